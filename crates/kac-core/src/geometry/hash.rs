@@ -1,0 +1,181 @@
+//! The shape id: SHA-256 of a canonical byte layout of the validated geometry, independent of the input format,
+//! the platform, the order of vertices and elements, and the rotation of each face.
+//!
+//! Canonical layout, version 1 (all integers little-endian):
+//! ```text
+//! "kac-shape/1\n"                      12 bytes
+//! kind                                  u8: 1 triangle_mesh, 2 tet_mesh, 3 point_cloud, 4 graph, 5 polyline
+//! n                                     u64: vertex count
+//! n × (x, y, z)                         f32 each (coordinates rounded to binary32, −0 written as +0),
+//!                                       vertices sorted by (x, y, z) of these f32 values
+//! m, arity                              u64, u64: element count and vertices per element
+//! m × arity × u32                       elements in sorted vertex numbering:
+//!                                         faces rotated to start at their smallest index (orientation kept),
+//!                                         tets, segments and edges with indices ascending; then sorted
+//! graphs: m × f64                       edge weights, in the order of the sorted edges
+//! ```
+//! Coordinates enter the id as binary32 so that a mesh that went through a 32-bit format (STL, glTF, binary PLY
+//! of floats) keeps the id of its 64-bit original: two uploads that agree to single precision are one shape.
+//! Graphs without positions hash their vertices in input order (graph isomorphism is not attempted).
+
+use super::Shape;
+use serde::{Serialize, Serializer};
+use sha2::{Digest, Sha256};
+use std::cmp::Ordering;
+use std::fmt;
+
+/// A shape id: 32 bytes of SHA-256, shown as 64 lowercase hex digits.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ShapeId(pub [u8; 32]);
+
+impl ShapeId {
+    pub fn hex(&self) -> String {
+        self.0.iter().map(|b| format!("{b:02x}")).collect()
+    }
+    pub fn parse(s: &str) -> Option<ShapeId> {
+        if s.len() != 64 || !s.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return None;
+        }
+        let mut out = [0u8; 32];
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = u8::from_str_radix(&s[2 * i..2 * i + 2], 16).ok()?;
+        }
+        Some(ShapeId(out))
+    }
+}
+
+impl fmt::Debug for ShapeId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "ShapeId({})", self.hex())
+    }
+}
+
+impl fmt::Display for ShapeId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.hex())
+    }
+}
+
+impl Serialize for ShapeId {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&self.hex())
+    }
+}
+
+fn q(c: f64) -> f32 {
+    let f = c as f32;
+    if f == 0.0 {
+        0.0
+    } else {
+        f
+    }
+}
+
+/// The vertex order of the canonical layout: new index of each vertex.
+fn canonical_order(points: &[[f64; 3]]) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    let key = |i: u32| points[i as usize].map(q);
+    order.sort_by(|&a, &b| {
+        let (ka, kb) = (key(a), key(b));
+        ka[0].total_cmp(&kb[0])
+            .then(ka[1].total_cmp(&kb[1]))
+            .then(ka[2].total_cmp(&kb[2]))
+            .then_with(|| {
+                let (pa, pb) = (points[a as usize], points[b as usize]);
+                pa[0].total_cmp(&pb[0]).then(pa[1].total_cmp(&pb[1])).then(pa[2].total_cmp(&pb[2]))
+            })
+            .then(a.cmp(&b))
+    });
+    let mut rank = vec![0u32; points.len()];
+    for (r, &i) in order.iter().enumerate() {
+        rank[i as usize] = r as u32;
+    }
+    rank
+}
+
+/// Computes the id of a validated shape.
+pub fn shape_id(shape: &Shape) -> ShapeId {
+    let mut h = Sha256::new();
+    h.update(b"kac-shape/1\n");
+    let kind: u8 = match shape {
+        Shape::TriangleMesh(_) => 1,
+        Shape::TetMesh(_) => 2,
+        Shape::PointCloud(_) => 3,
+        Shape::Graph(_) => 4,
+        Shape::Polyline(_) => 5,
+    };
+    h.update([kind]);
+    let n = shape.vertex_count();
+    h.update((n as u64).to_le_bytes());
+    let rank: Vec<u32> = match shape.positions() {
+        Some(p) => {
+            let rank = canonical_order(p);
+            let mut sorted = vec![[0f32; 3]; p.len()];
+            for (i, &r) in rank.iter().enumerate() {
+                sorted[r as usize] = p[i].map(q);
+            }
+            let mut buf = Vec::with_capacity(12 * p.len());
+            for s in &sorted {
+                for c in s {
+                    buf.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+            h.update(&buf);
+            rank
+        }
+        None => (0..n as u32).collect(),
+    };
+    let r = |v: u32| rank[v as usize];
+    let mut write_elements = |mut elems: Vec<Vec<u32>>, arity: usize| {
+        elems.sort_unstable();
+        h.update((elems.len() as u64).to_le_bytes());
+        h.update((arity as u64).to_le_bytes());
+        let mut buf = Vec::with_capacity(4 * arity * elems.len());
+        for e in &elems {
+            for v in e {
+                buf.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        h.update(&buf);
+    };
+    match shape {
+        Shape::TriangleMesh(m) => {
+            let faces = m
+                .faces
+                .iter()
+                .map(|f| {
+                    let g = f.map(r);
+                    let k = (0..3).min_by_key(|&k| g[k]).unwrap_or(0);
+                    vec![g[k], g[(k + 1) % 3], g[(k + 2) % 3]]
+                })
+                .collect();
+            write_elements(faces, 3);
+        }
+        Shape::TetMesh(m) => {
+            let tets = m.tets.iter().map(|t| sorted(t.iter().map(|&v| r(v)).collect())).collect();
+            write_elements(tets, 4);
+        }
+        Shape::Polyline(p) => {
+            let segs = p.segments.iter().map(|s| sorted(s.iter().map(|&v| r(v)).collect())).collect();
+            write_elements(segs, 2);
+        }
+        Shape::PointCloud(_) => write_elements(Vec::new(), 0),
+        Shape::Graph(g) => {
+            let mut edges: Vec<(Vec<u32>, f64)> = g.edges.iter().zip(&g.weights).map(|(e, &w)| (sorted(e.iter().map(|&v| r(v)).collect()), w)).collect();
+            edges.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.partial_cmp(&b.1).unwrap_or(Ordering::Equal)));
+            let weights: Vec<f64> = edges.iter().map(|e| e.1).collect();
+            write_elements(edges.into_iter().map(|e| e.0).collect(), 2);
+            let mut buf = Vec::with_capacity(8 * weights.len());
+            for w in weights {
+                buf.extend_from_slice(&w.to_le_bytes());
+            }
+            h.update(&buf);
+        }
+    }
+    ShapeId(h.finalize().into())
+}
+
+fn sorted(mut v: Vec<u32>) -> Vec<u32> {
+    v.sort_unstable();
+    v
+}

@@ -1,0 +1,224 @@
+//! Shape kinds kac analyses, in their canonical (validated) form, and the raw form readers produce.
+//!
+//! Coordinates are `f64`; 2-D input is embedded at z = 0. Indices are `u32` (a shape has fewer than 2³² vertices).
+//! This module has no I/O and no HTTP; readers live in [`crate::io`].
+
+pub mod hash;
+pub mod summary;
+pub mod topology;
+pub mod triangulate;
+pub mod validate;
+
+use serde::Serialize;
+
+/// A point of R³.
+pub type Point = [f64; 3];
+
+/// A triangle mesh (a surface); faces are counter-clockwise seen from outside where the input says so.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TriangleMesh {
+    pub vertices: Vec<Point>,
+    pub faces: Vec<[u32; 3]>,
+}
+
+/// A tetrahedral mesh (a solid); after validation every tetrahedron has positive signed volume.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TetMesh {
+    pub vertices: Vec<Point>,
+    pub tets: Vec<[u32; 4]>,
+}
+
+/// Points sampled from a surface, optionally with normals.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PointCloud {
+    pub points: Vec<Point>,
+    pub normals: Option<Vec<Point>>,
+}
+
+/// A weighted undirected graph on `vertex_count` vertices; `positions` where the input gives them.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Graph {
+    pub vertex_count: usize,
+    pub positions: Option<Vec<Point>>,
+    pub edges: Vec<[u32; 2]>,
+    /// One positive weight per edge.
+    pub weights: Vec<f64>,
+}
+
+/// A 1-D shape: vertices joined by straight segments (one or several open or closed polylines).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Polyline {
+    pub vertices: Vec<Point>,
+    pub segments: Vec<[u32; 2]>,
+}
+
+/// Every shape kind kac takes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shape {
+    TriangleMesh(TriangleMesh),
+    TetMesh(TetMesh),
+    PointCloud(PointCloud),
+    Graph(Graph),
+    Polyline(Polyline),
+}
+
+/// The kind of a [`Shape`], as named in JSON.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShapeKind {
+    TriangleMesh,
+    TetMesh,
+    PointCloud,
+    Graph,
+    Polyline,
+}
+
+impl ShapeKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ShapeKind::TriangleMesh => "triangle_mesh",
+            ShapeKind::TetMesh => "tet_mesh",
+            ShapeKind::PointCloud => "point_cloud",
+            ShapeKind::Graph => "graph",
+            ShapeKind::Polyline => "polyline",
+        }
+    }
+}
+
+impl Shape {
+    pub fn kind(&self) -> ShapeKind {
+        match self {
+            Shape::TriangleMesh(_) => ShapeKind::TriangleMesh,
+            Shape::TetMesh(_) => ShapeKind::TetMesh,
+            Shape::PointCloud(_) => ShapeKind::PointCloud,
+            Shape::Graph(_) => ShapeKind::Graph,
+            Shape::Polyline(_) => ShapeKind::Polyline,
+        }
+    }
+
+    /// Number of vertices (points for a cloud), i.e. the size of per-vertex arrays.
+    pub fn vertex_count(&self) -> usize {
+        match self {
+            Shape::TriangleMesh(m) => m.vertices.len(),
+            Shape::TetMesh(m) => m.vertices.len(),
+            Shape::PointCloud(c) => c.points.len(),
+            Shape::Graph(g) => g.vertex_count,
+            Shape::Polyline(p) => p.vertices.len(),
+        }
+    }
+
+    /// Vertex positions, where the shape has them.
+    pub fn positions(&self) -> Option<&[Point]> {
+        match self {
+            Shape::TriangleMesh(m) => Some(&m.vertices),
+            Shape::TetMesh(m) => Some(&m.vertices),
+            Shape::PointCloud(c) => Some(&c.points),
+            Shape::Graph(g) => g.positions.as_deref(),
+            Shape::Polyline(p) => Some(&p.vertices),
+        }
+    }
+}
+
+/// Polygons of varying size stored flat: polygon `i` is `indices[offsets[i]..offsets[i + 1]]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Polygons {
+    pub indices: Vec<u32>,
+    pub offsets: Vec<usize>,
+}
+
+impl Default for Polygons {
+    fn default() -> Self {
+        Polygons { indices: Vec::new(), offsets: vec![0] }
+    }
+}
+
+impl Polygons {
+    pub fn with_capacity(polygons: usize, indices: usize) -> Self {
+        let mut offsets = Vec::with_capacity(polygons + 1);
+        offsets.push(0);
+        Polygons { indices: Vec::with_capacity(indices), offsets }
+    }
+    pub fn len(&self) -> usize {
+        self.offsets.len() - 1
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    pub fn get(&self, i: usize) -> &[u32] {
+        &self.indices[self.offsets[i]..self.offsets[i + 1]]
+    }
+    pub fn push(&mut self, polygon: &[u32]) {
+        self.indices.extend_from_slice(polygon);
+        self.offsets.push(self.indices.len());
+    }
+    /// Ends the polygon whose indices were pushed with `indices.push` since the last call.
+    pub fn close(&mut self) {
+        self.offsets.push(self.indices.len());
+    }
+    pub fn iter(&self) -> impl Iterator<Item = &[u32]> + '_ {
+        self.offsets.windows(2).map(move |w| &self.indices[w[0]..w[1]])
+    }
+    pub fn from_triangles(triangles: &[[u32; 3]]) -> Self {
+        Polygons {
+            indices: triangles.iter().flatten().copied().collect(),
+            offsets: (0..=triangles.len()).map(|i| 3 * i).collect(),
+        }
+    }
+}
+
+/// What a reader produced, before validation. Readers check syntax, finiteness and index ranges (they know the
+/// line or byte offset); [`validate::validate`] decides the kind, repairs and reports.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RawShape {
+    pub vertices: Vec<Point>,
+    /// Surface faces (polygons; triangles are the common case).
+    pub polygons: Polygons,
+    pub tets: Vec<[u32; 4]>,
+    /// Segments: polyline pieces or graph edges.
+    pub segments: Vec<[u32; 2]>,
+    /// Graph edge weights (one per segment) when the input is a weighted graph.
+    pub weights: Option<Vec<f64>>,
+    /// Per-vertex normals of a point cloud.
+    pub normals: Option<Vec<Point>>,
+    /// The input declares its segments to be a graph (edges), not a polyline.
+    pub is_graph: bool,
+    /// Vertex count of a graph given without positions (then `vertices` is empty).
+    pub graph_vertex_count: Option<usize>,
+    /// Whether coordinates came with only two components (embedded at z = 0).
+    pub planar_input: bool,
+    /// Vertices welded by the reader itself (STL stores no shared vertices), before validation.
+    pub reader_welded: usize,
+    /// Notes of the reader: content skipped or interpreted, for the report.
+    pub notes: Vec<String>,
+}
+
+/// Componentwise helpers on points.
+pub(crate) mod vec3 {
+    use super::Point;
+    #[inline]
+    pub fn sub(a: Point, b: Point) -> Point {
+        [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+    }
+    #[inline]
+    pub fn cross(a: Point, b: Point) -> Point {
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    }
+    #[inline]
+    pub fn dot(a: Point, b: Point) -> f64 {
+        a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    }
+    #[inline]
+    pub fn norm(a: Point) -> f64 {
+        dot(a, a).sqrt()
+    }
+    /// Twice the area vector of triangle (a, b, c).
+    #[inline]
+    pub fn area2(a: Point, b: Point, c: Point) -> Point {
+        cross(sub(b, a), sub(c, a))
+    }
+    /// Six times the signed volume of tetrahedron (a, b, c, d).
+    #[inline]
+    pub fn volume6(a: Point, b: Point, c: Point, d: Point) -> f64 {
+        dot(sub(b, a), cross(sub(c, a), sub(d, a)))
+    }
+}

@@ -1,0 +1,230 @@
+//! glTF 2.0: `.gltf` with embedded (data-URI) buffers and binary `.glb`. Every triangle primitive
+//! (`TRIANGLES`, `TRIANGLE_STRIP`, `TRIANGLE_FAN`) of every node of the default scene (or of every root node when
+//! no scene is given) is read with its node's global transform applied; primitives of points or lines are
+//! rejected, naming the mesh and primitive. glTF splits vertices wherever normals or UVs differ; validation welds
+//! them by position unless told not to. Accessors are decoded here with every offset checked against the buffer.
+
+use super::ReadOptions;
+use crate::error::{Location, Result, ShapeError};
+use crate::geometry::{Polygons, RawShape};
+use base64::Engine;
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+
+const FMT: &str = "gltf";
+
+fn syntax(pointer: String, message: impl Into<String>) -> ShapeError {
+    ShapeError::Syntax { format: FMT, location: Location::pointer(pointer), message: message.into() }
+}
+
+fn unsupported(pointer: String, message: impl Into<String>) -> ShapeError {
+    ShapeError::Unsupported { format: FMT, location: Location::pointer(pointer), message: message.into() }
+}
+
+type Mat4 = [[f64; 4]; 4]; // column-major: m[col][row]
+
+fn mul(a: &Mat4, b: &Mat4) -> Mat4 {
+    let mut c = [[0.0; 4]; 4];
+    for (j, cj) in c.iter_mut().enumerate() {
+        for (i, cij) in cj.iter_mut().enumerate() {
+            *cij = (0..4).map(|k| a[k][i] * b[j][k]).sum();
+        }
+    }
+    c
+}
+
+const IDENTITY: Mat4 = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+
+pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
+    let doc = gltf::Gltf::from_slice(bytes).map_err(|e| ShapeError::Syntax {
+        format: FMT,
+        location: Location::Unknown,
+        message: format!("not a valid glTF 2.0 document: {e}"),
+    })?;
+    // Buffers: the GLB BIN chunk or data URIs.
+    let mut buffers: Vec<Vec<u8>> = Vec::new();
+    for buffer in doc.buffers() {
+        let ptr = format!("/buffers/{}", buffer.index());
+        let data = match buffer.source() {
+            gltf::buffer::Source::Bin => doc.blob.clone().ok_or_else(|| syntax(ptr.clone(), "the buffer refers to a GLB BIN chunk, but there is none"))?,
+            gltf::buffer::Source::Uri(uri) => {
+                let Some(rest) = uri.strip_prefix("data:") else {
+                    return Err(unsupported(ptr, format!("external buffer '{uri}': only embedded (data URI) buffers and .glb are taken; pack the file as .glb")));
+                };
+                let (meta, payload) = rest.split_once(',').ok_or_else(|| syntax(ptr.clone(), "malformed data URI"))?;
+                if !meta.ends_with(";base64") {
+                    return Err(unsupported(ptr, "data URI without base64 encoding"));
+                }
+                base64::engine::general_purpose::STANDARD
+                    .decode(payload.trim())
+                    .map_err(|e| syntax(ptr.clone(), format!("invalid base64 in data URI: {e}")))?
+            }
+        };
+        if data.len() < buffer.length() {
+            return Err(ShapeError::Truncated { format: FMT, location: Location::pointer(ptr), message: format!("the buffer declares {} bytes but holds {}", buffer.length(), data.len()) });
+        }
+        buffers.push(data);
+    }
+
+    let roots: Vec<gltf::Node<'_>> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(scene) => scene.nodes().collect(),
+        None => {
+            let mut is_child = vec![false; doc.nodes().len()];
+            for n in doc.nodes() {
+                for c in n.children() {
+                    is_child[c.index()] = true;
+                }
+            }
+            doc.nodes().filter(|n| !is_child[n.index()]).collect()
+        }
+    };
+    let mut raw = RawShape::default();
+    let mut polygons = Polygons::default();
+    let mut stack: Vec<(gltf::Node<'_>, Mat4, usize)> = roots.into_iter().map(|n| (n, IDENTITY, 0)).collect();
+    let mut instances = 0usize;
+    let mut visits = 0usize;
+    while let Some((node, parent, depth)) = stack.pop() {
+        visits += 1;
+        if depth > 256 || visits > 1_000_000 {
+            return Err(syntax(format!("/nodes/{}", node.index()), "the node hierarchy is too deep or cyclic"));
+        }
+        let local: Mat4 = node.transform().matrix().map(|c| c.map(f64::from));
+        let global = mul(&parent, &local);
+        if let Some(mesh) = node.mesh() {
+            instances += 1;
+            for prim in mesh.primitives() {
+                read_primitive(&doc, &buffers, &mesh, &prim, &global, &mut raw, &mut polygons, options)?;
+            }
+        }
+        for child in node.children() {
+            stack.push((child, global, depth + 1));
+        }
+    }
+    raw.notes.push(format!("gltf: {instances} mesh instance(s) read with node transforms applied; vertices are not welded by the format"));
+    raw.polygons = polygons;
+    Ok(raw)
+}
+
+/// The bytes of an accessor's elements: (data, stride, element size), checked against the buffer.
+fn accessor_bytes<'b>(buffers: &'b [Vec<u8>], acc: &gltf::Accessor<'_>, elem: usize, ptr: &str) -> Result<(&'b [u8], usize)> {
+    if acc.sparse().is_some() {
+        return Err(unsupported(ptr.to_string(), "sparse accessors are not supported"));
+    }
+    let view = acc.view().ok_or_else(|| unsupported(ptr.to_string(), "accessor without a buffer view"))?;
+    let buf = buffers.get(view.buffer().index()).ok_or_else(|| syntax(ptr.to_string(), "buffer view refers to a missing buffer"))?;
+    let start = view.offset();
+    let len = view.length();
+    let view_bytes = start.checked_add(len).and_then(|end| buf.get(start..end)).ok_or_else(|| {
+        ShapeError::Truncated { format: FMT, location: Location::pointer(format!("/bufferViews/{}", view.index())), message: "the buffer view lies outside its buffer".into() }
+    })?;
+    let stride = view.stride().unwrap_or(elem);
+    if stride < elem {
+        return Err(syntax(ptr.to_string(), format!("byteStride {stride} is smaller than the element size {elem}")));
+    }
+    let count = acc.count();
+    if count == 0 {
+        return Ok((&[], stride));
+    }
+    let need = (count - 1).checked_mul(stride).and_then(|n| n.checked_add(elem)).and_then(|n| n.checked_add(acc.offset()));
+    match need {
+        Some(end) if end <= view_bytes.len() => Ok((&view_bytes[acc.offset()..end], stride)),
+        _ => Err(ShapeError::Truncated { format: FMT, location: Location::pointer(ptr.to_string()), message: format!("{count} elements do not fit in the buffer view") }),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn read_primitive(
+    _doc: &gltf::Gltf,
+    buffers: &[Vec<u8>],
+    mesh: &gltf::Mesh<'_>,
+    prim: &gltf::Primitive<'_>,
+    m: &Mat4,
+    raw: &mut RawShape,
+    polygons: &mut Polygons,
+    options: &ReadOptions,
+) -> Result<()> {
+    let pptr = format!("/meshes/{}/primitives/{}", mesh.index(), prim.index());
+    let mode = prim.mode();
+    if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+        return Err(unsupported(pptr, format!("primitive mode {mode:?} is not a triangle primitive; kac reads triangle meshes from glTF")));
+    }
+    let pos = prim.get(&gltf::Semantic::Positions).ok_or_else(|| syntax(pptr.clone(), "the primitive has no POSITION attribute"))?;
+    let aptr = format!("/accessors/{}", pos.index());
+    if pos.dimensions() != Dimensions::Vec3 || pos.data_type() != DataType::F32 || pos.normalized() {
+        return Err(unsupported(aptr, "POSITION must be VEC3 of FLOAT (quantized positions are not supported)"));
+    }
+    let (data, stride) = accessor_bytes(buffers, &pos, 12, &aptr)?;
+    let base = raw.vertices.len();
+    options.check_vertices((base + pos.count()) as u64)?;
+    raw.vertices.reserve(pos.count());
+    for i in 0..pos.count() {
+        let o = i * stride;
+        let f = |k: usize| f32::from_le_bytes([data[o + 4 * k], data[o + 4 * k + 1], data[o + 4 * k + 2], data[o + 4 * k + 3]]) as f64;
+        let p = [f(0), f(1), f(2)];
+        let q = [0, 1, 2].map(|r| m[0][r] * p[0] + m[1][r] * p[1] + m[2][r] * p[2] + m[3][r]);
+        let w = m[0][3] * p[0] + m[1][3] * p[1] + m[2][3] * p[2] + m[3][3];
+        let q = if w != 1.0 && w != 0.0 { q.map(|c| c / w) } else { q };
+        let vi = raw.vertices.len();
+        raw.vertices.push(super::text::check_point(q, vi, || Location::pointer(format!("{aptr}/{i}")))?);
+    }
+    let n = pos.count();
+    let indices: Vec<u32> = match prim.indices() {
+        Some(acc) => {
+            let iptr = format!("/accessors/{}", acc.index());
+            if acc.dimensions() != Dimensions::Scalar {
+                return Err(syntax(iptr, "indices must be SCALAR"));
+            }
+            let size = match acc.data_type() {
+                DataType::U8 => 1,
+                DataType::U16 => 2,
+                DataType::U32 => 4,
+                other => return Err(syntax(iptr, format!("index component type {other:?} is not allowed"))),
+            };
+            let (d, stride) = accessor_bytes(buffers, &acc, size, &iptr)?;
+            let mut out = Vec::with_capacity(acc.count());
+            for i in 0..acc.count() {
+                let o = i * stride;
+                let v = match size {
+                    1 => d[o] as u32,
+                    2 => u16::from_le_bytes([d[o], d[o + 1]]) as u32,
+                    _ => u32::from_le_bytes([d[o], d[o + 1], d[o + 2], d[o + 3]]),
+                };
+                if v as usize >= n {
+                    return Err(ShapeError::IndexOutOfRange {
+                        element: crate::error::Element::Face,
+                        index: i / 3,
+                        value: v as i64,
+                        vertex_count: n,
+                        location: Location::pointer(format!("{iptr}/{i}")),
+                    });
+                }
+                out.push(v);
+            }
+            out
+        }
+        None => (0..n as u32).collect(),
+    };
+    let b = base as u32;
+    let mut push = |t: [u32; 3]| polygons.push(&[t[0] + b, t[1] + b, t[2] + b]);
+    match mode {
+        Mode::Triangles => {
+            if indices.len() % 3 != 0 {
+                return Err(syntax(pptr, format!("{} indices is not a multiple of 3", indices.len())));
+            }
+            indices.chunks_exact(3).for_each(|t| push([t[0], t[1], t[2]]));
+        }
+        Mode::TriangleStrip => {
+            for i in 2..indices.len() {
+                let t = if i % 2 == 0 { [indices[i - 2], indices[i - 1], indices[i]] } else { [indices[i - 1], indices[i - 2], indices[i]] };
+                push(t);
+            }
+        }
+        _ => {
+            for i in 2..indices.len() {
+                push([indices[0], indices[i - 1], indices[i]]);
+            }
+        }
+    }
+    options.check_elements(polygons.len() as u64)?;
+    Ok(())
+}

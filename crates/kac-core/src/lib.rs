@@ -1,0 +1,31 @@
+//! # kac-core
+//!
+//! *Can you hear the shape of a drum?* The numerical core of kac: shapes and their readers
+//! ([`io`], [`geometry`]), validation with repairs and a report, content-hash ids, discrete Laplace operators,
+//! generalized eigensolvers and the descriptors read from a spectrum.
+//!
+//! This crate has no HTTP, no async runtime and no global state; the service and CLI are thin layers over it.
+//!
+//! Conventions (stated once, echoed in every result): the Laplacian `L` is positive semidefinite (the stiffness
+//! matrix; libigl's `cotmatrix` is `−L`), the eigenproblem is `L φ = λ M φ` with `M` the mass matrix,
+//! eigenvalues ascend, eigenvectors are `M`-orthonormal.
+
+pub mod error;
+pub mod geometry;
+pub mod io;
+
+pub use error::{Element, Location, ShapeError};
+pub use geometry::validate::{validate, Validated, ValidateOptions, Weld};
+pub use geometry::{Shape, ShapeKind};
+pub use io::{Format, ReadOptions};
+
+/// Reads and validates a file in one step (format from `format`, the extension, or the content).
+pub fn load(path: &std::path::Path, format: Option<Format>, read: &ReadOptions, validate_opts: &ValidateOptions) -> Result<(Validated, Format), ShapeError> {
+    let (raw, fmt) = io::read_path(path, format, read)?;
+    Ok((validate(raw, validate_opts)?, fmt))
+}
+
+/// Reads and validates bytes in one step.
+pub fn load_bytes(bytes: &[u8], format: Format, read: &ReadOptions, validate_opts: &ValidateOptions) -> Result<Validated, ShapeError> {
+    validate(io::read_bytes(bytes, format, read)?, validate_opts)
+}

@@ -1,0 +1,98 @@
+//! Command-line parsing and the subcommands. Exit codes: 0 success, 2 unreadable input or bad arguments,
+//! 1 any other failure.
+
+use clap::{Args, Parser, Subcommand};
+use kac_core::geometry::validate::Weld;
+use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
+use std::path::PathBuf;
+
+mod inspect;
+
+#[derive(Parser)]
+#[command(name = "kac", version, about = "Can you hear the shape of a drum? Spectral shape analysis.")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Read, validate and summarize a shape as JSON (kind, counts, id, bbox, area/volume, topology, repairs).
+    Inspect(inspect::InspectArgs),
+}
+
+/// Options shared by every subcommand that reads a shape.
+#[derive(Args, Debug, Clone)]
+pub struct ShapeArgs {
+    /// The shape file (OBJ, OFF, PLY, STL, glTF/GLB, Medit .mesh, Gmsh .msh, VTK, XYZ/CSV, JSON).
+    pub file: PathBuf,
+    /// Format name, overriding the extension and content sniffing.
+    #[arg(long, value_parser = parse_format)]
+    pub format: Option<Format>,
+    /// Merge duplicate vertices: `exact` (default), `none`, or a distance tolerance such as `1e-6`.
+    #[arg(long, default_value = "exact", value_parser = parse_weld)]
+    pub weld: Weld,
+    /// Keep zero-area faces and zero-volume tets instead of dropping them.
+    #[arg(long)]
+    pub keep_degenerate: bool,
+}
+
+fn parse_format(s: &str) -> Result<Format, String> {
+    Format::from_name(s).ok_or_else(|| format!("unknown format '{s}'; one of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json"))
+}
+
+fn parse_weld(s: &str) -> Result<Weld, String> {
+    match s {
+        "exact" => Ok(Weld::Exact),
+        "none" => Ok(Weld::None),
+        t => match t.parse::<f64>() {
+            Ok(v) if v > 0.0 && v.is_finite() => Ok(Weld::Tolerance(v)),
+            _ => Err(format!("'{s}' is not 'exact', 'none' or a positive tolerance")),
+        },
+    }
+}
+
+/// A failure of a subcommand: the exit code and the one-line message.
+pub struct Failure {
+    pub code: i32,
+    pub message: String,
+}
+
+impl From<kac_core::ShapeError> for Failure {
+    fn from(e: kac_core::ShapeError) -> Self {
+        Failure { code: 2, message: e.to_string() }
+    }
+}
+
+impl ShapeArgs {
+    pub fn load(&self) -> Result<(Validated, Format), Failure> {
+        let v = ValidateOptions { weld: self.weld, drop_degenerate: !self.keep_degenerate, kind: None };
+        Ok(kac_core::load(&self.file, self.format, &ReadOptions::default(), &v)?)
+    }
+}
+
+pub fn print_json(value: &impl serde::Serialize) -> Result<(), Failure> {
+    let s = serde_json::to_string_pretty(value).map_err(|e| Failure { code: 1, message: e.to_string() })?;
+    println!("{s}");
+    Ok(())
+}
+
+pub fn run() -> i32 {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() { 2 } else { 0 };
+        }
+    };
+    let result = match cli.command {
+        Command::Inspect(a) => inspect::run(a),
+    };
+    match result {
+        Ok(()) => 0,
+        Err(f) => {
+            eprintln!("kac: {}", f.message.replace('\n', " "));
+            f.code
+        }
+    }
+}
