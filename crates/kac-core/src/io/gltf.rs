@@ -35,8 +35,56 @@ fn mul(a: &Mat4, b: &Mat4) -> Mat4 {
 
 const IDENTITY: Mat4 = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
 
+/// The JSON chunk of a GLB, or the whole input.
+fn json_part(bytes: &[u8]) -> Result<std::borrow::Cow<'_, [u8]>> {
+    if bytes.starts_with(b"glTF") {
+        let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| ShapeError::Syntax { format: FMT, location: Location::byte(0), message: format!("invalid GLB container: {e}") })?;
+        Ok(glb.json)
+    } else {
+        Ok(std::borrow::Cow::Borrowed(bytes))
+    }
+}
+
+/// Checks that every accessor a primitive names exists. gltf-json 1.4.1 indexes `accessors` with the POSITION
+/// index inside its own validation without a bounds check (a panic on such files); this runs first.
+fn check_accessor_references(json: &[u8]) -> Result<()> {
+    let v: serde_json::Value = serde_json::from_slice(json).map_err(|e| ShapeError::Syntax {
+        format: FMT,
+        location: if e.line() > 0 { Location::line(e.line()) } else { Location::Unknown },
+        message: format!("invalid JSON: {e}"),
+    })?;
+    let accessors = v.get("accessors").and_then(|a| a.as_array()).map_or(0, |a| a.len());
+    let meshes = v.get("meshes").and_then(|m| m.as_array()).cloned().unwrap_or_default();
+    for (mi, mesh) in meshes.iter().enumerate() {
+        let prims = mesh.get("primitives").and_then(|p| p.as_array()).cloned().unwrap_or_default();
+        for (pi, prim) in prims.iter().enumerate() {
+            let mut refs: Vec<(String, &serde_json::Value)> = Vec::new();
+            if let Some(attrs) = prim.get("attributes").and_then(|a| a.as_object()) {
+                refs.extend(attrs.iter().map(|(k, v)| (format!("attributes/{k}"), v)));
+            }
+            if let Some(i) = prim.get("indices") {
+                refs.push(("indices".into(), i));
+            }
+            for (path, r) in refs {
+                let ok = r.as_u64().is_some_and(|i| (i as usize) < accessors);
+                if !ok {
+                    return Err(syntax(format!("/meshes/{mi}/primitives/{pi}/{path}"), format!("refers to accessor {r}, but the document has {accessors}")));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
-    let doc = gltf::Gltf::from_slice(bytes).map_err(|e| ShapeError::Syntax {
+    check_accessor_references(&json_part(bytes)?)?;
+    // Backstop: any other panic inside the gltf crate's parsing becomes a typed error, never a crash.
+    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(bytes)).map_err(|_| ShapeError::Syntax {
+        format: FMT,
+        location: Location::Unknown,
+        message: "the glTF document is internally inconsistent".into(),
+    })?;
+    let doc = parsed.map_err(|e| ShapeError::Syntax {
         format: FMT,
         location: Location::Unknown,
         message: format!("not a valid glTF 2.0 document: {e}"),

@@ -1,0 +1,28 @@
+//! Regression tests named after what broke. Inputs found by the property tests and fuzz targets are kept here
+//! (and under `fuzz/regressions/`) as ordinary tests.
+
+use kac_core::{load_bytes, Format, ReadOptions, ShapeError, ValidateOptions};
+
+/// gltf-json 1.4.1 panicked in its validation hook when a primitive's POSITION accessor index was out of range
+/// (found by `mutated_valid_files_never_panic`). kac checks accessor references first.
+#[test]
+fn gltf_position_accessor_out_of_range_is_an_error_not_a_panic() {
+    let doc = br#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":7}}]}],"accessors":[]}"#;
+    match load_bytes(doc, Format::Gltf, &ReadOptions::default(), &ValidateOptions::default()) {
+        Err(ShapeError::Syntax { message, .. }) => assert!(message.contains("accessor 7"), "{message}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+/// Every file kept under fuzz/regressions reads to a shape or a typed error.
+#[test]
+fn fuzz_regressions_do_not_panic() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/regressions");
+    let Ok(entries) = std::fs::read_dir(&dir) else { return };
+    for e in entries.flatten() {
+        let bytes = std::fs::read(e.path()).unwrap();
+        for f in Format::ALL {
+            let _ = load_bytes(&bytes, f, &ReadOptions::default(), &ValidateOptions::default());
+        }
+    }
+}
