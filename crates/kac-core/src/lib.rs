@@ -15,17 +15,27 @@ pub mod geometry;
 pub mod io;
 
 pub use error::{Element, Location, ShapeError};
-pub use geometry::validate::{validate, Validated, ValidateOptions, Weld};
+pub use geometry::validate::{validate, ValidateOptions, Validated, Weld};
 pub use geometry::{Shape, ShapeKind};
 pub use io::{Format, ReadOptions};
 
 /// Reads and validates a file in one step (format from `format`, the extension, or the content).
-pub fn load(path: &std::path::Path, format: Option<Format>, read: &ReadOptions, validate_opts: &ValidateOptions) -> Result<(Validated, Format), ShapeError> {
+pub fn load(
+    path: &std::path::Path,
+    format: Option<Format>,
+    read: &ReadOptions,
+    validate_opts: &ValidateOptions,
+) -> Result<(Validated, Format), ShapeError> {
     let (raw, fmt) = io::read_path(path, format, read)?;
     Ok((validate(raw, validate_opts)?, fmt))
 }
 
 /// Reads and validates bytes in one step.
-pub fn load_bytes(bytes: &[u8], format: Format, read: &ReadOptions, validate_opts: &ValidateOptions) -> Result<Validated, ShapeError> {
+pub fn load_bytes(
+    bytes: &[u8],
+    format: Format,
+    read: &ReadOptions,
+    validate_opts: &ValidateOptions,
+) -> Result<Validated, ShapeError> {
     validate(io::read_bytes(bytes, format, read)?, validate_opts)
 }

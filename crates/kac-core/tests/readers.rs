@@ -101,7 +101,7 @@ fn gmsh_v2_ascii_binary_and_v4_agree() {
     bin.extend_from_slice(&1i32.to_le_bytes());
     bin.extend_from_slice(b"\n$EndMeshFormat\n$Nodes\n4\n");
     for (tag, p) in [(10, [0.0, 0.0, 0.0]), (11, [1.0, 0.0, 0.0]), (12, [0.0, 1.0, 0.0]), (13, [0.0, 0.0, 1.0])] {
-        bin.extend_from_slice(&(tag as i32).to_le_bytes());
+        bin.extend_from_slice(&i32::to_le_bytes(tag));
         for c in p {
             bin.extend_from_slice(&f64::to_le_bytes(c));
         }
@@ -156,7 +156,13 @@ fn csv_xyz_and_json_inputs() {
 #[test]
 fn fatal_errors_name_the_element_rule_and_place() {
     match err(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 5\n", Format::Obj) {
-        ShapeError::IndexOutOfRange { element: Element::Face, index: 0, value: 5, vertex_count: 3, location: Location::Line { line: 4 } } => {}
+        ShapeError::IndexOutOfRange {
+            element: Element::Face,
+            index: 0,
+            value: 5,
+            vertex_count: 3,
+            location: Location::Line { line: 4 },
+        } => {}
         e => panic!("{e:?}"),
     }
     match err(b"OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n", Format::Off) {
@@ -181,7 +187,9 @@ fn fatal_errors_name_the_element_rule_and_place() {
         e => panic!("{e:?}"),
     }
     match err(br#"{"vertices": [[0,0,0]], "faces": [[0,0,7]]}"#, Format::Json) {
-        ShapeError::IndexOutOfRange { location: Location::Pointer { pointer }, .. } => assert_eq!(pointer, "/faces/0/2"),
+        ShapeError::IndexOutOfRange { location: Location::Pointer { pointer }, .. } => {
+            assert_eq!(pointer, "/faces/0/2")
+        }
         e => panic!("{e:?}"),
     }
     match err(b"", Format::Obj) {
@@ -205,7 +213,8 @@ fn declared_counts_cannot_force_huge_allocations() {
     let e = err(b"ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n", Format::Ply);
     assert!(matches!(e, ShapeError::LimitExceeded { .. } | ShapeError::Truncated { .. }), "{e:?}");
     let opts = ReadOptions { max_vertices: 2, ..Default::default() };
-    let e = load_bytes(b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", Format::Off, &opts, &ValidateOptions::default()).unwrap_err();
+    let e = load_bytes(b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", Format::Off, &opts, &ValidateOptions::default())
+        .unwrap_err();
     assert!(matches!(e, ShapeError::LimitExceeded { value: 3, limit: 2, .. }), "{e:?}");
 }
 

@@ -7,7 +7,8 @@ use kac_core::{load_bytes, Format, ReadOptions, ShapeError, ValidateOptions};
 /// (found by `mutated_valid_files_never_panic`). kac checks accessor references first.
 #[test]
 fn gltf_position_accessor_out_of_range_is_an_error_not_a_panic() {
-    let doc = br#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":7}}]}],"accessors":[]}"#;
+    let doc =
+        br#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":7}}]}],"accessors":[]}"#;
     match load_bytes(doc, Format::Gltf, &ReadOptions::default(), &ValidateOptions::default()) {
         Err(ShapeError::Syntax { message, .. }) => assert!(message.contains("accessor 7"), "{message}"),
         other => panic!("{other:?}"),

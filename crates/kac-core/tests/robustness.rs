@@ -38,7 +38,14 @@ fn seeds() -> Vec<Vec<u8>> {
     stl.extend_from_slice(&[0, 0]);
     s.push(stl);
     if let Some(dir) = common::data_dir() {
-        for rel in ["gltf/BoxInterleaved.glb", "gltf/Box_embedded.gltf", "ply/nut_binary.ply", "stl/Moon_binary.stl", "obj/cube_no_bottom.obj", "off/degtri_sliding.off"] {
+        for rel in [
+            "gltf/BoxInterleaved.glb",
+            "gltf/Box_embedded.gltf",
+            "ply/nut_binary.ply",
+            "stl/Moon_binary.stl",
+            "obj/cube_no_bottom.obj",
+            "off/degtri_sliding.off",
+        ] {
             if let Ok(b) = std::fs::read(dir.join(rel)) {
                 s.push(b);
             }

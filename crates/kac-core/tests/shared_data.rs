@@ -27,29 +27,239 @@ struct Expect {
 }
 
 const SURFACES: &[Expect] = &[
-    Expect { file: "obj/torus.obj", vertices: 2304, faces: 4608, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(1) },
-    Expect { file: "obj/fish_low_resolution.obj", vertices: 945, faces: 1886, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "obj/cube_no_bottom.obj", vertices: 25, faces: 40, components: 1, boundary_edges: 8, boundary_loops: 1, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "off/icosahedron.off", vertices: 12, faces: 20, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "off/torus.off", vertices: 576, faces: 1152, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(1) },
-    Expect { file: "off/square-mesh.off", vertices: 415, faces: 768, components: 1, boundary_edges: 60, boundary_loops: 1, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "off/eight.off", vertices: 315, faces: 634, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(2) },
-    Expect { file: "off/mesh_with_border.off", vertices: 548, faces: 1014, components: 1, boundary_edges: 80, boundary_loops: 1, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "ply/sphere_ascii.ply", vertices: 162, faces: 320, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "ply/airplane_ascii.ply", vertices: 1335, faces: 2452, components: 7, boundary_edges: 223, boundary_loops: 10, nm_edges: 1, nm_vertices: 6, genus: None },
-    Expect { file: "ply/nut_binary.ply", vertices: 523, faces: 1046, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(1) },
-    Expect { file: "ply/sphere_binary.ply", vertices: 422, faces: 840, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "stl/HalfDonut_ascii.stl", vertices: 144, faces: 288, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(1) },
-    Expect { file: "stl/HalfDonut_binary.stl", vertices: 144, faces: 288, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(1) },
-    Expect { file: "stl/Moon_binary.stl", vertices: 60, faces: 116, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "stl/sphere_binary.stl", vertices: 162, faces: 320, components: 1, boundary_edges: 0, boundary_loops: 0, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "stl/soup.stl", vertices: 300, faces: 100, components: 100, boundary_edges: 300, boundary_loops: 100, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
+    Expect {
+        file: "obj/torus.obj",
+        vertices: 2304,
+        faces: 4608,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(1),
+    },
+    Expect {
+        file: "obj/fish_low_resolution.obj",
+        vertices: 945,
+        faces: 1886,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "obj/cube_no_bottom.obj",
+        vertices: 25,
+        faces: 40,
+        components: 1,
+        boundary_edges: 8,
+        boundary_loops: 1,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "off/icosahedron.off",
+        vertices: 12,
+        faces: 20,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "off/torus.off",
+        vertices: 576,
+        faces: 1152,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(1),
+    },
+    Expect {
+        file: "off/square-mesh.off",
+        vertices: 415,
+        faces: 768,
+        components: 1,
+        boundary_edges: 60,
+        boundary_loops: 1,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "off/eight.off",
+        vertices: 315,
+        faces: 634,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(2),
+    },
+    Expect {
+        file: "off/mesh_with_border.off",
+        vertices: 548,
+        faces: 1014,
+        components: 1,
+        boundary_edges: 80,
+        boundary_loops: 1,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "ply/sphere_ascii.ply",
+        vertices: 162,
+        faces: 320,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "ply/airplane_ascii.ply",
+        vertices: 1335,
+        faces: 2452,
+        components: 7,
+        boundary_edges: 223,
+        boundary_loops: 10,
+        nm_edges: 1,
+        nm_vertices: 6,
+        genus: None,
+    },
+    Expect {
+        file: "ply/nut_binary.ply",
+        vertices: 523,
+        faces: 1046,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(1),
+    },
+    Expect {
+        file: "ply/sphere_binary.ply",
+        vertices: 422,
+        faces: 840,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "stl/HalfDonut_ascii.stl",
+        vertices: 144,
+        faces: 288,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(1),
+    },
+    Expect {
+        file: "stl/HalfDonut_binary.stl",
+        vertices: 144,
+        faces: 288,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(1),
+    },
+    Expect {
+        file: "stl/Moon_binary.stl",
+        vertices: 60,
+        faces: 116,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "stl/sphere_binary.stl",
+        vertices: 162,
+        faces: 320,
+        components: 1,
+        boundary_edges: 0,
+        boundary_loops: 0,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "stl/soup.stl",
+        vertices: 300,
+        faces: 100,
+        components: 100,
+        boundary_edges: 300,
+        boundary_loops: 100,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
     // glTF: the README counts split vertices, not welded.
-    Expect { file: "gltf/Box_embedded.gltf", vertices: 24, faces: 12, components: 6, boundary_edges: 24, boundary_loops: 6, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "gltf/BoxInterleaved.glb", vertices: 24, faces: 12, components: 6, boundary_edges: 24, boundary_loops: 6, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
-    Expect { file: "gltf/CesiumMilkTruck.glb", vertices: 3564, faces: 3624, components: 240, boundary_edges: 3082, boundary_loops: 267, nm_edges: 0, nm_vertices: 32, genus: None },
+    Expect {
+        file: "gltf/Box_embedded.gltf",
+        vertices: 24,
+        faces: 12,
+        components: 6,
+        boundary_edges: 24,
+        boundary_loops: 6,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "gltf/BoxInterleaved.glb",
+        vertices: 24,
+        faces: 12,
+        components: 6,
+        boundary_edges: 24,
+        boundary_loops: 6,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
+    Expect {
+        file: "gltf/CesiumMilkTruck.glb",
+        vertices: 3564,
+        faces: 3624,
+        components: 240,
+        boundary_edges: 3082,
+        boundary_loops: 267,
+        nm_edges: 0,
+        nm_vertices: 32,
+        genus: None,
+    },
     // Degenerate faces kept, as the README counts them.
-    Expect { file: "off/degtri_sliding.off", vertices: 8, faces: 8, components: 1, boundary_edges: 6, boundary_loops: 1, nm_edges: 0, nm_vertices: 0, genus: Some(0) },
+    Expect {
+        file: "off/degtri_sliding.off",
+        vertices: 8,
+        faces: 8,
+        components: 1,
+        boundary_edges: 6,
+        boundary_loops: 1,
+        nm_edges: 0,
+        nm_vertices: 0,
+        genus: Some(0),
+    },
 ];
 
 #[test]
@@ -138,7 +348,10 @@ fn tet_meshes_match_their_readme_rows() {
     let Some(v) = read("tet/cubeTetra.vtk", Weld::Exact, true) else { return };
     let Facts::Solid(f) = &v.report.facts else { panic!("cubeTetra is a solid") };
     assert_eq!((f.vertices, f.tets, f.inverted_tets, f.non_manifold_faces), (9261, 48000, 24000, 0));
-    assert_eq!((f.boundary.faces, f.boundary.vertices, f.boundary.closed, f.boundary.genus), (4800, 2402, true, Some(0)));
+    assert_eq!(
+        (f.boundary.faces, f.boundary.vertices, f.boundary.closed, f.boundary.genus),
+        (4800, 2402, true, Some(0))
+    );
     // The unit cube: volume 1, boundary area 6.
     assert!((f.volume - 1.0).abs() < 1e-9 && (f.boundary.area - 6.0).abs() < 1e-9);
     assert!(v.report.notes.iter().any(|n| n.contains("lapy")));
@@ -146,7 +359,10 @@ fn tet_meshes_match_their_readme_rows() {
     let Some(v) = read("tet/octopus-low.mesh", Weld::Exact, true) else { return };
     let Facts::Solid(f) = &v.report.facts else { panic!() };
     assert_eq!((f.vertices, f.tets, f.inverted_tets, f.non_manifold_faces), (452, 1140, 0, 0));
-    assert_eq!((f.boundary.faces, f.boundary.vertices, f.boundary.closed, f.boundary.manifold, f.boundary.genus), (898, 451, true, true, Some(0)));
+    assert_eq!(
+        (f.boundary.faces, f.boundary.vertices, f.boundary.closed, f.boundary.manifold, f.boundary.genus),
+        (898, 451, true, true, Some(0))
+    );
 }
 
 #[test]
@@ -162,9 +378,17 @@ fn point_clouds_read() {
 
 #[test]
 fn the_same_mesh_in_two_formats_has_one_id() {
-    let (Some(a), Some(b)) = (read("ply/sphere_ascii.ply", Weld::Exact, true), read("stl/sphere_binary.stl", Weld::Exact, true)) else { return };
+    let (Some(a), Some(b)) =
+        (read("ply/sphere_ascii.ply", Weld::Exact, true), read("stl/sphere_binary.stl", Weld::Exact, true))
+    else {
+        return;
+    };
     assert_eq!(a.id, b.id, "PLY (decimal text) and binary STL (f32) of the CGAL sphere");
-    let (Some(a), Some(b)) = (read("stl/HalfDonut_ascii.stl", Weld::Exact, true), read("stl/HalfDonut_binary.stl", Weld::Exact, true)) else { return };
+    let (Some(a), Some(b)) =
+        (read("stl/HalfDonut_ascii.stl", Weld::Exact, true), read("stl/HalfDonut_binary.stl", Weld::Exact, true))
+    else {
+        return;
+    };
     assert_eq!(a.id, b.id);
     // Different shapes differ.
     let Some(c) = read("off/icosahedron.off", Weld::Exact, true) else { return };
@@ -175,14 +399,25 @@ fn the_same_mesh_in_two_formats_has_one_id() {
 fn every_shared_file_reads_by_sniffing_alone() {
     let Some(dir) = common::data_or_skip("sniffing") else { return };
     for rel in [
-        "obj/torus.obj", "off/eight.off", "ply/nut_binary.ply", "ply/airplane_ascii.ply", "stl/Moon_binary.stl", "stl/HalfDonut_ascii.stl",
-        "gltf/Box_embedded.gltf", "gltf/CesiumMilkTruck.glb", "tet/octopus-low.mesh", "tet/cubeTetra.vtk", "points/kitten.xyz",
+        "obj/torus.obj",
+        "off/eight.off",
+        "ply/nut_binary.ply",
+        "ply/airplane_ascii.ply",
+        "stl/Moon_binary.stl",
+        "stl/HalfDonut_ascii.stl",
+        "gltf/Box_embedded.gltf",
+        "gltf/CesiumMilkTruck.glb",
+        "tet/octopus-low.mesh",
+        "tet/cubeTetra.vtk",
+        "points/kitten.xyz",
     ] {
         let bytes = std::fs::read(dir.join(rel)).unwrap();
         let f = Format::sniff(&bytes).unwrap_or_else(|| panic!("{rel}: not sniffed"));
         let by_ext = Format::from_name(rel.rsplit('.').next().unwrap()).unwrap();
-        let same = f == by_ext || (f == Format::Gltf && by_ext == Format::Glb) || (f == Format::Glb && by_ext == Format::Gltf);
+        let same =
+            f == by_ext || (f == Format::Gltf && by_ext == Format::Glb) || (f == Format::Glb && by_ext == Format::Gltf);
         assert!(same, "{rel}: sniffed {f}, extension says {by_ext}");
-        kac_core::load_bytes(&bytes, f, &ReadOptions::default(), &ValidateOptions::default()).unwrap_or_else(|e| panic!("{rel}: {e}"));
+        kac_core::load_bytes(&bytes, f, &ReadOptions::default(), &ValidateOptions::default())
+            .unwrap_or_else(|e| panic!("{rel}: {e}"));
     }
 }

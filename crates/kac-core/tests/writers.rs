@@ -36,7 +36,8 @@ fn off_obj_ply_json_round_trip_exactly() {
         (Format::Json, serde_json::to_vec(&write::json(&shape)).unwrap()),
     ];
     for (f, bytes) in outputs {
-        let v = load_bytes(&bytes, f, &ReadOptions::default(), &ValidateOptions::default()).unwrap_or_else(|e| panic!("{f}: {e}"));
+        let v = load_bytes(&bytes, f, &ReadOptions::default(), &ValidateOptions::default())
+            .unwrap_or_else(|e| panic!("{f}: {e}"));
         assert_eq!(v.shape, shape, "{f} round trip");
         assert!(v.map_is_identity());
     }
@@ -44,10 +45,25 @@ fn off_obj_ply_json_round_trip_exactly() {
 
 #[test]
 fn polyline_and_graph_round_trip_through_obj_and_json() {
-    let poly = Shape::Polyline(kac_core::geometry::Polyline { vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.5, 0.0], [2.0, 0.0, 0.25]], segments: vec![[0, 1], [1, 2]] });
-    let v = load_bytes(write::obj(&poly).as_bytes(), Format::Obj, &ReadOptions::default(), &ValidateOptions::default()).unwrap();
+    let poly = Shape::Polyline(kac_core::geometry::Polyline {
+        vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.5, 0.0], [2.0, 0.0, 0.25]],
+        segments: vec![[0, 1], [1, 2]],
+    });
+    let v = load_bytes(write::obj(&poly).as_bytes(), Format::Obj, &ReadOptions::default(), &ValidateOptions::default())
+        .unwrap();
     assert_eq!(v.shape, poly);
-    let g = Shape::Graph(kac_core::geometry::Graph { vertex_count: 4, positions: None, edges: vec![[0, 1], [1, 2], [2, 3]], weights: vec![0.5, 2.0, 1.0] });
-    let v = load_bytes(&serde_json::to_vec(&write::json(&g)).unwrap(), Format::Json, &ReadOptions::default(), &ValidateOptions::default()).unwrap();
+    let g = Shape::Graph(kac_core::geometry::Graph {
+        vertex_count: 4,
+        positions: None,
+        edges: vec![[0, 1], [1, 2], [2, 3]],
+        weights: vec![0.5, 2.0, 1.0],
+    });
+    let v = load_bytes(
+        &serde_json::to_vec(&write::json(&g)).unwrap(),
+        Format::Json,
+        &ReadOptions::default(),
+        &ValidateOptions::default(),
+    )
+    .unwrap();
     assert_eq!(v.shape, g);
 }

@@ -77,7 +77,8 @@ fn canonical_order(points: &[[f64; 3]]) -> Vec<u32> {
     let key = |i: u32| points[i as usize].map(q);
     order.sort_by(|&a, &b| {
         let (ka, kb) = (key(a), key(b));
-        ka[0].total_cmp(&kb[0])
+        ka[0]
+            .total_cmp(&kb[0])
             .then(ka[1].total_cmp(&kb[1]))
             .then(ka[2].total_cmp(&kb[2]))
             .then_with(|| {
@@ -161,7 +162,8 @@ pub fn shape_id(shape: &Shape) -> ShapeId {
         }
         Shape::PointCloud(_) => write_elements(Vec::new(), 0),
         Shape::Graph(g) => {
-            let mut edges: Vec<(Vec<u32>, f64)> = g.edges.iter().zip(&g.weights).map(|(e, &w)| (sorted(e.iter().map(|&v| r(v)).collect()), w)).collect();
+            let mut edges: Vec<(Vec<u32>, f64)> =
+                g.edges.iter().zip(&g.weights).map(|(e, &w)| (sorted(e.iter().map(|&v| r(v)).collect()), w)).collect();
             edges.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.partial_cmp(&b.1).unwrap_or(Ordering::Equal)));
             let weights: Vec<f64> = edges.iter().map(|e| e.1).collect();
             write_elements(edges.into_iter().map(|e| e.0).collect(), 2);

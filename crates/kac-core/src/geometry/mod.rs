@@ -3,6 +3,7 @@
 //! Coordinates are `f64`; 2-D input is embedded at z = 0. Indices are `u32` (a shape has fewer than 2³² vertices).
 //! This module has no I/O and no HTTP; readers live in [`crate::io`].
 
+pub mod generate;
 pub mod hash;
 pub mod summary;
 pub mod topology;

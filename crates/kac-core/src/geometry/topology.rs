@@ -117,9 +117,9 @@ impl BoundingBox {
         let first = *points.first()?;
         let mut b = BoundingBox { min: first, max: first };
         for p in points {
-            for k in 0..3 {
-                b.min[k] = b.min[k].min(p[k]);
-                b.max[k] = b.max[k].max(p[k]);
+            for (k, &c) in p.iter().enumerate() {
+                b.min[k] = b.min[k].min(c);
+                b.max[k] = b.max[k].max(c);
             }
         }
         Some(b)
@@ -201,7 +201,8 @@ pub fn surface_facts(mesh: &TriangleMesh, topo: &EdgeTopology) -> SurfaceFacts {
             corner_uf.union(corner_at(w[0], b), corner_at(w[1], b));
         }
     }
-    let mut boundary_roots: Vec<u32> = (0..nv as u32).filter(|&v| is_boundary_vertex[v as usize]).map(|v| boundary_uf.find(v)).collect();
+    let mut boundary_roots: Vec<u32> =
+        (0..nv as u32).filter(|&v| is_boundary_vertex[v as usize]).map(|v| boundary_uf.find(v)).collect();
     boundary_roots.sort_unstable();
     boundary_roots.dedup();
     // Fans per vertex.

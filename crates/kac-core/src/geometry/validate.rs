@@ -11,8 +11,8 @@ use super::topology::{self, BoundingBox, EdgeTopology, SurfaceFacts, UnionFind};
 use super::triangulate::triangulate;
 use super::{vec3, Graph, Point, PointCloud, Polyline, RawShape, Shape, ShapeKind, TetMesh, TriangleMesh};
 use crate::error::{Element, Location, Result, ShapeError};
+use rustc_hash::FxHashMap as HashMap;
 use serde::Serialize;
-use std::collections::HashMap;
 
 /// How duplicate vertices are merged.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
@@ -157,7 +157,8 @@ pub struct Validated {
 impl Validated {
     /// Whether the vertex map is the identity (no vertex was merged, dropped or moved).
     pub fn map_is_identity(&self) -> bool {
-        self.vertex_map.len() == self.shape.vertex_count() && self.vertex_map.iter().enumerate().all(|(i, &m)| m as usize == i)
+        self.vertex_map.len() == self.shape.vertex_count()
+            && self.vertex_map.iter().enumerate().all(|(i, &m)| m as usize == i)
     }
     /// Spreads per-vertex values of the validated shape back to the input's numbering (`fill` where dropped).
     pub fn to_input_numbering<T: Copy>(&self, values: &[T], fill: T) -> Vec<T> {
@@ -170,7 +171,12 @@ struct Repairs(Vec<Repair>);
 impl Repairs {
     fn add(&mut self, code: &'static str, examples: &[usize], count: usize, message: String) {
         if count > 0 {
-            self.0.push(Repair { code, count, message, examples: examples.iter().take(MAX_EXAMPLES).copied().collect() });
+            self.0.push(Repair {
+                code,
+                count,
+                message,
+                examples: examples.iter().take(MAX_EXAMPLES).copied().collect(),
+            });
         }
     }
 }
@@ -179,7 +185,7 @@ impl Repairs {
 /// the map from each input position to its unique index, and the number merged.
 pub fn weld_exact(points: &[Point]) -> (Vec<Point>, Vec<u32>, usize) {
     let key = |p: &Point| p.map(|c| if c == 0.0 { 0u64 } else { c.to_bits() });
-    let mut seen: HashMap<[u64; 3], u32> = HashMap::with_capacity(points.len() / 2);
+    let mut seen: HashMap<[u64; 3], u32> = HashMap::with_capacity_and_hasher(points.len() / 2, Default::default());
     let mut unique = Vec::with_capacity(points.len() / 2);
     let map = points
         .iter()
@@ -201,7 +207,7 @@ pub fn weld_tolerance(points: &[Point], tol: f64) -> (Vec<Point>, Vec<u32>, usiz
         return weld_exact(points);
     }
     let cell = |p: &Point| p.map(|c| (c / tol).floor() as i64);
-    let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+    let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::default();
     for (i, p) in points.iter().enumerate() {
         grid.entry(cell(p)).or_default().push(i as u32);
     }
@@ -222,7 +228,7 @@ pub fn weld_tolerance(points: &[Point], tol: f64) -> (Vec<Point>, Vec<u32>, usiz
             }
         }
     }
-    let mut root_index: HashMap<u32, u32> = HashMap::new();
+    let mut root_index: HashMap<u32, u32> = HashMap::default();
     let mut unique = Vec::new();
     let map = (0..points.len() as u32)
         .map(|i| {
@@ -281,7 +287,13 @@ pub fn validate(raw: RawShape, options: &ValidateOptions) -> Result<Validated> {
     let check = |idx: &mut dyn Iterator<Item = (usize, u32)>, element: Element| -> Result<()> {
         for (e, v) in idx {
             if v as usize >= nv {
-                return Err(ShapeError::IndexOutOfRange { element, index: e, value: v as i64, vertex_count: nv, location: Location::Unknown });
+                return Err(ShapeError::IndexOutOfRange {
+                    element,
+                    index: e,
+                    value: v as i64,
+                    vertex_count: nv,
+                    location: Location::Unknown,
+                });
             }
         }
         Ok(())
@@ -291,7 +303,12 @@ pub fn validate(raw: RawShape, options: &ValidateOptions) -> Result<Validated> {
     check(&mut raw.segments.iter().enumerate().flat_map(|(e, s)| s.iter().map(move |&v| (e, v))), Element::Segment)?;
     if let Some((i, p)) = raw.vertices.iter().enumerate().find(|(_, p)| !p.iter().all(|c| c.is_finite())) {
         let bad = p.iter().copied().find(|c| !c.is_finite()).unwrap_or(f64::NAN);
-        return Err(ShapeError::NonFinite { element: Element::Vertex, index: i, value: bad.to_string(), location: Location::Unknown });
+        return Err(ShapeError::NonFinite {
+            element: Element::Vertex,
+            index: i,
+            value: bad.to_string(),
+            location: Location::Unknown,
+        });
     }
 
     let kind = match options.kind {
@@ -387,7 +404,12 @@ fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut 
         origin.extend(std::iter::repeat_n(pi as u32, tris.len() - start));
     }
     let extra = tris.len().saturating_sub(raw.polygons.len() - repeated.len().min(raw.polygons.len()));
-    r.add("triangulated_polygons", &polygon_examples, polys_split, format!("{polys_split} polygons with more than three corners triangulated into {} extra triangles", extra));
+    r.add(
+        "triangulated_polygons",
+        &polygon_examples,
+        polys_split,
+        format!("{polys_split} polygons with more than three corners triangulated into {} extra triangles", extra),
+    );
     // Triangles left with a repeated index (from self-touching polygons) are dropped too.
     let mut keep: Vec<bool> = tris.iter().map(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).collect();
     for (i, k) in keep.iter().enumerate() {
@@ -404,9 +426,14 @@ fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut 
                 zero.push(origin[i] as usize);
             }
         }
-        r.add("zero_area_faces", &zero, zero.len(), format!("{} zero-area (collinear) triangle(s) dropped", zero.len()));
+        r.add(
+            "zero_area_faces",
+            &zero,
+            zero.len(),
+            format!("{} zero-area (collinear) triangle(s) dropped", zero.len()),
+        );
     }
-    let mut seen: HashMap<[u32; 3], ()> = HashMap::with_capacity(tris.len());
+    let mut seen: HashMap<[u32; 3], ()> = HashMap::with_capacity_and_hasher(tris.len(), Default::default());
     let mut dups = Vec::new();
     for (i, t) in tris.iter().enumerate() {
         if keep[i] {
@@ -418,16 +445,29 @@ fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut 
             }
         }
     }
-    r.add("duplicate_faces", &dups, dups.len(), format!("{} face(s) repeating the vertex set of an earlier face dropped", dups.len()));
+    r.add(
+        "duplicate_faces",
+        &dups,
+        dups.len(),
+        format!("{} face(s) repeating the vertex set of an earlier face dropped", dups.len()),
+    );
     let faces: Vec<[u32; 3]> = tris.iter().zip(&keep).filter(|(_, &k)| k).map(|(t, _)| *t).collect();
     if faces.is_empty() {
-        return Err(ShapeError::Empty { what: format!("no usable triangle is left of {} face(s)", raw.polygons.len()) });
+        return Err(ShapeError::Empty {
+            what: format!("no usable triangle is left of {} face(s)", raw.polygons.len()),
+        });
     }
     let mut used = vec![false; verts.len()];
     faces.iter().flatten().for_each(|&v| used[v as usize] = true);
     let (vertices, cmap, dropped) = compact(&verts, &used);
-    let dropped_input: Vec<usize> = weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
-    r.add("unreferenced_vertices", &dropped_input, dropped.len(), format!("{} vertex(es) used by no face dropped", dropped.len()));
+    let dropped_input: Vec<usize> =
+        weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
+    r.add(
+        "unreferenced_vertices",
+        &dropped_input,
+        dropped.len(),
+        format!("{} vertex(es) used by no face dropped", dropped.len()),
+    );
     let faces: Vec<[u32; 3]> = faces.iter().map(|t| t.map(|v| cmap[v as usize])).collect();
     let mesh = TriangleMesh { vertices, faces };
     let topo = EdgeTopology::new(&mesh.faces);
@@ -444,10 +484,16 @@ fn surface_warnings(f: &SurfaceFacts, warnings: &mut Vec<String>, prefix: &str) 
         ));
     }
     if f.orientation == topology::Orientation::Inconsistent {
-        warnings.push(format!("{prefix}inconsistent orientation: {} edge(s) traversed in the same direction by both faces", f.misoriented_edges));
+        warnings.push(format!(
+            "{prefix}inconsistent orientation: {} edge(s) traversed in the same direction by both faces",
+            f.misoriented_edges
+        ));
     }
     if f.components > 1 {
-        warnings.push(format!("{prefix}{} connected components: the Neumann spectrum has that many zero eigenvalues", f.components));
+        warnings.push(format!(
+            "{prefix}{} connected components: the Neumann spectrum has that many zero eigenvalues",
+            f.components
+        ));
     }
 }
 
@@ -463,7 +509,7 @@ fn solid(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Ve
     r.add("welded_vertices", &[], merged, format!("{merged} vertices at equal positions merged"));
     let mut tets = Vec::with_capacity(raw.tets.len());
     let (mut repeated, mut zero, mut inverted, mut dups) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut seen: HashMap<[u32; 4], ()> = HashMap::with_capacity(raw.tets.len());
+    let mut seen: HashMap<[u32; 4], ()> = HashMap::with_capacity_and_hasher(raw.tets.len(), Default::default());
     for (i, t) in raw.tets.iter().enumerate() {
         let mut t = t.map(|v| weld_map[v as usize]);
         let mut k = t;
@@ -474,7 +520,10 @@ fn solid(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Ve
         }
         let p = t.map(|v| verts[v as usize]);
         let vol6 = vec3::volume6(p[0], p[1], p[2], p[3]);
-        let l = (0..4).flat_map(|a| (a + 1..4).map(move |b| (a, b))).map(|(a, b)| vec3::norm(vec3::sub(p[a], p[b]))).fold(0.0, f64::max);
+        let l = (0..4)
+            .flat_map(|a| (a + 1..4).map(move |b| (a, b)))
+            .map(|(a, b)| vec3::norm(vec3::sub(p[a], p[b])))
+            .fold(0.0, f64::max);
         if o.drop_degenerate && vol6.abs() <= 1e-10 * l * l * l {
             zero.push(i);
             continue;
@@ -489,9 +538,19 @@ fn solid(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Ve
         }
         tets.push(t);
     }
-    r.add("repeated_index", &repeated, repeated.len(), format!("{} tetrahedra with a repeated vertex index dropped", repeated.len()));
+    r.add(
+        "repeated_index",
+        &repeated,
+        repeated.len(),
+        format!("{} tetrahedra with a repeated vertex index dropped", repeated.len()),
+    );
     r.add("zero_volume_tets", &zero, zero.len(), format!("{} zero-volume (flat) tetrahedra dropped", zero.len()));
-    r.add("inverted_tets", &inverted, inverted.len(), format!("{} negatively oriented tetrahedra reoriented (two vertices swapped)", inverted.len()));
+    r.add(
+        "inverted_tets",
+        &inverted,
+        inverted.len(),
+        format!("{} negatively oriented tetrahedra reoriented (two vertices swapped)", inverted.len()),
+    );
     r.add("duplicate_tets", &dups, dups.len(), format!("{} tetrahedra repeating an earlier one dropped", dups.len()));
     if tets.is_empty() {
         return Err(ShapeError::Empty { what: format!("no usable tetrahedron is left of {}", raw.tets.len()) });
@@ -499,8 +558,14 @@ fn solid(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Ve
     let mut used = vec![false; verts.len()];
     tets.iter().flatten().for_each(|&v| used[v as usize] = true);
     let (vertices, cmap, dropped) = compact(&verts, &used);
-    let dropped_input: Vec<usize> = weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
-    r.add("unreferenced_vertices", &dropped_input, dropped.len(), format!("{} vertex(es) used by no tetrahedron dropped", dropped.len()));
+    let dropped_input: Vec<usize> =
+        weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
+    r.add(
+        "unreferenced_vertices",
+        &dropped_input,
+        dropped.len(),
+        format!("{} vertex(es) used by no tetrahedron dropped", dropped.len()),
+    );
     let tets: Vec<[u32; 4]> = tets.iter().map(|t| t.map(|v| cmap[v as usize])).collect();
     let mesh = TetMesh { vertices, tets };
     let (bfaces, nm_faces) = topology::tet_boundary(&mesh.tets);
@@ -519,7 +584,18 @@ fn solid(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Ve
         uf.union(t[0], t[3]);
     }
     let components = (0..mesh.vertices.len() as u32).filter(|&v| uf.find(v) == v).count();
-    let volume: f64 = mesh.tets.iter().map(|t| vec3::volume6(mesh.vertices[t[0] as usize], mesh.vertices[t[1] as usize], mesh.vertices[t[2] as usize], mesh.vertices[t[3] as usize]) / 6.0).sum();
+    let volume: f64 = mesh
+        .tets
+        .iter()
+        .map(|t| {
+            vec3::volume6(
+                mesh.vertices[t[0] as usize],
+                mesh.vertices[t[1] as usize],
+                mesh.vertices[t[2] as usize],
+                mesh.vertices[t[3] as usize],
+            ) / 6.0
+        })
+        .sum();
     let mut edges: Vec<[u32; 2]> = Vec::with_capacity(6 * mesh.tets.len());
     let mut tri: Vec<[u32; 3]> = Vec::with_capacity(4 * mesh.tets.len());
     for t in &mesh.tets {
@@ -558,7 +634,7 @@ fn curve(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs) -> Result<Outcome
     r.add("welded_vertices", &[], merged, format!("{merged} vertices at equal positions merged"));
     let mut segs = Vec::with_capacity(raw.segments.len());
     let (mut zero, mut dups) = (Vec::new(), Vec::new());
-    let mut seen: HashMap<[u32; 2], ()> = HashMap::new();
+    let mut seen: HashMap<[u32; 2], ()> = HashMap::default();
     for (i, s) in raw.segments.iter().enumerate() {
         let s = s.map(|v| weld_map[v as usize]);
         if s[0] == s[1] {
@@ -572,16 +648,32 @@ fn curve(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs) -> Result<Outcome
         }
         segs.push(s);
     }
-    r.add("zero_length_segments", &zero, zero.len(), format!("{} segment(s) joining a vertex to itself dropped", zero.len()));
-    r.add("duplicate_segments", &dups, dups.len(), format!("{} segment(s) repeating an earlier one dropped", dups.len()));
+    r.add(
+        "zero_length_segments",
+        &zero,
+        zero.len(),
+        format!("{} segment(s) joining a vertex to itself dropped", zero.len()),
+    );
+    r.add(
+        "duplicate_segments",
+        &dups,
+        dups.len(),
+        format!("{} segment(s) repeating an earlier one dropped", dups.len()),
+    );
     if segs.is_empty() {
         return Err(ShapeError::Empty { what: format!("no usable segment is left of {}", raw.segments.len()) });
     }
     let mut used = vec![false; verts.len()];
     segs.iter().flatten().for_each(|&v| used[v as usize] = true);
     let (vertices, cmap, dropped) = compact(&verts, &used);
-    let dropped_input: Vec<usize> = weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
-    r.add("unreferenced_vertices", &dropped_input, dropped.len(), format!("{} vertex(es) used by no segment dropped", dropped.len()));
+    let dropped_input: Vec<usize> =
+        weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
+    r.add(
+        "unreferenced_vertices",
+        &dropped_input,
+        dropped.len(),
+        format!("{} vertex(es) used by no segment dropped", dropped.len()),
+    );
     let segments: Vec<[u32; 2]> = segs.iter().map(|s| s.map(|v| cmap[v as usize])).collect();
     let n = vertices.len();
     let mut degree = vec![0usize; n];
@@ -617,13 +709,18 @@ fn graph(raw: &RawShape, r: &mut Repairs) -> Result<Outcome> {
         return Err(ShapeError::Empty { what: "the graph has no vertices".into() });
     }
     let weights = raw.weights.clone().unwrap_or_else(|| vec![1.0; raw.segments.len()]);
-    let mut merged: HashMap<[u32; 2], usize> = HashMap::new();
+    let mut merged: HashMap<[u32; 2], usize> = HashMap::default();
     let mut edges: Vec<[u32; 2]> = Vec::new();
     let mut w: Vec<f64> = Vec::new();
     let (mut loops, mut dups, mut zero) = (Vec::new(), Vec::new(), Vec::new());
     for (i, (s, &wi)) in raw.segments.iter().zip(&weights).enumerate() {
         if !wi.is_finite() || wi < 0.0 {
-            return Err(ShapeError::InvalidElement { element: Element::Edge, index: i, rule: format!("edge weights must be finite and non-negative, this one is {wi}"), location: Location::pointer(format!("/weights/{i}")) });
+            return Err(ShapeError::InvalidElement {
+                element: Element::Edge,
+                index: i,
+                rule: format!("edge weights must be finite and non-negative, this one is {wi}"),
+                location: Location::pointer(format!("/weights/{i}")),
+            });
         }
         if s[0] == s[1] {
             loops.push(i);
@@ -646,9 +743,19 @@ fn graph(raw: &RawShape, r: &mut Repairs) -> Result<Outcome> {
             }
         }
     }
-    r.add("self_loops", &loops, loops.len(), format!("{} self-loop(s) dropped (they do not change a Laplacian)", loops.len()));
+    r.add(
+        "self_loops",
+        &loops,
+        loops.len(),
+        format!("{} self-loop(s) dropped (they do not change a Laplacian)", loops.len()),
+    );
     r.add("zero_weight_edges", &zero, zero.len(), format!("{} edge(s) of weight 0 dropped", zero.len()));
-    r.add("duplicate_edges", &dups, dups.len(), format!("{} repeated edge(s) merged into one, weights summed", dups.len()));
+    r.add(
+        "duplicate_edges",
+        &dups,
+        dups.len(),
+        format!("{} repeated edge(s) merged into one, weights summed", dups.len()),
+    );
     let mut degree = vec![0usize; n];
     let mut uf = UnionFind::new(n);
     for e in &edges {

@@ -38,7 +38,11 @@ const IDENTITY: Mat4 = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1
 /// The JSON chunk of a GLB, or the whole input.
 fn json_part(bytes: &[u8]) -> Result<std::borrow::Cow<'_, [u8]>> {
     if bytes.starts_with(b"glTF") {
-        let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| ShapeError::Syntax { format: FMT, location: Location::byte(0), message: format!("invalid GLB container: {e}") })?;
+        let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| ShapeError::Syntax {
+            format: FMT,
+            location: Location::byte(0),
+            message: format!("invalid GLB container: {e}"),
+        })?;
         Ok(glb.json)
     } else {
         Ok(std::borrow::Cow::Borrowed(bytes))
@@ -68,7 +72,10 @@ fn check_accessor_references(json: &[u8]) -> Result<()> {
             for (path, r) in refs {
                 let ok = r.as_u64().is_some_and(|i| (i as usize) < accessors);
                 if !ok {
-                    return Err(syntax(format!("/meshes/{mi}/primitives/{pi}/{path}"), format!("refers to accessor {r}, but the document has {accessors}")));
+                    return Err(syntax(
+                        format!("/meshes/{mi}/primitives/{pi}/{path}"),
+                        format!("refers to accessor {r}, but the document has {accessors}"),
+                    ));
                 }
             }
         }
@@ -94,7 +101,10 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     for buffer in doc.buffers() {
         let ptr = format!("/buffers/{}", buffer.index());
         let data = match buffer.source() {
-            gltf::buffer::Source::Bin => doc.blob.clone().ok_or_else(|| syntax(ptr.clone(), "the buffer refers to a GLB BIN chunk, but there is none"))?,
+            gltf::buffer::Source::Bin => doc
+                .blob
+                .clone()
+                .ok_or_else(|| syntax(ptr.clone(), "the buffer refers to a GLB BIN chunk, but there is none"))?,
             gltf::buffer::Source::Uri(uri) => {
                 let Some(rest) = uri.strip_prefix("data:") else {
                     return Err(unsupported(ptr, format!("external buffer '{uri}': only embedded (data URI) buffers and .glb are taken; pack the file as .glb")));
@@ -109,7 +119,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
             }
         };
         if data.len() < buffer.length() {
-            return Err(ShapeError::Truncated { format: FMT, location: Location::pointer(ptr), message: format!("the buffer declares {} bytes but holds {}", buffer.length(), data.len()) });
+            return Err(ShapeError::Truncated {
+                format: FMT,
+                location: Location::pointer(ptr),
+                message: format!("the buffer declares {} bytes but holds {}", buffer.length(), data.len()),
+            });
         }
         buffers.push(data);
     }
@@ -148,23 +162,35 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
             stack.push((child, global, depth + 1));
         }
     }
-    raw.notes.push(format!("gltf: {instances} mesh instance(s) read with node transforms applied; vertices are not welded by the format"));
+    raw.notes.push(format!(
+        "gltf: {instances} mesh instance(s) read with node transforms applied; vertices are not welded by the format"
+    ));
     raw.polygons = polygons;
     Ok(raw)
 }
 
 /// The bytes of an accessor's elements: (data, stride, element size), checked against the buffer.
-fn accessor_bytes<'b>(buffers: &'b [Vec<u8>], acc: &gltf::Accessor<'_>, elem: usize, ptr: &str) -> Result<(&'b [u8], usize)> {
+fn accessor_bytes<'b>(
+    buffers: &'b [Vec<u8>],
+    acc: &gltf::Accessor<'_>,
+    elem: usize,
+    ptr: &str,
+) -> Result<(&'b [u8], usize)> {
     if acc.sparse().is_some() {
         return Err(unsupported(ptr.to_string(), "sparse accessors are not supported"));
     }
     let view = acc.view().ok_or_else(|| unsupported(ptr.to_string(), "accessor without a buffer view"))?;
-    let buf = buffers.get(view.buffer().index()).ok_or_else(|| syntax(ptr.to_string(), "buffer view refers to a missing buffer"))?;
+    let buf = buffers
+        .get(view.buffer().index())
+        .ok_or_else(|| syntax(ptr.to_string(), "buffer view refers to a missing buffer"))?;
     let start = view.offset();
     let len = view.length();
-    let view_bytes = start.checked_add(len).and_then(|end| buf.get(start..end)).ok_or_else(|| {
-        ShapeError::Truncated { format: FMT, location: Location::pointer(format!("/bufferViews/{}", view.index())), message: "the buffer view lies outside its buffer".into() }
-    })?;
+    let view_bytes =
+        start.checked_add(len).and_then(|end| buf.get(start..end)).ok_or_else(|| ShapeError::Truncated {
+            format: FMT,
+            location: Location::pointer(format!("/bufferViews/{}", view.index())),
+            message: "the buffer view lies outside its buffer".into(),
+        })?;
     let stride = view.stride().unwrap_or(elem);
     if stride < elem {
         return Err(syntax(ptr.to_string(), format!("byteStride {stride} is smaller than the element size {elem}")));
@@ -173,10 +199,15 @@ fn accessor_bytes<'b>(buffers: &'b [Vec<u8>], acc: &gltf::Accessor<'_>, elem: us
     if count == 0 {
         return Ok((&[], stride));
     }
-    let need = (count - 1).checked_mul(stride).and_then(|n| n.checked_add(elem)).and_then(|n| n.checked_add(acc.offset()));
+    let need =
+        (count - 1).checked_mul(stride).and_then(|n| n.checked_add(elem)).and_then(|n| n.checked_add(acc.offset()));
     match need {
         Some(end) if end <= view_bytes.len() => Ok((&view_bytes[acc.offset()..end], stride)),
-        _ => Err(ShapeError::Truncated { format: FMT, location: Location::pointer(ptr.to_string()), message: format!("{count} elements do not fit in the buffer view") }),
+        _ => Err(ShapeError::Truncated {
+            format: FMT,
+            location: Location::pointer(ptr.to_string()),
+            message: format!("{count} elements do not fit in the buffer view"),
+        }),
     }
 }
 
@@ -194,9 +225,14 @@ fn read_primitive(
     let pptr = format!("/meshes/{}/primitives/{}", mesh.index(), prim.index());
     let mode = prim.mode();
     if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
-        return Err(unsupported(pptr, format!("primitive mode {mode:?} is not a triangle primitive; kac reads triangle meshes from glTF")));
+        return Err(unsupported(
+            pptr,
+            format!("primitive mode {mode:?} is not a triangle primitive; kac reads triangle meshes from glTF"),
+        ));
     }
-    let pos = prim.get(&gltf::Semantic::Positions).ok_or_else(|| syntax(pptr.clone(), "the primitive has no POSITION attribute"))?;
+    let pos = prim
+        .get(&gltf::Semantic::Positions)
+        .ok_or_else(|| syntax(pptr.clone(), "the primitive has no POSITION attribute"))?;
     let aptr = format!("/accessors/{}", pos.index());
     if pos.dimensions() != Dimensions::Vec3 || pos.data_type() != DataType::F32 || pos.normalized() {
         return Err(unsupported(aptr, "POSITION must be VEC3 of FLOAT (quantized positions are not supported)"));
@@ -207,7 +243,9 @@ fn read_primitive(
     raw.vertices.reserve(pos.count());
     for i in 0..pos.count() {
         let o = i * stride;
-        let f = |k: usize| f32::from_le_bytes([data[o + 4 * k], data[o + 4 * k + 1], data[o + 4 * k + 2], data[o + 4 * k + 3]]) as f64;
+        let f = |k: usize| {
+            f32::from_le_bytes([data[o + 4 * k], data[o + 4 * k + 1], data[o + 4 * k + 2], data[o + 4 * k + 3]]) as f64
+        };
         let p = [f(0), f(1), f(2)];
         let q = [0, 1, 2].map(|r| m[0][r] * p[0] + m[1][r] * p[1] + m[2][r] * p[2] + m[3][r]);
         let w = m[0][3] * p[0] + m[1][3] * p[1] + m[2][3] * p[2] + m[3][3];
@@ -263,7 +301,11 @@ fn read_primitive(
         }
         Mode::TriangleStrip => {
             for i in 2..indices.len() {
-                let t = if i % 2 == 0 { [indices[i - 2], indices[i - 1], indices[i]] } else { [indices[i - 1], indices[i - 2], indices[i]] };
+                let t = if i % 2 == 0 {
+                    [indices[i - 2], indices[i - 1], indices[i]]
+                } else {
+                    [indices[i - 1], indices[i - 2], indices[i]]
+                };
                 push(t);
             }
         }

@@ -87,7 +87,8 @@ impl<'a> Scanner<'a> {
     }
     fn i64(&mut self, what: &str) -> Result<i64> {
         match self.token() {
-            Some((l, t)) => text::parse_i64(t).ok_or_else(|| text::syntax(FMT, l, format!("expected an integer for {what}, found '{}'", show(t)))),
+            Some((l, t)) => text::parse_i64(t)
+                .ok_or_else(|| text::syntax(FMT, l, format!("expected an integer for {what}, found '{}'", show(t)))),
             None => Err(text::syntax(FMT, self.line, format!("missing {what}"))),
         }
     }
@@ -115,14 +116,22 @@ impl<'a> Scanner<'a> {
                 return Ok(());
             }
         }
-        Err(ShapeError::Truncated { format: FMT, location: Location::line(start), message: format!("section ${} is not closed", String::from_utf8_lossy(name)) })
+        Err(ShapeError::Truncated {
+            format: FMT,
+            location: Location::line(start),
+            message: format!("section ${} is not closed", String::from_utf8_lossy(name)),
+        })
     }
     fn expect_end(&mut self, name: &str) -> Result<()> {
         // Binary sections end with a newline before `$End...`; ASCII ones too.
         match self.token() {
             Some((_, t)) if t == format!("$End{name}").as_bytes() => Ok(()),
             Some((l, t)) => Err(text::syntax(FMT, l, format!("expected $End{name}, found '{}'", show(t)))),
-            None => Err(ShapeError::Truncated { format: FMT, location: Location::line(self.line), message: format!("missing $End{name}") }),
+            None => Err(ShapeError::Truncated {
+                format: FMT,
+                location: Location::line(self.line),
+                message: format!("missing $End{name}"),
+            }),
         }
     }
 }
@@ -140,7 +149,12 @@ impl Builder {
         let i = self.raw.vertices.len();
         self.raw.vertices.push(text::check_point(p, i, loc)?);
         if tag < 0 || self.tags.insert(tag as u64, i as u32).is_some() {
-            return Err(ShapeError::InvalidElement { element: Element::Vertex, index: i, rule: format!("node tag {tag} is negative or repeated"), location: Location::Unknown });
+            return Err(ShapeError::InvalidElement {
+                element: Element::Vertex,
+                index: i,
+                rule: format!("node tag {tag} is negative or repeated"),
+                location: Location::Unknown,
+            });
         }
         Ok(())
     }
@@ -182,7 +196,13 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     let mut version = 0.0f64;
     let mut binary = false;
     let mut big = false;
-    let mut bld = Builder { raw: RawShape::default(), tags: HashMap::new(), polygons: Polygons::default(), higher_order: 0, other: 0 };
+    let mut bld = Builder {
+        raw: RawShape::default(),
+        tags: HashMap::new(),
+        polygons: Polygons::default(),
+        higher_order: 0,
+        other: 0,
+    };
     let mut seen_format = false;
     while let Some((ln, line)) = s.next_line() {
         if line.is_empty() {
@@ -197,14 +217,26 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                 let ds = text::expect_usize(FMT, l, t.next(), "data size")?;
                 binary = ft == 1;
                 if !(2.0..3.0).contains(&version) && !(4.1..4.2).contains(&version) {
-                    return Err(ShapeError::Unsupported { format: FMT, location: Location::line(l), message: format!("MSH version {version}; versions 2.x and 4.1 are taken") });
+                    return Err(ShapeError::Unsupported {
+                        format: FMT,
+                        location: Location::line(l),
+                        message: format!("MSH version {version}; versions 2.x and 4.1 are taken"),
+                    });
                 }
                 if binary && version >= 4.0 {
-                    return Err(ShapeError::Unsupported { format: FMT, location: Location::line(l), message: "binary MSH 4 is not supported; save as MSH 4.1 ASCII or MSH 2 binary".into() });
+                    return Err(ShapeError::Unsupported {
+                        format: FMT,
+                        location: Location::line(l),
+                        message: "binary MSH 4 is not supported; save as MSH 4.1 ASCII or MSH 2 binary".into(),
+                    });
                 }
                 if binary {
                     if ds != 8 {
-                        return Err(ShapeError::Unsupported { format: FMT, location: Location::line(l), message: format!("data size {ds}; binary MSH needs 8-byte doubles") });
+                        return Err(ShapeError::Unsupported {
+                            format: FMT,
+                            location: Location::line(l),
+                            message: format!("data size {ds}; binary MSH needs 8-byte doubles"),
+                        });
                     }
                     let one = s.take(4, "the endianness marker")?;
                     big = i32::from_le_bytes([one[0], one[1], one[2], one[3]]) != 1;
@@ -291,9 +323,17 @@ fn elements_v2(s: &mut Scanner<'_>, b: &mut Builder, options: &ReadOptions, bina
             let at = s.pos;
             let h = s.take(12, "an element block header")?;
             let (ty, count, ntags) = (rd_i32(&h[0..4], big) as i64, rd_i32(&h[4..8], big), rd_i32(&h[8..12], big));
-            let nn = nodes_of(ty).ok_or_else(|| ShapeError::Unsupported { format: FMT, location: Location::byte(at), message: format!("element type {ty}") })?;
+            let nn = nodes_of(ty).ok_or_else(|| ShapeError::Unsupported {
+                format: FMT,
+                location: Location::byte(at),
+                message: format!("element type {ty}"),
+            })?;
             if count <= 0 || ntags < 0 || done + count as usize > n {
-                return Err(ShapeError::Syntax { format: FMT, location: Location::byte(at), message: format!("invalid element block header ({count} elements, {ntags} tags)") });
+                return Err(ShapeError::Syntax {
+                    format: FMT,
+                    location: Location::byte(at),
+                    message: format!("invalid element block header ({count} elements, {ntags} tags)"),
+                });
             }
             let rec = 4 * (1 + ntags as usize + nn);
             for _ in 0..count {
@@ -315,7 +355,11 @@ fn elements_v2(s: &mut Scanner<'_>, b: &mut Builder, options: &ReadOptions, bina
             for _ in 0..ntags {
                 s.i64("tag")?;
             }
-            let nn = nodes_of(ty).ok_or_else(|| ShapeError::Unsupported { format: FMT, location: Location::line(line), message: format!("element type {ty}") })?;
+            let nn = nodes_of(ty).ok_or_else(|| ShapeError::Unsupported {
+                format: FMT,
+                location: Location::line(line),
+                message: format!("element type {ty}"),
+            })?;
             nodes.clear();
             for _ in 0..nn {
                 nodes.push(s.i64("node tag")?);
@@ -374,7 +418,11 @@ fn elements_v4(s: &mut Scanner<'_>, b: &mut Builder, options: &ReadOptions) -> R
         let line = s.line;
         let ty = s.i64("element type")?;
         let m = s.count("elements in block")?;
-        let nn = nodes_of(ty).ok_or_else(|| ShapeError::Unsupported { format: FMT, location: Location::line(line), message: format!("element type {ty}") })?;
+        let nn = nodes_of(ty).ok_or_else(|| ShapeError::Unsupported {
+            format: FMT,
+            location: Location::line(line),
+            message: format!("element type {ty}"),
+        })?;
         if index + m > n {
             return Err(text::syntax(FMT, line, "more elements in blocks than declared"));
         }
@@ -394,7 +442,9 @@ fn elements_v4(s: &mut Scanner<'_>, b: &mut Builder, options: &ReadOptions) -> R
 
 fn relocate(e: ShapeError, index: usize, location: Location) -> ShapeError {
     match e {
-        ShapeError::InvalidElement { element, rule, .. } => ShapeError::InvalidElement { element, index, rule, location },
+        ShapeError::InvalidElement { element, rule, .. } => {
+            ShapeError::InvalidElement { element, index, rule, location }
+        }
         other => other,
     }
 }

@@ -67,7 +67,14 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                     [*x, *y, 0.0]
                 }
                 [x, y, z] => [*x, *y, *z],
-                _ => return Err(ShapeError::InvalidElement { element: Element::Vertex, index: i, rule: format!("a vertex has 2 or 3 coordinates, this one has {}", v.len()), location: ptr(format!("/vertices/{i}")) }),
+                _ => {
+                    return Err(ShapeError::InvalidElement {
+                        element: Element::Vertex,
+                        index: i,
+                        rule: format!("a vertex has 2 or 3 coordinates, this one has {}", v.len()),
+                        location: ptr(format!("/vertices/{i}")),
+                    })
+                }
             };
             raw.vertices.push(text::check_point(p, i, || ptr(format!("/vertices/{i}")))?);
         }
@@ -78,17 +85,29 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
             n
         }
         (Some(n), m) if n != m => {
-            return Err(ShapeError::InvalidElement { element: Element::Vertex, index: m, rule: format!("vertex_count is {n} but {m} vertices are listed"), location: ptr("/vertex_count".into()) });
+            return Err(ShapeError::InvalidElement {
+                element: Element::Vertex,
+                index: m,
+                rule: format!("vertex_count is {n} but {m} vertices are listed"),
+                location: ptr("/vertex_count".into()),
+            });
         }
         (_, m) => m,
     };
-    let index = |key: &str, e: usize, k: usize, v: i64, element: Element| text::check_index(v, nv, element, e, || ptr(format!("/{key}/{e}/{k}")));
+    let index = |key: &str, e: usize, k: usize, v: i64, element: Element| {
+        text::check_index(v, nv, element, e, || ptr(format!("/{key}/{e}/{k}")))
+    };
     if let Some(faces) = js.faces {
         options.check_elements(faces.len() as u64)?;
         let mut polys = Polygons::with_capacity(faces.len(), 3 * faces.len());
         for (e, f) in faces.iter().enumerate() {
             if f.len() < 3 {
-                return Err(ShapeError::InvalidElement { element: Element::Face, index: e, rule: format!("a face needs at least 3 corners, this one has {}", f.len()), location: ptr(format!("/faces/{e}")) });
+                return Err(ShapeError::InvalidElement {
+                    element: Element::Face,
+                    index: e,
+                    rule: format!("a face needs at least 3 corners, this one has {}", f.len()),
+                    location: ptr(format!("/faces/{e}")),
+                });
             }
             for (k, &v) in f.iter().enumerate() {
                 polys.indices.push(index("faces", e, k, v, Element::Face)?);
@@ -102,7 +121,12 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
         let mut out = Vec::with_capacity(list.len());
         for (e, item) in list.iter().enumerate() {
             if item.len() != arity {
-                return Err(ShapeError::InvalidElement { element, index: e, rule: format!("expected {arity} vertex indices, found {}", item.len()), location: ptr(format!("/{key}/{e}")) });
+                return Err(ShapeError::InvalidElement {
+                    element,
+                    index: e,
+                    rule: format!("expected {arity} vertex indices, found {}", item.len()),
+                    location: ptr(format!("/{key}/{e}")),
+                });
             }
             let mut a = [0u32; 4];
             for (k, &v) in item.iter().enumerate() {
@@ -120,12 +144,21 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
         raw.is_graph = true;
         if let Some(w) = js.weights {
             if w.len() != raw.segments.len() {
-                return Err(ShapeError::InvalidElement { element: Element::Edge, index: w.len().min(raw.segments.len()), rule: format!("{} weights for {} edges", w.len(), raw.segments.len()), location: ptr("/weights".into()) });
+                return Err(ShapeError::InvalidElement {
+                    element: Element::Edge,
+                    index: w.len().min(raw.segments.len()),
+                    rule: format!("{} weights for {} edges", w.len(), raw.segments.len()),
+                    location: ptr("/weights".into()),
+                });
             }
             raw.weights = Some(w);
         }
     } else if js.weights.is_some() {
-        return Err(ShapeError::Syntax { format: FMT, location: ptr("/weights".into()), message: "weights need edges".into() });
+        return Err(ShapeError::Syntax {
+            format: FMT,
+            location: ptr("/weights".into()),
+            message: "weights need edges".into(),
+        });
     }
     if let Some(s) = js.segments {
         raw.segments.extend(fixed("segments", &s, 2, Element::Segment)?.into_iter().map(|a| [a[0], a[1]]));
@@ -133,7 +166,12 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     if let Some(pl) = js.polylines {
         for (e, chain) in pl.iter().enumerate() {
             if chain.len() < 2 {
-                return Err(ShapeError::InvalidElement { element: Element::Segment, index: e, rule: "a polyline needs at least 2 vertices".into(), location: ptr(format!("/polylines/{e}")) });
+                return Err(ShapeError::InvalidElement {
+                    element: Element::Segment,
+                    index: e,
+                    rule: "a polyline needs at least 2 vertices".into(),
+                    location: ptr(format!("/polylines/{e}")),
+                });
             }
             let mut ids = Vec::with_capacity(chain.len());
             for (k, &v) in chain.iter().enumerate() {
@@ -144,7 +182,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     }
     if let Some(ns) = js.normals {
         if ns.len() != raw.vertices.len() || ns.iter().any(|n| n.len() != 3) {
-            return Err(ShapeError::Syntax { format: FMT, location: ptr("/normals".into()), message: "normals need one [nx, ny, nz] per vertex".into() });
+            return Err(ShapeError::Syntax {
+                format: FMT,
+                location: ptr("/normals".into()),
+                message: "normals need one [nx, ny, nz] per vertex".into(),
+            });
         }
         raw.normals = Some(ns.iter().map(|n| [n[0], n[1], n[2]]).collect());
     }

@@ -26,7 +26,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
             "Dimension" => {
                 dim = t.usize(FMT, "dimension")?;
                 if !(2..=3).contains(&dim) {
-                    return Err(ShapeError::Unsupported { format: FMT, location: Location::line(ln), message: format!("dimension {dim}") });
+                    return Err(ShapeError::Unsupported {
+                        format: FMT,
+                        location: Location::line(ln),
+                        message: format!("dimension {dim}"),
+                    });
                 }
                 raw.planar_input = dim == 2;
             }
@@ -71,7 +75,8 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                     }
                 }
             }
-            "Corners" | "RequiredVertices" | "Ridges" | "RequiredEdges" | "RequiredTriangles" | "RequiredTetrahedra" => {
+            "Corners" | "RequiredVertices" | "Ridges" | "RequiredEdges" | "RequiredTriangles"
+            | "RequiredTetrahedra" => {
                 let n = t.usize(FMT, "count")?;
                 for _ in 0..n {
                     t.i64(FMT, "index")?;
@@ -93,7 +98,13 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                 skipped.push(k);
             }
             "End" => break,
-            _ => return Err(ShapeError::Unsupported { format: FMT, location: Location::line(ln), message: format!("unknown section '{}'", text::show(key)) }),
+            _ => {
+                return Err(ShapeError::Unsupported {
+                    format: FMT,
+                    location: Location::line(ln),
+                    message: format!("unknown section '{}'", text::show(key)),
+                })
+            }
         }
     }
     if !raw.tets.is_empty() && !triangles.is_empty() {

@@ -249,8 +249,8 @@ pub fn read_bytes(bytes: &[u8], format: Format, options: &ReadOptions) -> Result
 
 /// Reads a file; the format comes from `explicit`, the extension or the content.
 pub fn read_path(path: &Path, explicit: Option<Format>, options: &ReadOptions) -> Result<(RawShape, Format)> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| ShapeError::Io { path: path.display().to_string(), message: e.to_string() })?;
+    let bytes =
+        std::fs::read(path).map_err(|e| ShapeError::Io { path: path.display().to_string(), message: e.to_string() })?;
     let format = choose_format(explicit, Some(path), &bytes)?;
     Ok((read_bytes(&bytes, format, options)?, format))
 }

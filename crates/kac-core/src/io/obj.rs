@@ -22,8 +22,7 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     let mut max_ref: Option<(i64, Element, usize, usize)> = None;
     let mut corner: Vec<u32> = Vec::with_capacity(16);
 
-    let mut lines = Lines::new(bytes);
-    while let Some((ln, line)) = lines.next() {
+    for (ln, line) in Lines::new(bytes) {
         let line = line.trim_ascii();
         if line.is_empty() || line[0] == b'#' {
             continue;
@@ -113,9 +112,9 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                 }
             }
             b"vp" | b"o" | b"g" | b"s" | b"usemtl" | b"mtllib" | b"usemap" | b"maplib" | b"lod" | b"shadow_obj"
-            | b"trace_obj" | b"p" | b"cstype" | b"deg" | b"curv" | b"curv2" | b"surf" | b"parm" | b"trim"
-            | b"hole" | b"scrv" | b"sp" | b"end" | b"con" | b"mg" | b"bmat" | b"step" | b"ctech" | b"stech"
-            | b"bevel" | b"c_interp" | b"d_interp" => {
+            | b"trace_obj" | b"p" | b"cstype" | b"deg" | b"curv" | b"curv2" | b"surf" | b"parm" | b"trim" | b"hole"
+            | b"scrv" | b"sp" | b"end" | b"con" | b"mg" | b"bmat" | b"step" | b"ctech" | b"stech" | b"bevel"
+            | b"c_interp" | b"d_interp" => {
                 if !matches!(key, b"o" | b"g" | b"s" | b"usemtl" | b"mtllib") {
                     *ignored.entry(text::show(key)).or_default() += 1;
                 }

@@ -21,7 +21,8 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
         }
         None
     };
-    let (ln, header) = next_content(&mut lines).ok_or_else(|| ShapeError::Empty { what: "the OFF file has no header".into() })?;
+    let (ln, header) =
+        next_content(&mut lines).ok_or_else(|| ShapeError::Empty { what: "the OFF file has no header".into() })?;
     let mut toks: Vec<&[u8]> = text::tokens(&header).collect();
     let keyword = toks.first().copied().unwrap_or_default();
     let kw = String::from_utf8_lossy(keyword).to_string();
@@ -33,18 +34,27 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     let mut dim = 3usize;
     toks.remove(0);
     if toks.first().is_some_and(|t| t.eq_ignore_ascii_case(b"BINARY")) {
-        return Err(ShapeError::Unsupported { format: FMT, location: Location::line(ln), message: "binary OFF is not supported; write it as ASCII OFF".into() });
+        return Err(ShapeError::Unsupported {
+            format: FMT,
+            location: Location::line(ln),
+            message: "binary OFF is not supported; write it as ASCII OFF".into(),
+        });
     }
     let mut counts_line = (ln, toks.iter().map(|t| t.to_vec()).collect::<Vec<_>>());
     if prefix.contains('n') {
         // nOFF: the dimension comes first (on the header line or the next one).
         if counts_line.1.is_empty() {
-            let (l, c) = next_content(&mut lines).ok_or_else(|| text::syntax(FMT, ln, "missing dimension after nOFF"))?;
+            let (l, c) =
+                next_content(&mut lines).ok_or_else(|| text::syntax(FMT, ln, "missing dimension after nOFF"))?;
             counts_line = (l, text::tokens(&c).map(|t| t.to_vec()).collect());
         }
         let d = text::expect_usize(FMT, counts_line.0, counts_line.1.first().map(|v| v.as_slice()), "dimension")?;
         if !(2..=3).contains(&d) {
-            return Err(ShapeError::Unsupported { format: FMT, location: Location::line(counts_line.0), message: format!("dimension {d}; only 2 and 3 are taken") });
+            return Err(ShapeError::Unsupported {
+                format: FMT,
+                location: Location::line(counts_line.0),
+                message: format!("dimension {d}; only 2 and 3 are taken"),
+            });
         }
         dim = d;
         counts_line.1.remove(0);
@@ -64,7 +74,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     let coords = dim + usize::from(homogeneous);
     while raw.vertices.len() < nv {
         let Some((ln, line)) = lines.next() else {
-            return Err(ShapeError::Truncated { format: FMT, location: Location::line(lines.line()), message: format!("expected {nv} vertices, found {}", raw.vertices.len()) });
+            return Err(ShapeError::Truncated {
+                format: FMT,
+                location: Location::line(lines.line()),
+                message: format!("expected {nv} vertices, found {}", raw.vertices.len()),
+            });
         };
         let line = text::strip_comment(line);
         if line.is_empty() {
@@ -87,7 +101,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     let mut colored = 0usize;
     while polygons.len() < nf {
         let Some((ln, line)) = lines.next() else {
-            return Err(ShapeError::Truncated { format: FMT, location: Location::line(lines.line()), message: format!("expected {nf} faces, found {}", polygons.len()) });
+            return Err(ShapeError::Truncated {
+                format: FMT,
+                location: Location::line(lines.line()),
+                message: format!("expected {nf} faces, found {}", polygons.len()),
+            });
         };
         let line = text::strip_comment(line);
         if line.is_empty() {
@@ -97,11 +115,20 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
         let mut t = text::tokens(line);
         let k = text::expect_usize(FMT, ln, t.next(), "face size")?;
         if k < 3 {
-            return Err(ShapeError::InvalidElement { element: Element::Face, index: face, rule: format!("a face needs at least 3 corners, this one has {k}"), location: Location::line(ln) });
+            return Err(ShapeError::InvalidElement {
+                element: Element::Face,
+                index: face,
+                rule: format!("a face needs at least 3 corners, this one has {k}"),
+                location: Location::line(ln),
+            });
         }
         for _ in 0..k {
-            let tok = t.next().ok_or_else(|| text::syntax(FMT, ln, format!("face {face} declares {k} corners but lists fewer")))?;
-            let v = text::parse_i64(tok).ok_or_else(|| text::syntax(FMT, ln, format!("expected a vertex index, found '{}'", text::show(tok))))?;
+            let tok = t
+                .next()
+                .ok_or_else(|| text::syntax(FMT, ln, format!("face {face} declares {k} corners but lists fewer")))?;
+            let v = text::parse_i64(tok).ok_or_else(|| {
+                text::syntax(FMT, ln, format!("expected a vertex index, found '{}'", text::show(tok)))
+            })?;
             polygons.indices.push(text::check_index(v, nv, Element::Face, face, || Location::line(ln))?);
         }
         polygons.close();

@@ -133,7 +133,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     let mut elements: Vec<ElementDecl> = Vec::new();
     loop {
         let Some((ln, line)) = lines.next() else {
-            return Err(ShapeError::Truncated { format: FMT, location: Location::line(lines.line()), message: "the header has no 'end_header'".into() });
+            return Err(ShapeError::Truncated {
+                format: FMT,
+                location: Location::line(lines.line()),
+                message: "the header has no 'end_header'".into(),
+            });
         };
         let mut t = text::tokens(line);
         match t.next() {
@@ -145,7 +149,13 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                     Some(b"ascii") => Encoding::Ascii,
                     Some(b"binary_little_endian") => Encoding::Little,
                     Some(b"binary_big_endian") => Encoding::Big,
-                    other => return Err(text::syntax(FMT, ln, format!("unknown format '{}'", text::show(other.unwrap_or_default())))),
+                    other => {
+                        return Err(text::syntax(
+                            FMT,
+                            ln,
+                            format!("unknown format '{}'", text::show(other.unwrap_or_default())),
+                        ))
+                    }
                 });
             }
             Some(b"element") => {
@@ -157,35 +167,53 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                 let e = elements.last_mut().ok_or_else(|| text::syntax(FMT, ln, "property before any element"))?;
                 let ty = t.next().ok_or_else(|| text::syntax(FMT, ln, "property without a type"))?;
                 let prop = if ty == b"list" {
-                    let count = t.next().and_then(Scalar::parse).ok_or_else(|| text::syntax(FMT, ln, "list property needs a valid count type"))?;
-                    let item = t.next().and_then(Scalar::parse).ok_or_else(|| text::syntax(FMT, ln, "list property needs a valid item type"))?;
+                    let count = t
+                        .next()
+                        .and_then(Scalar::parse)
+                        .ok_or_else(|| text::syntax(FMT, ln, "list property needs a valid count type"))?;
+                    let item = t
+                        .next()
+                        .and_then(Scalar::parse)
+                        .ok_or_else(|| text::syntax(FMT, ln, "list property needs a valid item type"))?;
                     if !count.is_integer() {
                         return Err(text::syntax(FMT, ln, "a list count type must be an integer type"));
                     }
                     let name = t.next().ok_or_else(|| text::syntax(FMT, ln, "property without a name"))?.to_vec();
                     Property::List { name, count, item }
                 } else {
-                    let ty = Scalar::parse(ty).ok_or_else(|| text::syntax(FMT, ln, format!("unknown property type '{}'", text::show(ty))))?;
+                    let ty = Scalar::parse(ty)
+                        .ok_or_else(|| text::syntax(FMT, ln, format!("unknown property type '{}'", text::show(ty))))?;
                     let name = t.next().ok_or_else(|| text::syntax(FMT, ln, "property without a name"))?.to_vec();
                     Property::Scalar { name, ty }
                 };
                 e.properties.push(prop);
             }
-            Some(other) => return Err(text::syntax(FMT, ln, format!("unknown header keyword '{}'", text::show(other)))),
+            Some(other) => {
+                return Err(text::syntax(FMT, ln, format!("unknown header keyword '{}'", text::show(other))))
+            }
         }
     }
     let encoding = encoding.ok_or_else(|| text::syntax(FMT, lines.line(), "the header has no 'format' line"))?;
-    let vertex_decl = elements.iter().find(|e| role(e) == Role::Vertex).ok_or_else(|| ShapeError::Empty { what: "the PLY file has no 'vertex' element".into() })?;
+    let vertex_decl = elements
+        .iter()
+        .find(|e| role(e) == Role::Vertex)
+        .ok_or_else(|| ShapeError::Empty { what: "the PLY file has no 'vertex' element".into() })?;
     let nv = vertex_decl.count;
     options.check_vertices(nv as u64)?;
-    let elements_total: u64 = elements.iter().filter(|e| matches!(role(e), Role::Face | Role::Tet | Role::Edge)).map(|e| e.count as u64).sum();
+    let elements_total: u64 = elements
+        .iter()
+        .filter(|e| matches!(role(e), Role::Face | Role::Tet | Role::Edge))
+        .map(|e| e.count as u64)
+        .sum();
     options.check_elements(elements_total)?;
 
     let mut out = Output { raw: RawShape::default(), polygons: Polygons::default(), nv, skipped: Vec::new() };
     let body_start = lines.offset();
     match encoding {
         Encoding::Ascii => read_ascii(&mut lines, &elements, &mut out, bytes.len())?,
-        Encoding::Little | Encoding::Big => read_binary(&bytes[body_start..], body_start, encoding == Encoding::Big, &elements, &mut out)?,
+        Encoding::Little | Encoding::Big => {
+            read_binary(&bytes[body_start..], body_start, encoding == Encoding::Big, &elements, &mut out)?
+        }
     }
     let Output { mut raw, polygons, skipped, .. } = out;
     raw.polygons = polygons;
@@ -224,10 +252,13 @@ fn index_list(e: &ElementDecl) -> Result<usize> {
             return Ok(i);
         }
     }
-    e.properties
-        .iter()
-        .position(|p| matches!(p, Property::List { .. }))
-        .ok_or_else(|| text::syntax(FMT, e.line, format!("element '{}' has no list of vertex indices", String::from_utf8_lossy(&e.name))))
+    e.properties.iter().position(|p| matches!(p, Property::List { .. })).ok_or_else(|| {
+        text::syntax(
+            FMT,
+            e.line,
+            format!("element '{}' has no list of vertex indices", String::from_utf8_lossy(&e.name)),
+        )
+    })
 }
 
 fn edge_slots(e: &ElementDecl) -> Result<[usize; 2]> {
@@ -244,17 +275,33 @@ fn push_vertex(out: &mut Output, p: [f64; 3], location: impl FnOnce() -> Locatio
     Ok(())
 }
 
-fn push_indices(out: &mut Output, r: Role, idx: &[f64], element_index: usize, location: impl Fn() -> Location) -> Result<()> {
+fn push_indices(
+    out: &mut Output,
+    r: Role,
+    idx: &[f64],
+    element_index: usize,
+    location: impl Fn() -> Location,
+) -> Result<()> {
     let (element, want) = match r {
         Role::Face => (Element::Face, 0),
         Role::Tet => (Element::Tetrahedron, 4),
         _ => (Element::Edge, 2),
     };
     if r == Role::Face && idx.len() < 3 {
-        return Err(ShapeError::InvalidElement { element, index: element_index, rule: format!("a face needs at least 3 corners, this one has {}", idx.len()), location: location() });
+        return Err(ShapeError::InvalidElement {
+            element,
+            index: element_index,
+            rule: format!("a face needs at least 3 corners, this one has {}", idx.len()),
+            location: location(),
+        });
     }
     if want != 0 && idx.len() != want {
-        return Err(ShapeError::InvalidElement { element, index: element_index, rule: format!("expected {want} vertex indices, found {}", idx.len()), location: location() });
+        return Err(ShapeError::InvalidElement {
+            element,
+            index: element_index,
+            rule: format!("expected {want} vertex indices, found {}", idx.len()),
+            location: location(),
+        });
     }
     let mut buf = [0u32; 4];
     for (k, &v) in idx.iter().enumerate() {
@@ -294,7 +341,16 @@ fn read_ascii(lines: &mut Lines<'_>, elements: &[ElementDecl], out: &mut Output,
         let mut done = 0;
         while done < e.count {
             let Some((ln, line)) = lines.next() else {
-                return Err(ShapeError::Truncated { format: FMT, location: Location::line(lines.line()), message: format!("element '{}' declares {} records, found {}", String::from_utf8_lossy(&e.name), e.count, done) });
+                return Err(ShapeError::Truncated {
+                    format: FMT,
+                    location: Location::line(lines.line()),
+                    message: format!(
+                        "element '{}' declares {} records, found {}",
+                        String::from_utf8_lossy(&e.name),
+                        e.count,
+                        done
+                    ),
+                });
             };
             let mut toks = text::tokens(line).peekable();
             if toks.peek().is_none() {
@@ -308,7 +364,12 @@ fn read_ascii(lines: &mut Lines<'_>, elements: &[ElementDecl], out: &mut Output,
                         values.push(text::expect_f64(FMT, ln, toks.next(), &String::from_utf8_lossy(name))?);
                     }
                     Property::List { name, .. } => {
-                        let n = text::expect_usize(FMT, ln, toks.next(), &format!("count of list '{}'", String::from_utf8_lossy(name)))?;
+                        let n = text::expect_usize(
+                            FMT,
+                            ln,
+                            toks.next(),
+                            &format!("count of list '{}'", String::from_utf8_lossy(name)),
+                        )?;
                         values.push(f64::NAN);
                         for _ in 0..n {
                             let v = text::expect_f64(FMT, ln, toks.next(), "list item")?;
@@ -328,7 +389,9 @@ fn read_ascii(lines: &mut Lines<'_>, elements: &[ElementDecl], out: &mut Output,
                     }
                 }
                 Role::Face | Role::Tet => push_indices(out, r, &list, done, || Location::line(ln))?,
-                Role::Edge => push_indices(out, r, &[values[eslots[0]], values[eslots[1]]], done, || Location::line(ln))?,
+                Role::Edge => {
+                    push_indices(out, r, &[values[eslots[0]], values[eslots[1]]], done, || Location::line(ln))?
+                }
                 Role::Skip => {}
             }
             done += 1;
@@ -354,7 +417,11 @@ impl Cursor<'_> {
                 self.pos += n;
                 Ok(ty.decode(s, self.big))
             }
-            None => Err(ShapeError::Truncated { format: FMT, location: Location::byte(self.base + self.pos), message: format!("the data ends inside {what}") }),
+            None => Err(ShapeError::Truncated {
+                format: FMT,
+                location: Location::byte(self.base + self.pos),
+                message: format!("the data ends inside {what}"),
+            }),
         }
     }
     fn at(&self) -> usize {
@@ -390,10 +457,12 @@ fn read_binary(body: &[u8], base: usize, big: bool, elements: &[ElementDecl], ou
                 }
             }
             if all_scalar {
-                let need = record.checked_mul(e.count).filter(|&n| n <= body.len() - c.pos).ok_or_else(|| ShapeError::Truncated {
-                    format: FMT,
-                    location: Location::byte(c.at()),
-                    message: format!("{} vertices of {record} bytes need more data than the file has", e.count),
+                let need = record.checked_mul(e.count).filter(|&n| n <= body.len() - c.pos).ok_or_else(|| {
+                    ShapeError::Truncated {
+                        format: FMT,
+                        location: Location::byte(c.at()),
+                        message: format!("{} vertices of {record} bytes need more data than the file has", e.count),
+                    }
                 })?;
                 let data = &body[c.pos..c.pos + need];
                 out.raw.vertices.reserve(e.count);
@@ -440,7 +509,10 @@ fn read_binary(body: &[u8], base: usize, big: bool, elements: &[ElementDecl], ou
         let eslots = if r == Role::Edge { edge_slots(e)? } else { [0; 2] };
         if r == Role::Face {
             // At least one count byte per face must be there: no allocation beyond the input's size.
-            out.polygons = Polygons::with_capacity(text::capacity(e.count, body.len(), 1), text::capacity(3 * e.count, body.len(), 1));
+            out.polygons = Polygons::with_capacity(
+                text::capacity(e.count, body.len(), 1),
+                text::capacity(3 * e.count, body.len(), 1),
+            );
         }
         // Fast path for the common face layout: one list property and nothing else.
         if r == Role::Face && e.properties.len() == 1 {
@@ -448,16 +520,27 @@ fn read_binary(body: &[u8], base: usize, big: bool, elements: &[ElementDecl], ou
                 for f in 0..e.count {
                     let start = c.at();
                     let n = c.scalar(count, &what)?;
-                    if !(n >= 3.0 && n <= 1.0e6) {
-                        return Err(ShapeError::InvalidElement { element: Element::Face, index: f, rule: format!("a face needs between 3 and 10⁶ corners, this one declares {n}"), location: Location::byte(start) });
+                    if !(3.0..=1.0e6).contains(&n) {
+                        return Err(ShapeError::InvalidElement {
+                            element: Element::Face,
+                            index: f,
+                            rule: format!("a face needs between 3 and 10⁶ corners, this one declares {n}"),
+                            location: Location::byte(start),
+                        });
                     }
                     let n = n as usize;
                     let size = item.size();
-                    let data = c.b.get(c.pos..c.pos + n * size).ok_or_else(|| ShapeError::Truncated { format: FMT, location: Location::byte(c.at()), message: format!("the data ends inside face {f}") })?;
+                    let data = c.b.get(c.pos..c.pos + n * size).ok_or_else(|| ShapeError::Truncated {
+                        format: FMT,
+                        location: Location::byte(c.at()),
+                        message: format!("the data ends inside face {f}"),
+                    })?;
                     for k in 0..n {
                         let v = item.decode(&data[k * size..], big);
                         let vi = if v.fract() == 0.0 && v.abs() < 9.0e15 { v as i64 } else { i64::MIN };
-                        out.polygons.indices.push(text::check_index(vi, out.nv, Element::Face, f, || Location::byte(start))?);
+                        out.polygons
+                            .indices
+                            .push(text::check_index(vi, out.nv, Element::Face, f, || Location::byte(start))?);
                     }
                     out.polygons.close();
                     c.pos += n * size;
@@ -477,7 +560,12 @@ fn read_binary(body: &[u8], base: usize, big: bool, elements: &[ElementDecl], ou
                         values.push(f64::NAN);
                         if pi == list_slot {
                             if !(0.0..=1.0e6).contains(&n) {
-                                return Err(ShapeError::InvalidElement { element: Element::Face, index: idx, rule: format!("list length {n} is out of range"), location: Location::byte(start) });
+                                return Err(ShapeError::InvalidElement {
+                                    element: Element::Face,
+                                    index: idx,
+                                    rule: format!("list length {n} is out of range"),
+                                    location: Location::byte(start),
+                                });
                             }
                             for _ in 0..n as usize {
                                 list.push(c.scalar(*item, &what)?);
@@ -490,7 +578,9 @@ fn read_binary(body: &[u8], base: usize, big: bool, elements: &[ElementDecl], ou
             }
             match r {
                 Role::Face | Role::Tet => push_indices(out, r, &list, idx, || Location::byte(start))?,
-                Role::Edge => push_indices(out, r, &[values[eslots[0]], values[eslots[1]]], idx, || Location::byte(start))?,
+                Role::Edge => {
+                    push_indices(out, r, &[values[eslots[0]], values[eslots[1]]], idx, || Location::byte(start))?
+                }
                 _ => {}
             }
         }
@@ -504,11 +594,19 @@ fn read_binary(body: &[u8], base: usize, big: bool, elements: &[ElementDecl], ou
 
 fn skip_list(c: &mut Cursor<'_>, n: f64, item: Scalar, what: &str) -> Result<()> {
     if !(0.0..=1.0e9).contains(&n) {
-        return Err(ShapeError::Syntax { format: FMT, location: Location::byte(c.at()), message: format!("a list in {what} has an invalid length {n}") });
+        return Err(ShapeError::Syntax {
+            format: FMT,
+            location: Location::byte(c.at()),
+            message: format!("a list in {what} has an invalid length {n}"),
+        });
     }
     let bytes = n as usize * item.size();
     if c.pos + bytes > c.b.len() {
-        return Err(ShapeError::Truncated { format: FMT, location: Location::byte(c.at()), message: format!("the data ends inside a list of {what}") });
+        return Err(ShapeError::Truncated {
+            format: FMT,
+            location: Location::byte(c.at()),
+            message: format!("the data ends inside a list of {what}"),
+        });
     }
     c.pos += bytes;
     Ok(())

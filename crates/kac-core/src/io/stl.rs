@@ -35,7 +35,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
 
 fn read_binary(bytes: &[u8], options: &ReadOptions) -> Result<(Vec<[f64; 3]>, Vec<String>)> {
     if bytes.len() < 84 {
-        return Err(ShapeError::Truncated { format: FMT, location: Location::byte(bytes.len()), message: "a binary STL needs an 84-byte header".into() });
+        return Err(ShapeError::Truncated {
+            format: FMT,
+            location: Location::byte(bytes.len()),
+            message: "a binary STL needs an 84-byte header".into(),
+        });
     }
     let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
     options.check_elements(n as u64)?;
@@ -43,7 +47,11 @@ fn read_binary(bytes: &[u8], options: &ReadOptions) -> Result<(Vec<[f64; 3]>, Ve
     let body = &bytes[84..];
     let have = body.len() / 50;
     if have < n {
-        return Err(ShapeError::Truncated { format: FMT, location: Location::byte(84 + have * 50), message: format!("the header declares {n} triangles but the data holds {have}") });
+        return Err(ShapeError::Truncated {
+            format: FMT,
+            location: Location::byte(84 + have * 50),
+            message: format!("the header declares {n} triangles but the data holds {have}"),
+        });
     }
     let extra = body.len() - 50 * n;
     if extra > 0 {
@@ -53,7 +61,9 @@ fn read_binary(bytes: &[u8], options: &ReadOptions) -> Result<(Vec<[f64; 3]>, Ve
     for (t, rec) in body.chunks_exact(50).take(n).enumerate() {
         for k in 0..3 {
             let o = 12 + 12 * k;
-            let f = |i: usize| f32::from_le_bytes([rec[o + 4 * i], rec[o + 4 * i + 1], rec[o + 4 * i + 2], rec[o + 4 * i + 3]]) as f64;
+            let f = |i: usize| {
+                f32::from_le_bytes([rec[o + 4 * i], rec[o + 4 * i + 1], rec[o + 4 * i + 2], rec[o + 4 * i + 3]]) as f64
+            };
             let p = [f(0), f(1), f(2)];
             soup.push(text::check_point(p, 3 * t + k, || Location::byte(84 + 50 * t + o))?);
         }
@@ -90,7 +100,11 @@ fn read_ascii(bytes: &[u8], options: &ReadOptions) -> Result<(Vec<[f64; 3]>, Vec
             }
             b"endloop" => {
                 if in_loop != 4 {
-                    return Err(text::syntax(FMT, loop_line, format!("a facet loop has {} vertices, STL needs 3", in_loop.saturating_sub(1))));
+                    return Err(text::syntax(
+                        FMT,
+                        loop_line,
+                        format!("a facet loop has {} vertices, STL needs 3", in_loop.saturating_sub(1)),
+                    ));
                 }
                 in_loop = 0;
                 if soup.len() / 3 > options.max_elements {
@@ -102,7 +116,11 @@ fn read_ascii(bytes: &[u8], options: &ReadOptions) -> Result<(Vec<[f64; 3]>, Vec
         }
     }
     if in_loop != 0 {
-        return Err(ShapeError::Truncated { format: FMT, location: Location::line(loop_line), message: "the last facet loop is not closed".into() });
+        return Err(ShapeError::Truncated {
+            format: FMT,
+            location: Location::line(loop_line),
+            message: "the last facet loop is not closed".into(),
+        });
     }
     let notes = if solids > 1 { vec![format!("stl: {solids} solids merged")] } else { Vec::new() };
     Ok((soup, notes))

@@ -98,7 +98,8 @@ pub fn syntax(format: &'static str, line: usize, message: impl Into<String>) -> 
 /// Reads a float token or reports which field was expected.
 pub fn expect_f64(format: &'static str, line: usize, tok: Option<&[u8]>, what: &str) -> Result<f64> {
     match tok {
-        Some(t) => parse_f64(t).ok_or_else(|| syntax(format, line, format!("expected a number for {what}, found '{}'", show(t)))),
+        Some(t) => parse_f64(t)
+            .ok_or_else(|| syntax(format, line, format!("expected a number for {what}, found '{}'", show(t)))),
         None => Err(syntax(format, line, format!("missing {what}"))),
     }
 }
@@ -121,7 +122,12 @@ pub fn check_point(p: Point, vertex: usize, location: impl FnOnce() -> Location)
         Ok(p)
     } else {
         let bad = p.iter().copied().find(|c| !c.is_finite()).unwrap_or(f64::NAN);
-        Err(ShapeError::NonFinite { element: Element::Vertex, index: vertex, value: bad.to_string(), location: location() })
+        Err(ShapeError::NonFinite {
+            element: Element::Vertex,
+            index: vertex,
+            value: bad.to_string(),
+            location: location(),
+        })
     }
 }
 
@@ -202,7 +208,8 @@ impl<'a> Tokens<'a> {
     }
     pub fn i64(&mut self, format: &'static str, what: &str) -> Result<i64> {
         match self.next_token() {
-            Some((line, t)) => parse_i64(t).ok_or_else(|| syntax(format, line, format!("expected an integer for {what}, found '{}'", show(t)))),
+            Some((line, t)) => parse_i64(t)
+                .ok_or_else(|| syntax(format, line, format!("expected an integer for {what}, found '{}'", show(t)))),
             None => Err(syntax(format, self.line, format!("missing {what}"))),
         }
     }

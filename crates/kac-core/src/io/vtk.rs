@@ -18,9 +18,17 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
         return Err(text::syntax(FMT, 1, "the first line must be '# vtk DataFile Version x.x'"));
     }
     lines.next(); // title
-    let (ln, enc) = lines.next().ok_or_else(|| ShapeError::Truncated { format: FMT, location: Location::line(2), message: "missing ASCII/BINARY line".into() })?;
+    let (ln, enc) = lines.next().ok_or_else(|| ShapeError::Truncated {
+        format: FMT,
+        location: Location::line(2),
+        message: "missing ASCII/BINARY line".into(),
+    })?;
     if !enc.trim_ascii().eq_ignore_ascii_case(b"ASCII") {
-        return Err(ShapeError::Unsupported { format: FMT, location: Location::line(ln), message: format!("'{}' encoding; only ASCII legacy VTK is taken", show(enc.trim_ascii())) });
+        return Err(ShapeError::Unsupported {
+            format: FMT,
+            location: Location::line(ln),
+            message: format!("'{}' encoding; only ASCII legacy VTK is taken", show(enc.trim_ascii())),
+        });
     }
     let header_lines = lines.line();
     let mut t = Tokens::new(lines.rest(), false);
@@ -38,7 +46,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
             b"DATASET" => {
                 dataset = t.next_token().map(|x| x.1.to_ascii_uppercase()).unwrap_or_default();
                 if dataset != b"UNSTRUCTURED_GRID" && dataset != b"POLYDATA" {
-                    return Err(ShapeError::Unsupported { format: FMT, location: Location::line(line_of(&t)), message: format!("DATASET {}; UNSTRUCTURED_GRID and POLYDATA are taken", show(&dataset)) });
+                    return Err(ShapeError::Unsupported {
+                        format: FMT,
+                        location: Location::line(line_of(&t)),
+                        message: format!("DATASET {}; UNSTRUCTURED_GRID and POLYDATA are taken", show(&dataset)),
+                    });
                 }
             }
             b"POINTS" => {
@@ -64,7 +76,8 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                     b"TRIANGLE_STRIPS" => {
                         for c in &list {
                             for i in 2..c.len() {
-                                let tri = if i % 2 == 0 { [c[i - 2], c[i - 1], c[i]] } else { [c[i - 1], c[i - 2], c[i]] };
+                                let tri =
+                                    if i % 2 == 0 { [c[i - 2], c[i - 1], c[i]] } else { [c[i - 1], c[i - 2], c[i]] };
                                 polydata_polys.push(&tri);
                                 strips += 1;
                             }
@@ -89,7 +102,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
     }
     if dataset == b"UNSTRUCTURED_GRID" {
         if cells.len() != cell_types.len() {
-            return Err(text::syntax(FMT, line_of(&t), format!("{} cells but {} cell types", cells.len(), cell_types.len())));
+            return Err(text::syntax(
+                FMT,
+                line_of(&t),
+                format!("{} cells but {} cell types", cells.len(), cell_types.len()),
+            ));
         }
         let mut polys = Polygons::default();
         let mut other = 0usize;
@@ -102,7 +119,12 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
                 _ => 0,
             };
             if want != 0 && c.len() != want {
-                return Err(ShapeError::InvalidElement { element: Element::Tetrahedron, index: i, rule: format!("cell type {ty} needs {want} points, the cell has {}", c.len()), location: Location::Unknown });
+                return Err(ShapeError::InvalidElement {
+                    element: Element::Tetrahedron,
+                    index: i,
+                    rule: format!("cell type {ty} needs {want} points, the cell has {}", c.len()),
+                    location: Location::Unknown,
+                });
             }
             match ty {
                 10 => raw.tets.push([c[0], c[1], c[2], c[3]]),
@@ -123,7 +145,10 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
         let all_quads = !polydata_polys.is_empty() && strips == 0 && polydata_polys.iter().all(|p| p.len() == 4);
         if all_quads && solid_quads(&raw.vertices, &polydata_polys) {
             raw.tets = polydata_polys.iter().map(|p| [p[0], p[1], p[2], p[3]]).collect();
-            raw.notes.push(format!("vtk: {} POLYDATA 4-vertex polygons are solid and were read as tetrahedra (lapy's convention)", raw.tets.len()));
+            raw.notes.push(format!(
+                "vtk: {} POLYDATA 4-vertex polygons are solid and were read as tetrahedra (lapy's convention)",
+                raw.tets.len()
+            ));
         } else {
             raw.polygons = polydata_polys;
             raw.segments = polydata_lines;
@@ -134,7 +159,12 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
 
 fn push_polygon(polys: &mut Polygons, c: &[u32], header_lines: usize) -> Result<()> {
     if c.len() < 3 {
-        return Err(ShapeError::InvalidElement { element: Element::Face, index: polys.len(), rule: format!("a polygon needs 3 points, this one has {}", c.len()), location: Location::line(header_lines) });
+        return Err(ShapeError::InvalidElement {
+            element: Element::Face,
+            index: polys.len(),
+            rule: format!("a polygon needs 3 points, this one has {}", c.len()),
+            location: Location::line(header_lines),
+        });
     }
     polys.push(c);
     Ok(())
@@ -147,7 +177,15 @@ fn read_cell_list(t: &mut Tokens<'_>, n: usize, size: usize, nv: usize, header_l
     // Peek: the 5.x layout has the word OFFSETS here.
     let first = t.next_token();
     let Some((l0, tok0)) = first else {
-        return if n == 0 { Ok(cells) } else { Err(ShapeError::Truncated { format: FMT, location: Location::line(t.line() + header_lines), message: "missing cells".into() }) };
+        return if n == 0 {
+            Ok(cells)
+        } else {
+            Err(ShapeError::Truncated {
+                format: FMT,
+                location: Location::line(t.line() + header_lines),
+                message: "missing cells".into(),
+            })
+        };
     };
     if tok0.eq_ignore_ascii_case(b"OFFSETS") {
         t.next_token(); // type
@@ -168,7 +206,11 @@ fn read_cell_list(t: &mut Tokens<'_>, n: usize, size: usize, nv: usize, header_l
         for w in offsets.windows(2) {
             let (a, b) = (w[0], w[1]);
             if a > b || b > conn.len() {
-                return Err(text::syntax(FMT, t.line() + header_lines, "OFFSETS are not increasing within CONNECTIVITY"));
+                return Err(text::syntax(
+                    FMT,
+                    t.line() + header_lines,
+                    "OFFSETS are not increasing within CONNECTIVITY",
+                ));
             }
             cells.push(conn[a..b].to_vec());
         }
@@ -178,12 +220,20 @@ fn read_cell_list(t: &mut Tokens<'_>, n: usize, size: usize, nv: usize, header_l
     for i in 0..n {
         let (l, tok) = match pending.take() {
             Some(x) => x,
-            None => t.next_token().ok_or_else(|| ShapeError::Truncated { format: FMT, location: Location::line(t.line() + header_lines), message: format!("expected {n} cells, found {i}") })?,
+            None => t.next_token().ok_or_else(|| ShapeError::Truncated {
+                format: FMT,
+                location: Location::line(t.line() + header_lines),
+                message: format!("expected {n} cells, found {i}"),
+            })?,
         };
         let k = text::expect_usize(FMT, l + header_lines, Some(tok), "cell size")?;
         used += k + 1;
         if used > size {
-            return Err(text::syntax(FMT, l + header_lines, format!("the cells use more than the declared list size {size}")));
+            return Err(text::syntax(
+                FMT,
+                l + header_lines,
+                format!("the cells use more than the declared list size {size}"),
+            ));
         }
         let mut c = Vec::with_capacity(k);
         for _ in 0..k {
