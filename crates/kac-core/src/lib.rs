@@ -13,6 +13,7 @@
 pub mod error;
 pub mod geometry;
 pub mod io;
+pub mod operators;
 
 pub use error::{Element, Location, ShapeError};
 pub use geometry::validate::{validate, ValidateOptions, Validated, Weld};

@@ -212,6 +212,14 @@ pub(crate) mod vec3 {
     pub fn norm(a: Point) -> f64 {
         dot(a, a).sqrt()
     }
+    #[inline]
+    pub fn add(a: Point, b: Point) -> Point {
+        [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+    }
+    #[inline]
+    pub fn scale(a: Point, s: f64) -> Point {
+        [a[0] * s, a[1] * s, a[2] * s]
+    }
     /// Twice the area vector of triangle (a, b, c).
     #[inline]
     pub fn area2(a: Point, b: Point, c: Point) -> Point {

@@ -1,0 +1,64 @@
+//! Dirichlet boundary conditions by elimination: the rows and columns of boundary vertices are removed from L
+//! and M (the principal submatrix on interior vertices), never replaced by identity rows, which would add
+//! spurious eigenvalues. The kept indices let vectors be put back with zeros on the boundary.
+
+use super::sparse::{submatrix, SparsePair};
+use super::{Boundary, OperatorError};
+use crate::geometry::{topology, Shape};
+use std::sync::Arc;
+
+/// Boundary vertices of a shape: mesh boundary loops, tet boundary faces, polyline ends; none for clouds and
+/// graphs (give vertices explicitly).
+pub fn boundary_vertices(shape: &Shape) -> Vec<bool> {
+    match shape {
+        Shape::TriangleMesh(m) => topology::boundary_vertices(m),
+        Shape::TetMesh(m) => {
+            let (faces, _) = topology::tet_boundary(&m.tets);
+            let mut b = vec![false; m.vertices.len()];
+            faces.iter().flatten().for_each(|&v| b[v as usize] = true);
+            b
+        }
+        Shape::Polyline(p) => {
+            let mut deg = vec![0u32; p.vertices.len()];
+            for s in &p.segments {
+                deg[s[0] as usize] += 1;
+                deg[s[1] as usize] += 1;
+            }
+            deg.iter().map(|&d| d == 1).collect()
+        }
+        _ => vec![false; shape.vertex_count()],
+    }
+}
+
+pub fn apply(shape: &Shape, pair: SparsePair, boundary: &Boundary) -> Result<(SparsePair, Option<Vec<u32>>), OperatorError> {
+    let n = pair.n();
+    let fixed: Vec<bool> = match boundary {
+        Boundary::Neumann => return Ok((pair, None)),
+        Boundary::Dirichlet => {
+            let b = boundary_vertices(shape);
+            if !b.iter().any(|&x| x) {
+                return Err(OperatorError::Boundary { message: format!("the {} has no boundary; give the vertices to fix", shape.kind().as_str()) });
+            }
+            b
+        }
+        Boundary::DirichletVertices(list) => {
+            let mut b = vec![false; n];
+            for &v in list {
+                if v as usize >= n {
+                    return Err(OperatorError::Boundary { message: format!("vertex {v} does not exist (the shape has {n})") });
+                }
+                b[v as usize] = true;
+            }
+            b
+        }
+    };
+    let keep: Vec<usize> = (0..n).filter(|&i| !fixed[i]).collect();
+    if keep.is_empty() {
+        return Err(OperatorError::Boundary { message: "every vertex is on the boundary; nothing is left".into() });
+    }
+    let (pattern, mut vals) = submatrix(&pair.pattern, &[&pair.stiffness, &pair.mass], &keep);
+    let mass = vals.pop().unwrap_or_default();
+    let stiffness = vals.pop().unwrap_or_default();
+    let kept = keep.iter().map(|&i| i as u32).collect();
+    Ok((SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: pair.mass_is_diagonal }, Some(kept)))
+}

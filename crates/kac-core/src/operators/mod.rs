@@ -1,0 +1,317 @@
+//! Discrete Laplace operators: a sparse symmetric pair (L, M), L positive semidefinite (stiffness), M the
+//! positive definite mass, on every kind of shape, with Neumann (natural) or Dirichlet boundary conditions.
+//! Each operator's file states its formula, sign and units. No I/O, no HTTP.
+
+pub mod boundary;
+pub mod cotan_laplacian;
+pub mod graph_laplacian;
+pub mod intrinsic_delaunay;
+pub mod point_cloud;
+pub mod properties;
+pub mod robust;
+pub mod sparse;
+pub mod tet_laplacian;
+
+use crate::geometry::{Shape, ShapeKind};
+use graph_laplacian::GraphKind;
+use serde::{Deserialize, Serialize};
+use sparse::SparsePair;
+
+/// The operators kac builds (CLI and API names in kebab-case).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OperatorKind {
+    /// Cotangent (P1 FEM) Laplacian of a triangle mesh.
+    Cotan,
+    /// Cotangent Laplacian of the intrinsic Delaunay triangulation (non-negative weights).
+    IntrinsicDelaunay,
+    /// Sharp & Crane's robust Laplacian: tufted cover, intrinsic Delaunay, mollification (non-manifold meshes,
+    /// point clouds).
+    Robust,
+    /// Combinatorial graph Laplacian D − W.
+    Graph,
+    /// Symmetric normalized graph Laplacian I − D^{−1/2} W D^{−1/2}.
+    GraphNormalized,
+    /// Random-walk graph Laplacian, as (D − W) φ = λ D φ.
+    GraphRandomWalk,
+    /// Belkin–Niyogi heat-kernel point-cloud Laplacian.
+    PointCloud,
+    /// P1 FEM on a tetrahedral mesh.
+    Tet,
+    /// P1 FEM on a polyline (the 1-D string).
+    String,
+}
+
+impl OperatorKind {
+    pub const ALL: [OperatorKind; 9] = [
+        OperatorKind::Cotan,
+        OperatorKind::IntrinsicDelaunay,
+        OperatorKind::Robust,
+        OperatorKind::Graph,
+        OperatorKind::GraphNormalized,
+        OperatorKind::GraphRandomWalk,
+        OperatorKind::PointCloud,
+        OperatorKind::Tet,
+        OperatorKind::String,
+    ];
+    pub fn name(self) -> &'static str {
+        match self {
+            OperatorKind::Cotan => "cotan",
+            OperatorKind::IntrinsicDelaunay => "intrinsic-delaunay",
+            OperatorKind::Robust => "robust",
+            OperatorKind::Graph => "graph",
+            OperatorKind::GraphNormalized => "graph-normalized",
+            OperatorKind::GraphRandomWalk => "graph-random-walk",
+            OperatorKind::PointCloud => "point-cloud",
+            OperatorKind::Tet => "tet",
+            OperatorKind::String => "string",
+        }
+    }
+    pub fn from_name(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == s)
+    }
+    /// The default operator of a shape kind.
+    pub fn default_for(kind: ShapeKind) -> Self {
+        match kind {
+            ShapeKind::TriangleMesh => OperatorKind::Cotan,
+            ShapeKind::TetMesh => OperatorKind::Tet,
+            ShapeKind::PointCloud => OperatorKind::PointCloud,
+            ShapeKind::Graph => OperatorKind::Graph,
+            ShapeKind::Polyline => OperatorKind::String,
+        }
+    }
+    fn is_graph(self) -> bool {
+        matches!(self, OperatorKind::Graph | OperatorKind::GraphNormalized | OperatorKind::GraphRandomWalk)
+    }
+}
+
+/// Mass matrices. `Identity` and `Degree` are what the graph Laplacians use (reported, not chosen).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mass {
+    Consistent,
+    Lumped,
+    Voronoi,
+    Identity,
+    Degree,
+}
+
+impl Mass {
+    pub fn name(self) -> &'static str {
+        match self {
+            Mass::Consistent => "consistent",
+            Mass::Lumped => "lumped",
+            Mass::Voronoi => "voronoi",
+            Mass::Identity => "identity",
+            Mass::Degree => "degree",
+        }
+    }
+    pub fn from_name(s: &str) -> Option<Self> {
+        [Mass::Consistent, Mass::Lumped, Mass::Voronoi, Mass::Identity, Mass::Degree].into_iter().find(|m| m.name() == s)
+    }
+}
+
+/// Boundary conditions.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Boundary {
+    /// Natural (free) boundary: nothing is removed.
+    Neumann,
+    /// Zero on the shape's boundary (mesh boundary loops, tet boundary faces, polyline ends), by elimination.
+    Dirichlet,
+    /// Zero on the given vertices, by elimination.
+    DirichletVertices(Vec<u32>),
+}
+
+impl Boundary {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Boundary::Neumann => "neumann",
+            Boundary::Dirichlet | Boundary::DirichletVertices(_) => "dirichlet",
+        }
+    }
+}
+
+/// Parameters of the point-cloud and robust operators.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CloudParams {
+    /// Neighbours per point for spacing, normals and local areas (default 16).
+    pub k: usize,
+    /// Heat-kernel time t; default (2h)², h the mean distance to the nearest neighbour.
+    pub t: Option<f64>,
+    /// Kernel support radius; default 3√t.
+    pub radius: Option<f64>,
+}
+
+impl Default for CloudParams {
+    fn default() -> Self {
+        CloudParams { k: 16, t: None, radius: None }
+    }
+}
+
+/// What to build.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OperatorOptions {
+    /// Default: by shape kind (cotan, tet, point-cloud, graph, string).
+    pub operator: Option<OperatorKind>,
+    /// Default: consistent for FEM operators, lumped for robust and point-cloud; graphs use their own.
+    pub mass: Option<Mass>,
+    pub boundary: Boundary,
+    pub cloud: CloudParams,
+    /// Mollification factor of the robust Laplacian (δ relative to the mean edge length; default 1e-5).
+    pub mollify: f64,
+}
+
+impl Default for OperatorOptions {
+    fn default() -> Self {
+        OperatorOptions { operator: None, mass: None, boundary: Boundary::Neumann, cloud: CloudParams::default(), mollify: 1e-5 }
+    }
+}
+
+/// Why an operator cannot be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize)]
+#[serde(tag = "error", rename_all = "snake_case")]
+pub enum OperatorError {
+    #[error("the '{operator}' operator does not apply to a {kind}")]
+    NotApplicable { operator: &'static str, kind: &'static str },
+    #[error("the '{mass}' mass does not apply to the '{operator}' operator")]
+    MassNotApplicable { operator: &'static str, mass: &'static str },
+    #[error("{element} {index} is degenerate: {message}")]
+    DegenerateElement { element: &'static str, index: usize, message: String },
+    #[error("the '{operator}' operator needs a manifold mesh: {message}; use 'robust'")]
+    NonManifold { operator: &'static str, message: String },
+    #[error("Dirichlet boundary: {message}")]
+    Boundary { message: String },
+    #[error("invalid parameter {name}: {message}")]
+    InvalidParameter { name: &'static str, message: String },
+}
+
+impl OperatorError {
+    pub fn code(&self) -> &'static str {
+        match self {
+            OperatorError::NotApplicable { .. } => "operator-not-applicable",
+            OperatorError::MassNotApplicable { .. } => "mass-not-applicable",
+            OperatorError::DegenerateElement { .. } => "degenerate-element",
+            OperatorError::NonManifold { .. } => "non-manifold",
+            OperatorError::Boundary { .. } => "invalid-boundary",
+            OperatorError::InvalidParameter { .. } => "invalid-parameter",
+        }
+    }
+}
+
+/// A built operator: the pair on the kept vertices and how it was made.
+#[derive(Debug, Clone)]
+pub struct Operator {
+    pub pair: SparsePair,
+    pub kind: OperatorKind,
+    pub mass: Mass,
+    pub boundary: &'static str,
+    /// Vertex count of the shape.
+    pub full_size: usize,
+    /// Kept vertices (sorted) when a Dirichlet boundary was eliminated; `None`: all vertices.
+    pub interior: Option<Vec<u32>>,
+    /// Parameters chosen automatically (point clouds: t, radius, h; robust: δ), echoed in results.
+    pub parameters: serde_json::Map<String, serde_json::Value>,
+}
+
+impl Operator {
+    /// Puts a vector of the (possibly condensed) operator back on all vertices, zeros on the Dirichlet boundary.
+    pub fn expand(&self, x: &[f64]) -> Vec<f64> {
+        match &self.interior {
+            None => x.to_vec(),
+            Some(keep) => {
+                let mut out = vec![0.0; self.full_size];
+                for (k, &i) in keep.iter().enumerate() {
+                    out[i as usize] = x[k];
+                }
+                out
+            }
+        }
+    }
+}
+
+/// Builds the operator pair of a shape.
+pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, OperatorError> {
+    let op = options.operator.unwrap_or_else(|| OperatorKind::default_for(shape.kind()));
+    let not_applicable = || OperatorError::NotApplicable { operator: op.name(), kind: shape.kind().as_str() };
+    let default_mass = match op {
+        OperatorKind::Robust | OperatorKind::PointCloud => Mass::Lumped,
+        OperatorKind::Graph | OperatorKind::GraphNormalized => Mass::Identity,
+        OperatorKind::GraphRandomWalk => Mass::Degree,
+        _ => Mass::Consistent,
+    };
+    let mass = options.mass.unwrap_or(default_mass);
+    let mass_ok = match op {
+        OperatorKind::Cotan | OperatorKind::IntrinsicDelaunay => matches!(mass, Mass::Consistent | Mass::Lumped | Mass::Voronoi),
+        OperatorKind::Tet | OperatorKind::String => matches!(mass, Mass::Consistent | Mass::Lumped),
+        OperatorKind::Robust | OperatorKind::PointCloud => mass == Mass::Lumped,
+        OperatorKind::Graph | OperatorKind::GraphNormalized => mass == Mass::Identity,
+        OperatorKind::GraphRandomWalk => mass == Mass::Degree,
+    };
+    if !mass_ok {
+        return Err(OperatorError::MassNotApplicable { operator: op.name(), mass: mass.name() });
+    }
+    let mut parameters = serde_json::Map::new();
+    let pair = match (op, shape) {
+        (OperatorKind::Cotan, Shape::TriangleMesh(m)) => {
+            cotan_laplacian::cotan_pair(m.vertices.len(), &m.faces, |f| cotan_laplacian::face_lengths(&m.vertices, &m.faces[f]), mass)?
+        }
+        (OperatorKind::IntrinsicDelaunay, Shape::TriangleMesh(m)) => {
+            let (pair, flips) = intrinsic_delaunay::intrinsic_delaunay_pair(m, mass)?;
+            parameters.insert("flips".into(), flips.into());
+            pair
+        }
+        (OperatorKind::Robust, Shape::TriangleMesh(m)) => {
+            let (pair, delta) = robust::robust_mesh_pair(m, options.mollify)?;
+            parameters.insert("mollify_delta".into(), delta.into());
+            pair
+        }
+        (OperatorKind::Robust, Shape::PointCloud(c)) => {
+            let (pair, delta) = robust::robust_cloud_pair(&c.points, options.cloud.k, options.mollify)?;
+            parameters.insert("mollify_delta".into(), delta.into());
+            parameters.insert("k".into(), options.cloud.k.into());
+            pair
+        }
+        (OperatorKind::PointCloud, s) => {
+            let pts = s.positions().filter(|_| !matches!(s, Shape::Graph(_))).ok_or_else(not_applicable)?;
+            let (pair, used) = point_cloud::belkin_niyogi_pair(pts, &options.cloud)?;
+            parameters.extend(used);
+            pair
+        }
+        (OperatorKind::Tet, Shape::TetMesh(m)) => tet_laplacian::tet_pair(&m.vertices, &m.tets, mass)?,
+        (OperatorKind::String, Shape::Polyline(p)) => graph_laplacian::string_pair(&p.vertices, &p.segments, mass)?,
+        (g, s) if g.is_graph() => {
+            let kind = match g {
+                OperatorKind::Graph => GraphKind::Combinatorial,
+                OperatorKind::GraphNormalized => GraphKind::Normalized,
+                _ => GraphKind::RandomWalk,
+            };
+            let (edges, weights) = edge_graph(s).ok_or_else(not_applicable)?;
+            graph_laplacian::graph_pair(s.vertex_count(), &edges, &weights, kind)
+        }
+        _ => return Err(not_applicable()),
+    };
+    let full_size = pair.n();
+    let (pair, interior) = boundary::apply(shape, pair, &options.boundary)?;
+    Ok(Operator { pair, kind: op, mass, boundary: options.boundary.name(), full_size, interior, parameters })
+}
+
+/// The edge graph of a shape with unit weights (graphs keep theirs); none for point clouds.
+pub fn edge_graph(shape: &Shape) -> Option<(Vec<[u32; 2]>, Vec<f64>)> {
+    let mut edges: Vec<[u32; 2]> = match shape {
+        Shape::Graph(g) => return Some((g.edges.clone(), g.weights.clone())),
+        Shape::PointCloud(_) => return None,
+        Shape::Polyline(p) => p.segments.clone(),
+        Shape::TriangleMesh(m) => m.faces.iter().flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]]).collect(),
+        Shape::TetMesh(m) => m.tets.iter().flat_map(|t| [[t[0], t[1]], [t[0], t[2]], [t[0], t[3]], [t[1], t[2]], [t[1], t[3]], [t[2], t[3]]]).collect(),
+    };
+    for e in edges.iter_mut() {
+        if e[0] > e[1] {
+            e.swap(0, 1);
+        }
+    }
+    edges.sort_unstable();
+    edges.dedup();
+    let w = vec![1.0; edges.len()];
+    Some((edges, w))
+}

@@ -1,0 +1,234 @@
+//! Point-cloud Laplacians. Neighbourhoods come from a k-d tree (kiddo). Each point gets a tangent frame (PCA of
+//! its k nearest neighbours) and a local area A_i: the area of its Voronoi cell among the neighbours projected
+//! to the tangent plane. These areas are what keeps the operator right on randomly sampled clouds: the
+//! quadrature weight of each point is the area it stands for, not 1/n.
+//!
+//! Belkin–Niyogi heat-kernel weights (eq. 9.39), written symmetrically with the areas as quadrature weights:
+//! `L_ij = −A_i A_j e^{−|x_i − x_j|²/4t} / (4π t² m)` for |x_i − x_j| < r, `L_ii = −Σ_j L_ij`, `M = diag(A_i)`,
+//! where m = 1 − e^{−a}(1 + a), a = r²/4t, corrects for the kernel's truncation at r (the second moment of the
+//! truncated Gaussian), so that (M⁻¹L f)_i → −Δf(x_i) as t → 0. Defaults: t = (2h)², h the mean distance to the
+//! nearest neighbour; r = 3√t. Sign: L positive semidefinite. Units: L dimensionless·area, M area.
+
+use super::sparse::{assemble, SparsePair};
+use super::{CloudParams, OperatorError};
+use crate::geometry::{vec3, Point};
+use kiddo::{KdTree, SquaredEuclidean};
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// The k nearest neighbours of every point (itself excluded), nearest first.
+pub struct Neighbourhoods {
+    pub k: usize,
+    pub index: Vec<u32>,
+    pub tree: KdTree<f64, 3>,
+}
+
+impl Neighbourhoods {
+    pub fn knn(points: &[Point], k: usize) -> Result<Self, OperatorError> {
+        if points.len() < 4 {
+            return Err(OperatorError::InvalidParameter { name: "points", message: format!("{} points; a point-cloud Laplacian needs at least 4", points.len()) });
+        }
+        let k = k.clamp(3, points.len() - 1);
+        let mut tree: KdTree<f64, 3> = KdTree::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
+            tree.add(p, i as u64);
+        }
+        let index: Vec<u32> = points
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(i, p)| {
+                let found = tree.nearest_n::<SquaredEuclidean>(p, k + 1);
+                let mut out: Vec<u32> = found.iter().map(|n| n.item as u32).filter(|&j| j as usize != i).collect();
+                out.truncate(k);
+                while out.len() < k {
+                    out.push(out.last().copied().unwrap_or(0));
+                }
+                out
+            })
+            .collect();
+        Ok(Neighbourhoods { k, index, tree })
+    }
+    pub fn of(&self, i: usize) -> &[u32] {
+        &self.index[i * self.k..(i + 1) * self.k]
+    }
+}
+
+/// An orthonormal tangent frame (u, v) and normal n at each point, from the covariance of its neighbourhood.
+pub fn local_frames(points: &[Point], nb: &Neighbourhoods) -> Vec<[Point; 3]> {
+    (0..points.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut c = [[0.0; 3]; 3];
+            let p = points[i];
+            for &j in nb.of(i) {
+                let d = vec3::sub(points[j as usize], p);
+                for a in 0..3 {
+                    for b in 0..3 {
+                        c[a][b] += d[a] * d[b];
+                    }
+                }
+            }
+            let n = smallest_eigenvector(c);
+            let helper = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+            let u = vec3::cross(n, helper);
+            let u = vec3::scale(u, 1.0 / vec3::norm(u));
+            let v = vec3::cross(n, u);
+            [u, v, n]
+        })
+        .collect()
+}
+
+/// Eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix (Jacobi rotations).
+fn smallest_eigenvector(mut a: [[f64; 3]; 3]) -> Point {
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _ in 0..30 {
+        let (mut p, mut q, mut best) = (0, 1, 0.0);
+        for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+            if a[i][j].abs() > best {
+                best = a[i][j].abs();
+                p = i;
+                q = j;
+            }
+        }
+        if best < 1e-300 {
+            break;
+        }
+        let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+        let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+        let t = if theta == 0.0 { 1.0 } else { t };
+        let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
+        let mut b = a;
+        for k in 0..3 {
+            b[k][p] = c * a[k][p] - s * a[k][q];
+            b[k][q] = s * a[k][p] + c * a[k][q];
+        }
+        a = b;
+        for k in 0..3 {
+            b[p][k] = c * a[p][k] - s * a[q][k];
+            b[q][k] = s * a[p][k] + c * a[q][k];
+        }
+        a = b;
+        for row in v.iter_mut() {
+            let (x, y) = (row[p], row[q]);
+            row[p] = c * x - s * y;
+            row[q] = s * x + c * y;
+        }
+    }
+    let m = (0..3).min_by(|&i, &j| a[i][i].total_cmp(&a[j][j])).unwrap_or(2);
+    let e = [v[0][m], v[1][m], v[2][m]];
+    let l = vec3::norm(e);
+    if l > 0.0 {
+        vec3::scale(e, 1.0 / l)
+    } else {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+/// The Voronoi cell of a point among its projected neighbours: its area and, in angular order, the neighbour
+/// behind each cell edge (`u32::MAX` for an edge of the bounding square, i.e. an open side of the cell).
+pub struct Cell {
+    pub area: f64,
+    pub edges: Vec<u32>,
+}
+
+pub fn voronoi_cell(points: &[Point], nb: &Neighbourhoods, frames: &[[Point; 3]], i: usize) -> Cell {
+    let [u, v, _] = frames[i];
+    let p = points[i];
+    let q: Vec<(f64, f64, u32)> = nb
+        .of(i)
+        .iter()
+        .map(|&j| {
+            let d = vec3::sub(points[j as usize], p);
+            (vec3::dot(d, u), vec3::dot(d, v), j)
+        })
+        .filter(|&(x, y, _)| x * x + y * y > 0.0)
+        .collect();
+    let r = q.iter().map(|&(x, y, _)| (x * x + y * y).sqrt()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+    // The cell is clipped to the square of half-size r (the farthest neighbour): a bound for open cells.
+    let mut poly: Vec<([f64; 2], u32)> = vec![([-r, -r], u32::MAX), ([r, -r], u32::MAX), ([r, r], u32::MAX), ([-r, r], u32::MAX)];
+    // poly[k].1 labels the edge from vertex k to vertex k+1.
+    for &(qx, qy, j) in &q {
+        let c = 0.5 * (qx * qx + qy * qy);
+        let side = |x: [f64; 2]| x[0] * qx + x[1] * qy - c; // ≤ 0 inside
+        let mut out: Vec<([f64; 2], u32)> = Vec::with_capacity(poly.len() + 1);
+        for k in 0..poly.len() {
+            let (a, la) = poly[k];
+            let (b, _) = poly[(k + 1) % poly.len()];
+            let (sa, sb) = (side(a), side(b));
+            if sa <= 0.0 {
+                out.push((a, la));
+            }
+            if (sa <= 0.0) != (sb <= 0.0) {
+                let t = sa / (sa - sb);
+                let x = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+                // Entering the inside: the new edge continues the old one; leaving: the new edge is j's.
+                out.push((x, if sa <= 0.0 { j } else { la }));
+            }
+        }
+        poly = out;
+        if poly.is_empty() {
+            break;
+        }
+    }
+    let mut area = 0.0;
+    for k in 0..poly.len() {
+        let (a, b) = (poly[k].0, poly[(k + 1) % poly.len()].0);
+        area += a[0] * b[1] - a[1] * b[0];
+    }
+    Cell { area: 0.5 * area.abs(), edges: poly.iter().map(|e| e.1).collect() }
+}
+
+/// Local areas of all points (Voronoi cells in the tangent planes).
+pub fn local_areas(points: &[Point], nb: &Neighbourhoods, frames: &[[Point; 3]]) -> Vec<f64> {
+    (0..points.len()).into_par_iter().map(|i| voronoi_cell(points, nb, frames, i).area).collect()
+}
+
+/// The Belkin–Niyogi pair and the parameters it used (h, t, radius, k, total area).
+pub fn belkin_niyogi_pair(points: &[Point], params: &CloudParams) -> Result<(SparsePair, serde_json::Map<String, serde_json::Value>), OperatorError> {
+    let nb = Neighbourhoods::knn(points, params.k)?;
+    let n = points.len();
+    let h = (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[0] as usize], points[i]))).sum::<f64>() / n as f64;
+    let t = match params.t {
+        Some(t) if t > 0.0 && t.is_finite() => t,
+        Some(t) => return Err(OperatorError::InvalidParameter { name: "t", message: format!("{t} is not a positive time") }),
+        None => 4.0 * h * h,
+    };
+    let r = match params.radius {
+        Some(r) if r > 0.0 && r.is_finite() => r,
+        Some(r) => return Err(OperatorError::InvalidParameter { name: "radius", message: format!("{r} is not a positive radius") }),
+        None => 3.0 * t.sqrt(),
+    };
+    if !(h > 0.0) {
+        return Err(OperatorError::InvalidParameter { name: "points", message: "the points have no spacing (all coincide)".into() });
+    }
+    let frames = local_frames(points, &nb);
+    let areas = local_areas(points, &nb, &frames);
+    let a = r * r / (4.0 * t);
+    let moment = 1.0 - (-a).exp() * (1.0 + a);
+    let scale = 1.0 / (4.0 * std::f64::consts::PI * t * t * moment);
+    let off: Vec<(u32, u32, [f64; 2])> = (0..n)
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let found = nb.tree.within_unsorted::<SquaredEuclidean>(&points[i], r * r);
+            let areas = &areas;
+            found.into_iter().filter(move |f| (f.item as usize) > i).map(move |f| {
+                let j = f.item as usize;
+                let w = areas[i] * areas[j] * (-f.distance / (4.0 * t)).exp() * scale;
+                (i as u32, j as u32, [-w, 0.0])
+            })
+        })
+        .collect();
+    let mut diag = vec![0.0; n];
+    for &(i, j, [w, _]) in &off {
+        diag[i as usize] -= w;
+        diag[j as usize] -= w;
+    }
+    let (pattern, [stiffness, mass]) = assemble(n, &off, [&diag, &areas]);
+    let mut used = serde_json::Map::new();
+    used.insert("k".into(), nb.k.into());
+    used.insert("spacing_h".into(), h.into());
+    used.insert("t".into(), t.into());
+    used.insert("radius".into(), r.into());
+    used.insert("total_area".into(), areas.iter().sum::<f64>().into());
+    Ok((SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: true }, used))
+}

@@ -1,0 +1,207 @@
+//! Sparse symmetric storage for operator pairs (L, M): one compressed-column pattern (full storage, both
+//! triangles, rows sorted, diagonal always present) shared by the stiffness and mass values, so that
+//! L − σM for any σ and either mass has the same pattern and one symbolic Cholesky analysis serves them all.
+
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// A symmetric sparsity pattern in compressed-column form.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pattern {
+    pub n: usize,
+    pub col_ptr: Vec<usize>,
+    pub row_idx: Vec<usize>,
+}
+
+impl Pattern {
+    pub fn nnz(&self) -> usize {
+        self.row_idx.len()
+    }
+    /// Rows of column `j`.
+    pub fn col(&self, j: usize) -> &[usize] {
+        &self.row_idx[self.col_ptr[j]..self.col_ptr[j + 1]]
+    }
+    /// Position of the diagonal entry of column `j`.
+    pub fn diag_pos(&self, j: usize) -> usize {
+        self.col_ptr[j] + self.col(j).binary_search(&j).expect("the diagonal is always stored")
+    }
+    pub fn faer(&self) -> SymbolicSparseColMatRef<'_, usize> {
+        // SAFETY-free: checked construction (sorted rows, valid pointers).
+        SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
+    }
+}
+
+/// Stiffness and mass on one pattern.
+#[derive(Debug, Clone)]
+pub struct SparsePair {
+    pub pattern: Arc<Pattern>,
+    /// L: symmetric positive semidefinite stiffness.
+    pub stiffness: Vec<f64>,
+    /// M: symmetric positive definite mass (zeros off the diagonal when lumped).
+    pub mass: Vec<f64>,
+    pub mass_is_diagonal: bool,
+}
+
+impl SparsePair {
+    pub fn n(&self) -> usize {
+        self.pattern.n
+    }
+    pub fn l(&self) -> SparseColMatRef<'_, usize, f64> {
+        SparseColMatRef::new(self.pattern.faer(), &self.stiffness)
+    }
+    pub fn m(&self) -> SparseColMatRef<'_, usize, f64> {
+        SparseColMatRef::new(self.pattern.faer(), &self.mass)
+    }
+    /// Values of L − σ·M on the shared pattern.
+    pub fn shifted(&self, sigma: f64) -> Vec<f64> {
+        self.stiffness.iter().zip(&self.mass).map(|(l, m)| l - sigma * m).collect()
+    }
+    /// The diagonal of M.
+    pub fn mass_diagonal(&self) -> Vec<f64> {
+        (0..self.n()).map(|j| self.mass[self.pattern.diag_pos(j)]).collect()
+    }
+    /// Non-zero count of L (off-diagonal entries that are stored).
+    pub fn nnz(&self) -> usize {
+        self.pattern.nnz()
+    }
+}
+
+/// y = A·x for a symmetric matrix stored in full on `p`.
+pub fn matvec(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64]) {
+    y.par_chunks_mut(4096).enumerate().for_each(|(c, out)| {
+        for (k, yj) in out.iter_mut().enumerate() {
+            let j = c * 4096 + k;
+            let (a, b) = (p.col_ptr[j], p.col_ptr[j + 1]);
+            *yj = p.row_idx[a..b].iter().zip(&values[a..b]).map(|(&i, v)| v * x[i]).sum();
+        }
+    });
+}
+
+/// Assembles symmetric matrices from off-diagonal contributions.
+///
+/// `off` holds (i, j, values) with i ≠ j, each pair once (the assembler mirrors it); duplicates are summed.
+/// `diag` holds the diagonal of each matrix (dense). Returns the pattern (with every diagonal entry) and the
+/// value arrays, one per matrix. Counting sort by column, then a small sort per column, in parallel.
+pub fn assemble<const K: usize>(n: usize, off: &[(u32, u32, [f64; K])], diag: [&[f64]; K]) -> (Pattern, [Vec<f64>; K]) {
+    // Counting sort of both (i, j) and (j, i) by column.
+    let mut count = vec![0usize; n + 1];
+    for &(i, j, _) in off {
+        count[i as usize + 1] += 1;
+        count[j as usize + 1] += 1;
+    }
+    for c in 0..n {
+        count[c + 1] += count[c];
+    }
+    let mut fill = count.clone();
+    let mut bucket: Vec<(u32, [f64; K])> = vec![(0, [0.0; K]); 2 * off.len()];
+    for &(i, j, v) in off {
+        bucket[fill[j as usize]] = (i, v);
+        fill[j as usize] += 1;
+        bucket[fill[i as usize]] = (j, v);
+        fill[i as usize] += 1;
+    }
+    // Per column: sort rows, merge duplicates; count the entries kept (+1 for the diagonal).
+    let mut slices: Vec<&mut [(u32, [f64; K])]> = Vec::with_capacity(n);
+    let mut rest: &mut [(u32, [f64; K])] = &mut bucket;
+    for c in 0..n {
+        let (a, b) = rest.split_at_mut(count[c + 1] - count[c]);
+        slices.push(a);
+        rest = b;
+    }
+    let kept: Vec<usize> = slices
+        .par_iter_mut()
+        .map(|s| {
+            s.sort_unstable_by_key(|e| e.0);
+            let mut w = 0;
+            for r in 0..s.len() {
+                if w > 0 && s[w - 1].0 == s[r].0 {
+                    for k in 0..K {
+                        s[w - 1].1[k] += s[r].1[k];
+                    }
+                } else {
+                    s[w] = s[r];
+                    w += 1;
+                }
+            }
+            w
+        })
+        .collect();
+    let mut col_ptr = vec![0usize; n + 1];
+    for c in 0..n {
+        col_ptr[c + 1] = col_ptr[c] + kept[c] + 1;
+    }
+    let nnz = col_ptr[n];
+    let mut row_idx = vec![0usize; nnz];
+    let mut vals: [Vec<f64>; K] = std::array::from_fn(|_| vec![0.0; nnz]);
+    // Write columns (sequential writes into disjoint ranges).
+    {
+        let mut rows_rest: &mut [usize] = &mut row_idx;
+        let mut val_rest: [&mut [f64]; K] = vals.each_mut().map(|v| v.as_mut_slice());
+        let mut jobs = Vec::with_capacity(n);
+        for c in 0..n {
+            let len = kept[c] + 1;
+            let (r, rr) = rows_rest.split_at_mut(len);
+            rows_rest = rr;
+            let mut vs: [&mut [f64]; K] = std::array::from_fn(|_| &mut [][..]);
+            for k in 0..K {
+                let taken = std::mem::take(&mut val_rest[k]);
+                let (a, b) = taken.split_at_mut(len);
+                vs[k] = a;
+                val_rest[k] = b;
+            }
+            jobs.push((c, r, vs));
+        }
+        jobs.into_par_iter().zip(slices.into_par_iter()).for_each(|((c, rows, vs), s)| {
+            let s = &s[..kept[c]];
+            let mut w = 0;
+            let mut placed = false;
+            for e in s {
+                if !placed && e.0 as usize > c {
+                    rows[w] = c;
+                    for k in 0..K {
+                        vs[k][w] = diag[k][c];
+                    }
+                    w += 1;
+                    placed = true;
+                }
+                rows[w] = e.0 as usize;
+                for k in 0..K {
+                    vs[k][w] = e.1[k];
+                }
+                w += 1;
+            }
+            if !placed {
+                rows[w] = c;
+                for k in 0..K {
+                    vs[k][w] = diag[k][c];
+                }
+            }
+        });
+    }
+    (Pattern { n, col_ptr, row_idx }, vals)
+}
+
+/// The principal submatrix on `keep` (sorted indices): pattern and values of each matrix.
+pub fn submatrix(p: &Pattern, values: &[&[f64]], keep: &[usize]) -> (Pattern, Vec<Vec<f64>>) {
+    let mut new_index = vec![usize::MAX; p.n];
+    for (k, &i) in keep.iter().enumerate() {
+        new_index[i] = k;
+    }
+    let mut col_ptr = vec![0usize];
+    let mut row_idx = Vec::new();
+    let mut out: Vec<Vec<f64>> = values.iter().map(|_| Vec::new()).collect();
+    for &j in keep {
+        for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+            let ni = new_index[p.row_idx[pos]];
+            if ni != usize::MAX {
+                row_idx.push(ni);
+                for (o, v) in out.iter_mut().zip(values) {
+                    o.push(v[pos]);
+                }
+            }
+        }
+        col_ptr.push(row_idx.len());
+    }
+    (Pattern { n: keep.len(), col_ptr, row_idx }, out)
+}
