@@ -14,6 +14,7 @@ pub mod error;
 pub mod geometry;
 pub mod io;
 pub mod operators;
+pub mod spectrum;
 
 pub use error::{Element, Location, ShapeError};
 pub use geometry::validate::{validate, ValidateOptions, Validated, Weld};

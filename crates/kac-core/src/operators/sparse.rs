@@ -2,6 +2,7 @@
 //! triangles, rows sorted, diagonal always present) shared by the stiffness and mass values, so that
 //! L − σM for any σ and either mass has the same pattern and one symbolic Cholesky analysis serves them all.
 
+use faer::reborrow::ReborrowMut;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -204,4 +205,37 @@ pub fn submatrix(p: &Pattern, values: &[&[f64]], keep: &[usize]) -> (Pattern, Ve
         col_ptr.push(row_idx.len());
     }
     (Pattern { n: keep.len(), col_ptr, row_idx }, out)
+}
+
+/// Y = A·X for a symmetric A on `p` and a block X (n × b, column-major): X is copied to row-major so each entry
+/// of A meets b contiguous values; rows of Y are computed in parallel.
+pub fn spmm(p: &Pattern, values: &[f64], x: faer::MatRef<'_, f64>, mut y: faer::MatMut<'_, f64>) {
+    let (n, b) = (x.nrows(), x.ncols());
+    let mut xr = vec![0.0; n * b];
+    for c in 0..b {
+        let col = x.col(c);
+        for i in 0..n {
+            xr[i * b + c] = col[i];
+        }
+    }
+    let mut yr = vec![0.0; n * b];
+    yr.par_chunks_mut(b * 1024).enumerate().for_each(|(chunk, out)| {
+        let j0 = chunk * 1024;
+        for (k, row) in out.chunks_mut(b).enumerate() {
+            let j = j0 + k;
+            for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+                let a = values[pos];
+                let xi = &xr[p.row_idx[pos] * b..p.row_idx[pos] * b + b];
+                for (r, xv) in row.iter_mut().zip(xi) {
+                    *r += a * xv;
+                }
+            }
+        }
+    });
+    for c in 0..b {
+        let mut col = y.rb_mut().col_mut(c);
+        for i in 0..n {
+            col[i] = yr[i * b + c];
+        }
+    }
 }

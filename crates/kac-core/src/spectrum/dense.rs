@@ -1,0 +1,58 @@
+//! Dense generalized symmetric eigensolver for small problems: M = RRᵀ, C = R⁻¹ L R⁻ᵀ, C = U Λ Uᵀ, Φ = R⁻ᵀ U.
+
+use super::{EigenError, Spectrum, Stats, Timings};
+use crate::operators::sparse::SparsePair;
+use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
+use faer::{Mat, Par, Side};
+use std::time::Instant;
+
+fn to_dense(pair: &SparsePair, values: &[f64]) -> Mat<f64> {
+    let n = pair.n();
+    let p = &pair.pattern;
+    let mut a = Mat::<f64>::zeros(n, n);
+    for j in 0..n {
+        for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+            a[(p.row_idx[pos], j)] = values[pos];
+        }
+    }
+    a
+}
+
+pub fn eigs_dense(pair: &SparsePair, k: usize) -> Result<Spectrum, EigenError> {
+    let t0 = Instant::now();
+    let n = pair.n();
+    let l = to_dense(pair, &pair.stiffness);
+    let m = to_dense(pair, &pair.mass);
+    let chol = m.llt(Side::Lower).map_err(|e| EigenError::Factorization { message: format!("the mass matrix is not positive definite ({e:?})") })?;
+    let r = chol.L();
+    // C = R⁻¹ L R⁻ᵀ: solve R X = L, then R Cᵀ = Xᵀ.
+    let mut x = l.clone();
+    solve_lower_triangular_in_place(r, x.as_mut(), Par::Seq);
+    let mut c = x.transpose().to_owned();
+    solve_lower_triangular_in_place(r, c.as_mut(), Par::Seq);
+    let c = Mat::from_fn(n, n, |i, j| 0.5 * (c[(i, j)] + c[(j, i)]));
+    let evd = c.self_adjoint_eigen(Side::Lower).map_err(|e| EigenError::Factorization { message: format!("dense eigensolver failed ({e:?})") })?;
+    let s = evd.S();
+    let u = evd.U();
+    let mut phi = u.subcols(0, k).to_owned();
+    solve_upper_triangular_in_place(r.transpose(), phi.as_mut(), Par::Seq);
+    let values = (0..k).map(|i| s[i]).collect();
+    let total = t0.elapsed().as_secs_f64();
+    Ok(Spectrum {
+        values,
+        vectors: phi,
+        residuals: vec![],
+        stats: Stats {
+            method: "dense",
+            sigma: super::lanczos::default_sigma(pair),
+            block: 0,
+            subspace: n,
+            restarts: 0,
+            block_steps: 0,
+            solves: 0,
+            factor_nnz: n * (n + 1) / 2,
+            symbolic_reused: false,
+            timings: Timings { symbolic_s: 0.0, numeric_s: 0.0, iteration_s: total, total_s: total },
+        },
+    })
+}

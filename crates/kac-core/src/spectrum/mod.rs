@@ -1,0 +1,200 @@
+//! Generalized symmetric eigensolvers for L φ = λ M φ: the k smallest eigenpairs (or all in a band).
+//!
+//! - [`dense`]: small problems or k close to n: M = RRᵀ (Cholesky), eigen-decomposition of R⁻¹LR⁻ᵀ.
+//! - [`lanczos`]: the sparse path. Shift-invert with σ < 0, so K = L − σM is positive definite whenever L is
+//!   positive semidefinite and M positive definite: σ = −mean_j(L_jj / M_jj) / n by default (near the bottom of
+//!   the spectrum; see [`lanczos::default_sigma`]), multiplied by 100 and retried if the factorization meets a non-positive pivot. The operator
+//!   T = K⁻¹M is self-adjoint in the M-inner product; its largest eigenvalues θ = 1/(λ − σ) are the wanted ones.
+//!   A thick-restart block Lanczos method with full M-reorthogonalization finds them: every step solves b
+//!   right-hand sides at once (solves are memory-bound, so a block costs far less than b single solves),
+//!   converged pairs are locked (deflated from the Krylov decomposition), rank-deficient blocks (invariant
+//!   subspaces: several components, high multiplicities) are refilled with random vectors, and the start block
+//!   comes from a fixed seed, so results are deterministic.
+//!
+//! Output: eigenvalues ascending, M-orthonormal eigenvectors with the largest-magnitude entry positive, and
+//! per pair the relative residual ‖Lφ − λMφ‖₂ / (max(|λ|, |σ|) · ‖Mφ‖₂).
+
+pub mod dense;
+pub mod factor;
+pub mod lanczos;
+
+use crate::operators::sparse::SparsePair;
+use faer::Mat;
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::AtomicBool;
+
+/// Which solver.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Dense for n ≤ 1500 or k > n/3 (n ≤ 8000), sparse otherwise.
+    #[default]
+    Auto,
+    Dense,
+    Sparse,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EigenOptions {
+    /// Number of eigenpairs (1 ≤ k ≤ n − 1 for the sparse path, ≤ n for the dense one).
+    pub k: usize,
+    /// Relative residual tolerance of the shift-inverted problem (default 1e-10).
+    pub tol: f64,
+    pub sigma: Option<f64>,
+    /// Block size b (default: 8 for k ≤ 16, else 16).
+    pub block: Option<usize>,
+    /// Subspace size (default: max(2w, w + 6b) columns for w = k + guard wanted pairs, at most n).
+    pub subspace: Option<usize>,
+    /// Limit on block expansions.
+    pub max_steps: usize,
+    pub seed: u64,
+    /// Threads for the factorization and solves (0: all of rayon's).
+    pub threads: usize,
+    pub method: Method,
+}
+
+impl Default for EigenOptions {
+    fn default() -> Self {
+        EigenOptions { k: 10, tol: 1e-10, sigma: None, block: None, subspace: None, max_steps: 20_000, seed: 0x6b61_6321, threads: 0, method: Method::Auto }
+    }
+}
+
+/// Progress of a solve, for callbacks.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Progress {
+    pub phase: &'static str,
+    pub converged: usize,
+    pub wanted: usize,
+}
+
+/// Hooks for a long solve: progress reports and a stop flag checked between block steps.
+#[derive(Default, Clone, Copy)]
+pub struct Control<'a> {
+    pub progress: Option<&'a (dyn Fn(Progress) + Sync)>,
+    pub stop: Option<&'a AtomicBool>,
+}
+
+impl Control<'_> {
+    pub(crate) fn report(&self, phase: &'static str, converged: usize, wanted: usize) {
+        if let Some(p) = self.progress {
+            p(Progress { phase, converged, wanted });
+        }
+    }
+    pub(crate) fn stopped(&self) -> bool {
+        self.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed))
+    }
+}
+
+/// Seconds spent in each phase.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Timings {
+    pub symbolic_s: f64,
+    pub numeric_s: f64,
+    pub iteration_s: f64,
+    pub total_s: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Stats {
+    pub method: &'static str,
+    pub sigma: f64,
+    pub block: usize,
+    pub subspace: usize,
+    pub restarts: usize,
+    pub block_steps: usize,
+    /// Right-hand sides solved (columns).
+    pub solves: usize,
+    pub factor_nnz: usize,
+    pub symbolic_reused: bool,
+    pub timings: Timings,
+}
+
+/// Eigenpairs with their residuals.
+#[derive(Debug, Clone)]
+pub struct Spectrum {
+    pub values: Vec<f64>,
+    /// n × k, M-orthonormal columns.
+    pub vectors: Mat<f64>,
+    pub residuals: Vec<f64>,
+    pub stats: Stats,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize)]
+#[serde(tag = "error", rename_all = "snake_case")]
+pub enum EigenError {
+    #[error("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {max})")]
+    InvalidK { k: usize, n: usize, max: usize },
+    #[error("the shifted matrix L − σM could not be factored: {message}")]
+    Factorization { message: String },
+    #[error("stopped on request")]
+    Canceled,
+    #[error("did not converge: {converged} of {wanted} pairs after {steps} block steps")]
+    NoConvergence { converged: usize, wanted: usize, steps: usize },
+    #[error("invalid option {name}: {message}")]
+    InvalidOption { name: &'static str, message: String },
+}
+
+impl EigenError {
+    pub fn code(&self) -> &'static str {
+        match self {
+            EigenError::InvalidK { .. } => "invalid-k",
+            EigenError::Factorization { .. } => "factorization-failed",
+            EigenError::Canceled => "canceled",
+            EigenError::NoConvergence { .. } => "no-convergence",
+            EigenError::InvalidOption { .. } => "invalid-option",
+        }
+    }
+}
+
+/// The k smallest eigenpairs of L φ = λ M φ.
+pub fn eigs(pair: &SparsePair, options: &EigenOptions, symbolic: Option<&factor::Symbolic>, control: Control<'_>) -> Result<Spectrum, EigenError> {
+    let n = pair.n();
+    let k = options.k;
+    let dense = match options.method {
+        Method::Dense => true,
+        Method::Sparse => false,
+        Method::Auto => n <= 1500 || (3 * k > n && n <= 8000) || k + 1 >= n,
+    };
+    let max = if dense { n } else { n.saturating_sub(1) };
+    if k == 0 || k > max {
+        return Err(EigenError::InvalidK { k, n, max });
+    }
+    if !(options.tol > 0.0 && options.tol < 1.0) {
+        return Err(EigenError::InvalidOption { name: "tol", message: format!("{} is not in (0, 1)", options.tol) });
+    }
+    let mut s = if dense { dense::eigs_dense(pair, k)? } else { lanczos::eigs_block_lanczos(pair, options, symbolic, control)? };
+    finish(pair, &mut s);
+    Ok(s)
+}
+
+/// Fixes signs (largest-magnitude entry positive) and computes true residuals.
+fn finish(pair: &SparsePair, s: &mut Spectrum) {
+    let n = pair.n();
+    let k = s.values.len();
+    let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);
+    let mut lx = vec![0.0; n];
+    let mut mx = vec![0.0; n];
+    s.residuals = vec![0.0; k];
+    for j in 0..k {
+        let col = s.vectors.col(j);
+        let (mut big, mut arg) = (0.0f64, 0usize);
+        for i in 0..n {
+            if col[i].abs() > big {
+                big = col[i].abs();
+                arg = i;
+            }
+        }
+        if col[arg] < 0.0 {
+            for i in 0..n {
+                s.vectors[(i, j)] = -s.vectors[(i, j)];
+            }
+        }
+        let x: Vec<f64> = (0..n).map(|i| s.vectors[(i, j)]).collect();
+        crate::operators::sparse::matvec(&pair.pattern, &pair.stiffness, &x, &mut lx);
+        crate::operators::sparse::matvec(&pair.pattern, &pair.mass, &x, &mut mx);
+        let lam = s.values[j];
+        let r: f64 = lx.iter().zip(&mx).map(|(a, b)| (a - lam * b).powi(2)).sum::<f64>().sqrt();
+        let mnorm = mx.iter().map(|v| v * v).sum::<f64>().sqrt();
+        s.residuals[j] = r / (lam.abs().max(sigma_floor) * mnorm);
+    }
+}

@@ -1,0 +1,192 @@
+//! Eigensolver against mathematics: exact spectra of the sphere (l(l+1), multiplicity 2l+1), unit square,
+//! disk (Bessel zeros), segment ((πk/ℓ)²), eq. (9.3), graphs, the tetrahedral cube; and agreement with the
+//! dense path to 1e-10.
+
+use kac_core::geometry::generate;
+use kac_core::geometry::{Shape, TriangleMesh};
+use kac_core::operators::{self, Boundary, Mass, OperatorKind, OperatorOptions};
+use kac_core::spectrum::{eigs, Control, EigenOptions, Method, Spectrum};
+
+fn solve(shape: &Shape, op: OperatorOptions, k: usize, method: Method) -> Spectrum {
+    let o = operators::build(shape, &op).unwrap();
+    eigs(&o.pair, &EigenOptions { k, method, ..Default::default() }, None, Control::default()).unwrap()
+}
+
+fn mesh(m: TriangleMesh) -> Shape {
+    Shape::TriangleMesh(m)
+}
+
+fn opts(mass: Mass, boundary: Boundary) -> OperatorOptions {
+    OperatorOptions { mass: Some(mass), boundary, ..Default::default() }
+}
+
+/// M-orthonormality: ΦᵀMΦ = I.
+fn check_m_orthonormal(shape: &Shape, op: &OperatorOptions, s: &Spectrum, tol: f64) {
+    let o = operators::build(shape, op).unwrap();
+    let n = o.pair.n();
+    let k = s.values.len();
+    let mut mx = vec![0.0; n];
+    for a in 0..k {
+        let xa: Vec<f64> = (0..n).map(|i| s.vectors[(i, a)]).collect();
+        operators::sparse::matvec(&o.pair.pattern, &o.pair.mass, &xa, &mut mx);
+        for b in 0..k {
+            let d: f64 = (0..n).map(|i| s.vectors[(i, b)] * mx[i]).sum();
+            let want = if a == b { 1.0 } else { 0.0 };
+            assert!((d - want).abs() < tol, "φ{a}ᵀMφ{b} = {d}");
+        }
+    }
+}
+
+#[test]
+fn sparse_agrees_with_dense_on_a_small_sphere() {
+    let s = mesh(generate::icosphere(3));
+    for mass in [Mass::Consistent, Mass::Lumped] {
+        let o = opts(mass, Boundary::Neumann);
+        let d = solve(&s, o.clone(), 30, Method::Dense);
+        let sp = solve(&s, o.clone(), 30, Method::Sparse);
+        for (a, b) in d.values.iter().zip(&sp.values) {
+            assert!((a - b).abs() <= 1e-10 * a.abs().max(1.0), "{a} vs {b}");
+        }
+        assert!(sp.residuals.iter().all(|&r| r < 1e-8), "{:?}", sp.residuals);
+        check_m_orthonormal(&s, &o, &sp, 1e-9);
+    }
+}
+
+#[test]
+fn sphere_spectrum_has_full_multiplicities_and_second_order_convergence() {
+    // Unit sphere: λ = l(l+1) with multiplicity 2l+1. First 25 eigenvalues: l = 0..4.
+    let exact: Vec<f64> = (0..5).flat_map(|l| std::iter::repeat_n((l * (l + 1)) as f64, 2 * l + 1)).collect();
+    let mut errors = Vec::new();
+    for level in [3, 4, 5] {
+        let s = solve(&mesh(generate::icosphere(level)), opts(Mass::Consistent, Boundary::Neumann), 25, Method::Sparse);
+        assert!(s.values[0].abs() < 1e-8);
+        let err = s.values.iter().zip(&exact).skip(1).map(|(a, e)| ((a - e) / e).abs()).fold(0.0, f64::max);
+        errors.push(err);
+        // Every cluster member present: the nearest l(l+1) of each computed value is the expected one, so no
+        // member of a (2l+1)-cluster is missing (a missing one would pull in a value of the next cluster).
+        for (a, e) in s.values.iter().zip(&exact).skip(1) {
+            let l = ((1.0 + 4.0 * a).sqrt() - 1.0) / 2.0;
+            let nearest = l.round();
+            assert_eq!(nearest * (nearest + 1.0), *e, "level {level}: {a} is not near {e}");
+        }
+    }
+    let order1 = (errors[0] / errors[1]).log2();
+    let order2 = (errors[1] / errors[2]).log2();
+    assert!(order1 > 1.8 && order2 > 1.8, "observed orders {order1}, {order2} (errors {errors:?})");
+}
+
+fn assert_close(got: &[f64], want: &[f64], rel: f64, what: &str) {
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        let err = if *w == 0.0 { g.abs() } else { ((g - w) / w).abs() };
+        assert!(err <= rel, "{what}: eigenvalue {i}: {g} vs {w} (error {err:e})");
+    }
+}
+
+#[test]
+fn unit_square_dirichlet_and_neumann() {
+    let pi2 = std::f64::consts::PI.powi(2);
+    let sq = mesh(generate::unit_square(48));
+    // Dirichlet: π²(m² + n²), m, n ≥ 1.
+    let d = solve(&sq, opts(Mass::Consistent, Boundary::Dirichlet), 6, Method::Sparse);
+    assert_close(&d.values, &[2.0, 5.0, 5.0, 8.0, 10.0, 10.0].map(|x| x * pi2), 4e-3, "square Dirichlet");
+    // Neumann: m, n ≥ 0.
+    let nm = solve(&sq, opts(Mass::Consistent, Boundary::Neumann), 6, Method::Sparse);
+    assert_close(&nm.values, &[0.0, 1.0, 1.0, 2.0, 4.0, 4.0].map(|x| x * pi2), 4e-3, "square Neumann");
+    assert!(nm.values[0].abs() < 1e-8);
+}
+
+#[test]
+fn unit_disk_dirichlet_is_bessel_zeros_squared() {
+    // j₀₁², j₁₁² (×2), j₂₁² (×2), j₀₂².
+    let exact = [5.783185962947, 14.681970642124, 14.681970642124, 26.374616427163, 26.374616427163, 30.471262343662];
+    let disk = mesh(generate::unit_disk(40));
+    let s = solve(&disk, opts(Mass::Consistent, Boundary::Dirichlet), 6, Method::Sparse);
+    assert_close(&s.values, &exact, 3e-3, "disk Dirichlet");
+}
+
+#[test]
+fn string_and_equation_9_3() {
+    // Eq. (9.3): unit spacing, Dirichlet ends, lumped mass: exactly 2 − 2cos(kπ/n).
+    let n = 40;
+    let seg = Shape::Polyline(generate::segment(n, n as f64));
+    let o = OperatorOptions { mass: Some(Mass::Lumped), boundary: Boundary::Dirichlet, ..Default::default() };
+    let s = solve(&seg, o, 10, Method::Sparse);
+    let exact: Vec<f64> = (1..=10).map(|k| 2.0 - 2.0 * (k as f64 * std::f64::consts::PI / n as f64).cos()).collect();
+    assert_close(&s.values, &exact, 1e-11, "eq. (9.3)");
+    // "Hear the length of a string": P1 FEM with real lengths on [0, ℓ] converges to (πk/ℓ)².
+    let l = 2.5;
+    let seg = Shape::Polyline(generate::segment(400, l));
+    let s = solve(&seg, opts(Mass::Consistent, Boundary::Dirichlet), 5, Method::Sparse);
+    let exact: Vec<f64> = (1..=5).map(|k| (k as f64 * std::f64::consts::PI / l).powi(2)).collect();
+    assert_close(&s.values, &exact, 3e-4, "string Dirichlet");
+    // And exactly the discrete P1 spectrum on a uniform mesh: λ_h = (6/h²)(1 − cos θ)/(2 + cos θ), θ = πkh/ℓ.
+    let h = l / 400.0;
+    let p1: Vec<f64> = (1..=5).map(|k| {
+        let th = std::f64::consts::PI * k as f64 * h / l;
+        6.0 / (h * h) * (1.0 - th.cos()) / (2.0 + th.cos())
+    }).collect();
+    assert_close(&s.values, &p1, 1e-10, "string Dirichlet, discrete P1 spectrum");
+    let s = solve(&seg, opts(Mass::Consistent, Boundary::Neumann), 5, Method::Sparse);
+    let exact: Vec<f64> = (0..5).map(|k| (k as f64 * std::f64::consts::PI / l).powi(2)).collect();
+    assert_close(&s.values, &exact, 3e-4, "string Neumann");
+}
+
+#[test]
+fn graph_spectra() {
+    let graph = |g| Shape::Graph(g);
+    let o = OperatorOptions::default();
+    // K_n: 0 and n with multiplicity n − 1.
+    let s = solve(&graph(generate::complete_graph(12)), o.clone(), 12, Method::Dense);
+    let mut want = vec![12.0; 12];
+    want[0] = 0.0;
+    assert_close(&s.values, &want, 1e-12, "K_12");
+    // Cycle C_n: 2 − 2cos(2πj/n); path P_n: 2 − 2cos(πj/n).
+    let n = 300;
+    let mut cyc: Vec<f64> = (0..n).map(|j| 2.0 - 2.0 * (2.0 * std::f64::consts::PI * j as f64 / n as f64).cos()).collect();
+    cyc.sort_by(f64::total_cmp);
+    let s = solve(&graph(generate::cycle_graph(n)), o.clone(), 9, Method::Sparse);
+    assert_close(&s.values[1..], &cyc[1..9], 1e-9, "C_300");
+    let path: Vec<f64> = (0..9).map(|j| 2.0 - 2.0 * (std::f64::consts::PI * j as f64 / n as f64).cos()).collect();
+    let s = solve(&graph(generate::path_graph(n)), o.clone(), 9, Method::Sparse);
+    assert_close(&s.values[1..], &path[1..], 1e-9, "P_300");
+    // Petersen: 0, 2 (×5), 5 (×4).
+    let s = solve(&graph(generate::petersen_graph()), o, 10, Method::Dense);
+    assert_close(&s.values, &[0.0, 2.0, 2.0, 2.0, 2.0, 2.0, 5.0, 5.0, 5.0, 5.0], 1e-12, "Petersen");
+}
+
+#[test]
+fn tetrahedral_unit_cube_neumann_pi_squared_three_times() {
+    let cube = Shape::TetMesh(generate::unit_cube_tets(10));
+    let s = solve(&cube, OperatorOptions::default(), 4, Method::Sparse);
+    let pi2 = std::f64::consts::PI.powi(2);
+    assert!(s.values[0].abs() < 1e-8);
+    assert_close(&s.values[1..], &[pi2; 3], 2e-2, "cube Neumann");
+}
+
+#[test]
+fn disconnected_shape_has_one_zero_per_component() {
+    // 30 separate triangles: 30 zero eigenvalues, more than the block size, then positive ones.
+    let mut m = TriangleMesh::default();
+    for t in 0..30u32 {
+        let x = t as f64 * 3.0;
+        m.vertices.extend([[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 1.0, 0.0]]);
+        m.faces.push([3 * t, 3 * t + 1, 3 * t + 2]);
+    }
+    let s = solve(&mesh(m.clone()), OperatorOptions::default(), 40, Method::Sparse);
+    assert!(s.values[..30].iter().all(|v| v.abs() < 1e-8), "{:?}", &s.values[..31]);
+    assert!(s.values[30] > 1.0);
+    let d = solve(&mesh(m), OperatorOptions::default(), 40, Method::Dense);
+    assert_close(&s.values[30..], &d.values[30..], 1e-10, "sparse vs dense");
+}
+
+#[test]
+fn every_operator_solves() {
+    let sphere = mesh(generate::icosphere(3));
+    for (op, mass) in [(OperatorKind::Cotan, Mass::Voronoi), (OperatorKind::IntrinsicDelaunay, Mass::Lumped), (OperatorKind::Robust, Mass::Lumped), (OperatorKind::Graph, Mass::Identity), (OperatorKind::GraphNormalized, Mass::Identity), (OperatorKind::GraphRandomWalk, Mass::Degree), (OperatorKind::PointCloud, Mass::Lumped)] {
+        let o = OperatorOptions { operator: Some(op), mass: Some(mass), ..Default::default() };
+        let s = solve(&sphere, o, 10, Method::Sparse);
+        assert!(s.values[0].abs() < 1e-8, "{op:?}: {:?}", s.values);
+        assert!(s.values.windows(2).all(|w| w[0] <= w[1] + 1e-12), "{op:?} ascending");
+        assert!(s.residuals.iter().all(|r| *r < 1e-6), "{op:?}: {:?}", s.residuals);
+    }
+}
