@@ -9,7 +9,9 @@ fn kac() -> Command {
 }
 
 fn data(rel: &str) -> Option<PathBuf> {
-    let dir = std::env::var_os("KAC_DATA_DIR").map(PathBuf::from).unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let dir = std::env::var_os("KAC_DATA_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
     let p = dir.join(rel);
     if p.is_file() {
         Some(p)
@@ -25,7 +27,23 @@ fn inspect_prints_the_summary_contract() {
     let out = kac().arg("inspect").arg(&file).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    for key in ["kind", "vertices", "elements", "id", "bbox", "area", "volume", "components", "boundary_loops", "manifold", "orientation", "genus", "warnings", "report", "format"] {
+    for key in [
+        "kind",
+        "vertices",
+        "elements",
+        "id",
+        "bbox",
+        "area",
+        "volume",
+        "components",
+        "boundary_loops",
+        "manifold",
+        "orientation",
+        "genus",
+        "warnings",
+        "report",
+        "format",
+    ] {
         assert!(v.get(key).is_some(), "missing {key}");
     }
     assert_eq!(v["kind"], "triangle_mesh");

@@ -9,12 +9,28 @@ fn main() {
     let o = operators::build(&s, &OperatorOptions::default()).unwrap();
     println!("assembly {:.3}s n={}", t.elapsed().as_secs_f64(), o.pair.n());
     let sub: Option<usize> = std::env::args().nth(3).and_then(|s| s.parse().ok());
-    let sp = eigs(&o.pair, &EigenOptions { k, method: Method::Sparse, block: std::env::var("KAC_B").ok().and_then(|s| s.parse().ok()), tol: std::env::var("KAC_TOL").ok().and_then(|s| s.parse().ok()).unwrap_or(1e-10), subspace: sub, sigma: std::env::args().nth(4).and_then(|s| s.parse().ok()), ..Default::default() }, None, Control::default()).unwrap();
+    let sp = eigs(
+        &o.pair,
+        &EigenOptions {
+            k,
+            method: Method::Sparse,
+            block: std::env::var("KAC_B").ok().and_then(|s| s.parse().ok()),
+            tol: std::env::var("KAC_TOL").ok().and_then(|s| s.parse().ok()).unwrap_or(1e-10),
+            subspace: sub,
+            sigma: std::env::args().nth(4).and_then(|s| s.parse().ok()),
+            ..Default::default()
+        },
+        None,
+        Control::default(),
+    )
+    .unwrap();
     println!("{:?}", sp.stats);
     println!("vals {:?}", &sp.values[..k.min(8)]);
     println!("max resid {:e}", sp.residuals.iter().cloned().fold(0.0, f64::max));
     if level <= 4 {
-        let d = eigs(&o.pair, &EigenOptions { k, method: Method::Dense, ..Default::default() }, None, Control::default()).unwrap();
+        let d =
+            eigs(&o.pair, &EigenOptions { k, method: Method::Dense, ..Default::default() }, None, Control::default())
+                .unwrap();
         let md = d.values.iter().zip(&sp.values).map(|(a, b)| ((a - b) / a.abs().max(1.0)).abs()).fold(0.0, f64::max);
         println!("max rel diff vs dense {md:e}");
     }

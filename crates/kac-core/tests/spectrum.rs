@@ -121,10 +121,12 @@ fn string_and_equation_9_3() {
     assert_close(&s.values, &exact, 3e-4, "string Dirichlet");
     // And exactly the discrete P1 spectrum on a uniform mesh: λ_h = (6/h²)(1 − cos θ)/(2 + cos θ), θ = πkh/ℓ.
     let h = l / 400.0;
-    let p1: Vec<f64> = (1..=5).map(|k| {
-        let th = std::f64::consts::PI * k as f64 * h / l;
-        6.0 / (h * h) * (1.0 - th.cos()) / (2.0 + th.cos())
-    }).collect();
+    let p1: Vec<f64> = (1..=5)
+        .map(|k| {
+            let th = std::f64::consts::PI * k as f64 * h / l;
+            6.0 / (h * h) * (1.0 - th.cos()) / (2.0 + th.cos())
+        })
+        .collect();
     assert_close(&s.values, &p1, 1e-10, "string Dirichlet, discrete P1 spectrum");
     let s = solve(&seg, opts(Mass::Consistent, Boundary::Neumann), 5, Method::Sparse);
     let exact: Vec<f64> = (0..5).map(|k| (k as f64 * std::f64::consts::PI / l).powi(2)).collect();
@@ -142,7 +144,8 @@ fn graph_spectra() {
     assert_close(&s.values, &want, 1e-12, "K_12");
     // Cycle C_n: 2 − 2cos(2πj/n); path P_n: 2 − 2cos(πj/n).
     let n = 300;
-    let mut cyc: Vec<f64> = (0..n).map(|j| 2.0 - 2.0 * (2.0 * std::f64::consts::PI * j as f64 / n as f64).cos()).collect();
+    let mut cyc: Vec<f64> =
+        (0..n).map(|j| 2.0 - 2.0 * (2.0 * std::f64::consts::PI * j as f64 / n as f64).cos()).collect();
     cyc.sort_by(f64::total_cmp);
     let s = solve(&graph(generate::cycle_graph(n)), o.clone(), 9, Method::Sparse);
     assert_close(&s.values[1..], &cyc[1..9], 1e-9, "C_300");
@@ -182,7 +185,15 @@ fn disconnected_shape_has_one_zero_per_component() {
 #[test]
 fn every_operator_solves() {
     let sphere = mesh(generate::icosphere(3));
-    for (op, mass) in [(OperatorKind::Cotan, Mass::Voronoi), (OperatorKind::IntrinsicDelaunay, Mass::Lumped), (OperatorKind::Robust, Mass::Lumped), (OperatorKind::Graph, Mass::Identity), (OperatorKind::GraphNormalized, Mass::Identity), (OperatorKind::GraphRandomWalk, Mass::Degree), (OperatorKind::PointCloud, Mass::Lumped)] {
+    for (op, mass) in [
+        (OperatorKind::Cotan, Mass::Voronoi),
+        (OperatorKind::IntrinsicDelaunay, Mass::Lumped),
+        (OperatorKind::Robust, Mass::Lumped),
+        (OperatorKind::Graph, Mass::Identity),
+        (OperatorKind::GraphNormalized, Mass::Identity),
+        (OperatorKind::GraphRandomWalk, Mass::Degree),
+        (OperatorKind::PointCloud, Mass::Lumped),
+    ] {
         let o = OperatorOptions { operator: Some(op), mass: Some(mass), ..Default::default() };
         let s = solve(&sphere, o, 10, Method::Sparse);
         assert!(s.values[0].abs() < 1e-8, "{op:?}: {:?}", s.values);

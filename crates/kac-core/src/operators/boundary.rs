@@ -30,14 +30,20 @@ pub fn boundary_vertices(shape: &Shape) -> Vec<bool> {
     }
 }
 
-pub fn apply(shape: &Shape, pair: SparsePair, boundary: &Boundary) -> Result<(SparsePair, Option<Vec<u32>>), OperatorError> {
+pub fn apply(
+    shape: &Shape,
+    pair: SparsePair,
+    boundary: &Boundary,
+) -> Result<(SparsePair, Option<Vec<u32>>), OperatorError> {
     let n = pair.n();
     let fixed: Vec<bool> = match boundary {
         Boundary::Neumann => return Ok((pair, None)),
         Boundary::Dirichlet => {
             let b = boundary_vertices(shape);
             if !b.iter().any(|&x| x) {
-                return Err(OperatorError::Boundary { message: format!("the {} has no boundary; give the vertices to fix", shape.kind().as_str()) });
+                return Err(OperatorError::Boundary {
+                    message: format!("the {} has no boundary; give the vertices to fix", shape.kind().as_str()),
+                });
             }
             b
         }
@@ -45,7 +51,9 @@ pub fn apply(shape: &Shape, pair: SparsePair, boundary: &Boundary) -> Result<(Sp
             let mut b = vec![false; n];
             for &v in list {
                 if v as usize >= n {
-                    return Err(OperatorError::Boundary { message: format!("vertex {v} does not exist (the shape has {n})") });
+                    return Err(OperatorError::Boundary {
+                        message: format!("vertex {v} does not exist (the shape has {n})"),
+                    });
                 }
                 b[v as usize] = true;
             }
@@ -60,5 +68,8 @@ pub fn apply(shape: &Shape, pair: SparsePair, boundary: &Boundary) -> Result<(Sp
     let mass = vals.pop().unwrap_or_default();
     let stiffness = vals.pop().unwrap_or_default();
     let kept = keep.iter().map(|&i| i as u32).collect();
-    Ok((SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: pair.mass_is_diagonal }, Some(kept)))
+    Ok((
+        SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: pair.mass_is_diagonal },
+        Some(kept),
+    ))
 }

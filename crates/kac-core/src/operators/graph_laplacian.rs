@@ -62,7 +62,11 @@ pub fn string_pair(v: &[Point], segments: &[[u32; 2]], mass: Mass) -> Result<Spa
     for (si, s) in segments.iter().enumerate() {
         let h = vec3::norm(vec3::sub(v[s[0] as usize], v[s[1] as usize]));
         if !(h > 0.0) {
-            return Err(OperatorError::DegenerateElement { element: "segment", index: si, message: "zero length".into() });
+            return Err(OperatorError::DegenerateElement {
+                element: "segment",
+                index: si,
+                message: "zero length".into(),
+            });
         }
         off.push((s[0], s[1], [-1.0 / h, if consistent { h / 6.0 } else { 0.0 }]));
         for &i in s {

@@ -107,7 +107,9 @@ impl Mass {
         }
     }
     pub fn from_name(s: &str) -> Option<Self> {
-        [Mass::Consistent, Mass::Lumped, Mass::Voronoi, Mass::Identity, Mass::Degree].into_iter().find(|m| m.name() == s)
+        [Mass::Consistent, Mass::Lumped, Mass::Voronoi, Mass::Identity, Mass::Degree]
+            .into_iter()
+            .find(|m| m.name() == s)
     }
 }
 
@@ -164,7 +166,13 @@ pub struct OperatorOptions {
 
 impl Default for OperatorOptions {
     fn default() -> Self {
-        OperatorOptions { operator: None, mass: None, boundary: Boundary::Neumann, cloud: CloudParams::default(), mollify: 1e-5 }
+        OperatorOptions {
+            operator: None,
+            mass: None,
+            boundary: Boundary::Neumann,
+            cloud: CloudParams::default(),
+            mollify: 1e-5,
+        }
     }
 }
 
@@ -242,7 +250,9 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
     };
     let mass = options.mass.unwrap_or(default_mass);
     let mass_ok = match op {
-        OperatorKind::Cotan | OperatorKind::IntrinsicDelaunay => matches!(mass, Mass::Consistent | Mass::Lumped | Mass::Voronoi),
+        OperatorKind::Cotan | OperatorKind::IntrinsicDelaunay => {
+            matches!(mass, Mass::Consistent | Mass::Lumped | Mass::Voronoi)
+        }
         OperatorKind::Tet | OperatorKind::String => matches!(mass, Mass::Consistent | Mass::Lumped),
         OperatorKind::Robust | OperatorKind::PointCloud => mass == Mass::Lumped,
         OperatorKind::Graph | OperatorKind::GraphNormalized => mass == Mass::Identity,
@@ -253,9 +263,12 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
     }
     let mut parameters = serde_json::Map::new();
     let pair = match (op, shape) {
-        (OperatorKind::Cotan, Shape::TriangleMesh(m)) => {
-            cotan_laplacian::cotan_pair(m.vertices.len(), &m.faces, |f| cotan_laplacian::face_lengths(&m.vertices, &m.faces[f]), mass)?
-        }
+        (OperatorKind::Cotan, Shape::TriangleMesh(m)) => cotan_laplacian::cotan_pair(
+            m.vertices.len(),
+            &m.faces,
+            |f| cotan_laplacian::face_lengths(&m.vertices, &m.faces[f]),
+            mass,
+        )?,
         (OperatorKind::IntrinsicDelaunay, Shape::TriangleMesh(m)) => {
             let (pair, flips) = intrinsic_delaunay::intrinsic_delaunay_pair(m, mass)?;
             parameters.insert("flips".into(), flips.into());
@@ -303,7 +316,11 @@ pub fn edge_graph(shape: &Shape) -> Option<(Vec<[u32; 2]>, Vec<f64>)> {
         Shape::PointCloud(_) => return None,
         Shape::Polyline(p) => p.segments.clone(),
         Shape::TriangleMesh(m) => m.faces.iter().flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]]).collect(),
-        Shape::TetMesh(m) => m.tets.iter().flat_map(|t| [[t[0], t[1]], [t[0], t[2]], [t[0], t[3]], [t[1], t[2]], [t[1], t[3]], [t[2], t[3]]]).collect(),
+        Shape::TetMesh(m) => m
+            .tets
+            .iter()
+            .flat_map(|t| [[t[0], t[1]], [t[0], t[2]], [t[0], t[3]], [t[1], t[2]], [t[1], t[3]], [t[2], t[3]]])
+            .collect(),
     };
     for e in edges.iter_mut() {
         if e[0] > e[1] {

@@ -26,7 +26,10 @@ pub struct Neighbourhoods {
 impl Neighbourhoods {
     pub fn knn(points: &[Point], k: usize) -> Result<Self, OperatorError> {
         if points.len() < 4 {
-            return Err(OperatorError::InvalidParameter { name: "points", message: format!("{} points; a point-cloud Laplacian needs at least 4", points.len()) });
+            return Err(OperatorError::InvalidParameter {
+                name: "points",
+                message: format!("{} points; a point-cloud Laplacian needs at least 4", points.len()),
+            });
         }
         let k = k.clamp(3, points.len() - 1);
         let mut tree: KdTree<f64, 3> = KdTree::with_capacity(points.len());
@@ -145,7 +148,8 @@ pub fn voronoi_cell(points: &[Point], nb: &Neighbourhoods, frames: &[[Point; 3]]
         .collect();
     let r = q.iter().map(|&(x, y, _)| (x * x + y * y).sqrt()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
     // The cell is clipped to the square of half-size r (the farthest neighbour): a bound for open cells.
-    let mut poly: Vec<([f64; 2], u32)> = vec![([-r, -r], u32::MAX), ([r, -r], u32::MAX), ([r, r], u32::MAX), ([-r, r], u32::MAX)];
+    let mut poly: Vec<([f64; 2], u32)> =
+        vec![([-r, -r], u32::MAX), ([r, -r], u32::MAX), ([r, r], u32::MAX), ([-r, r], u32::MAX)];
     // poly[k].1 labels the edge from vertex k to vertex k+1.
     for &(qx, qy, j) in &q {
         let c = 0.5 * (qx * qx + qy * qy);
@@ -184,22 +188,35 @@ pub fn local_areas(points: &[Point], nb: &Neighbourhoods, frames: &[[Point; 3]])
 }
 
 /// The Belkin–Niyogi pair and the parameters it used (h, t, radius, k, total area).
-pub fn belkin_niyogi_pair(points: &[Point], params: &CloudParams) -> Result<(SparsePair, serde_json::Map<String, serde_json::Value>), OperatorError> {
+pub fn belkin_niyogi_pair(
+    points: &[Point],
+    params: &CloudParams,
+) -> Result<(SparsePair, serde_json::Map<String, serde_json::Value>), OperatorError> {
     let nb = Neighbourhoods::knn(points, params.k)?;
     let n = points.len();
     let h = (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[0] as usize], points[i]))).sum::<f64>() / n as f64;
     let t = match params.t {
         Some(t) if t > 0.0 && t.is_finite() => t,
-        Some(t) => return Err(OperatorError::InvalidParameter { name: "t", message: format!("{t} is not a positive time") }),
+        Some(t) => {
+            return Err(OperatorError::InvalidParameter { name: "t", message: format!("{t} is not a positive time") })
+        }
         None => 4.0 * h * h,
     };
     let r = match params.radius {
         Some(r) if r > 0.0 && r.is_finite() => r,
-        Some(r) => return Err(OperatorError::InvalidParameter { name: "radius", message: format!("{r} is not a positive radius") }),
+        Some(r) => {
+            return Err(OperatorError::InvalidParameter {
+                name: "radius",
+                message: format!("{r} is not a positive radius"),
+            })
+        }
         None => 3.0 * t.sqrt(),
     };
     if !(h > 0.0) {
-        return Err(OperatorError::InvalidParameter { name: "points", message: "the points have no spacing (all coincide)".into() });
+        return Err(OperatorError::InvalidParameter {
+            name: "points",
+            message: "the points have no spacing (all coincide)".into(),
+        });
     }
     let frames = local_frames(points, &nb);
     let areas = local_areas(points, &nb, &frames);

@@ -1,1 +1,250 @@
-pub fn _placeholder() {}
+//! The "no free lunch" report (§9.5): which properties of the smooth Laplacian a built discrete operator has
+//! on the user's shape. No discrete Laplacian has all of them on every mesh (Wardetzky, Mathur, Kälberer &
+//! Grinspun 2007); this says which ones hold here.
+//!
+//! - symmetry: max |L_ij − L_ji| relative to max |L_ij|;
+//! - local support: every non-zero joins vertices that are neighbours in the input (mesh edges, graph edges;
+//!   for point clouds the kernel radius) — intrinsic Delaunay edges may join vertices that are not;
+//! - linear precision: (L u)_i = 0 at interior vertices for linear u, where the shape is flat (planar surfaces,
+//!   straight polylines, every tet mesh);
+//! - maximum principle: no negative edge weight (no positive off-diagonal entry of L);
+//! - positive semidefiniteness: L + εM (ε = 10⁻¹⁰ · mean L_jj/M_jj) has a Cholesky factorization;
+//! - null space: eigenvalues below 10⁻⁸ · mean L_jj/M_jj among the smallest ones, against connected components;
+//! - constants in the kernel (Neumann): max |L·1| relative to max |L_ii|; the mass is positive and its total.
+
+use super::sparse::matvec;
+use super::{edge_graph, Operator, OperatorKind};
+use crate::geometry::topology::UnionFind;
+use crate::geometry::{vec3, Shape};
+use crate::spectrum::{self, factor::Symbolic, Control, EigenOptions, Method};
+use serde::Serialize;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Check {
+    pub holds: bool,
+    /// The measured quantity behind the verdict.
+    pub value: f64,
+    pub note: String,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct PropertyReport {
+    pub symmetric: Check,
+    pub local_support: Check,
+    /// `None` where the shape is not flat, so linear functions are not harmonic.
+    pub linear_precision: Option<Check>,
+    pub maximum_principle: Check,
+    pub positive_semidefinite: Check,
+    pub null_space: Check,
+    pub constants_in_kernel: Option<Check>,
+    pub mass_positive: Check,
+    pub total_mass: f64,
+}
+
+fn check(holds: bool, value: f64, note: impl Into<String>) -> Check {
+    Check { holds, value, note: note.into() }
+}
+
+/// Connected components of the operator's graph (non-zero off-diagonal entries).
+fn components(op: &Operator) -> usize {
+    let p = &op.pair.pattern;
+    let mut uf = UnionFind::new(p.n);
+    for j in 0..p.n {
+        for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+            if op.pair.stiffness[pos] != 0.0 {
+                uf.union(p.row_idx[pos] as u32, j as u32);
+            }
+        }
+    }
+    (0..p.n as u32).filter(|&v| uf.find(v) == v).count()
+}
+
+pub fn report(shape: &Shape, op: &Operator) -> PropertyReport {
+    let p = &op.pair.pattern;
+    let (l, m) = (&op.pair.stiffness, &op.pair.mass);
+    let n = p.n;
+    let maxabs = l.iter().fold(0.0f64, |a, b| a.max(b.abs())).max(f64::MIN_POSITIVE);
+    // Symmetry.
+    let mut asym = 0.0f64;
+    for j in 0..n {
+        for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+            let i = p.row_idx[pos];
+            let col_i = p.col(i);
+            let other = col_i.binary_search(&j).map(|k| l[p.col_ptr[i] + k]).unwrap_or(0.0);
+            asym = asym.max((l[pos] - other).abs());
+        }
+    }
+    let symmetric = check(asym <= 1e-14 * maxabs, asym / maxabs, "max |L_ij − L_ji| / max |L_ij|");
+    // Maximum principle: positive off-diagonal entries are negative weights.
+    let mut negative = 0usize;
+    for j in 0..n {
+        for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+            if p.row_idx[pos] < j && l[pos] > 1e-14 * maxabs {
+                negative += 1;
+            }
+        }
+    }
+    let maximum_principle =
+        check(negative == 0, negative as f64, "number of negative edge weights (positive off-diagonal entries of L)");
+    // Local support against the input's own neighbourhoods.
+    let index = |k: usize| op.interior.as_ref().map_or(k, |keep| keep[k] as usize);
+    let local_support = match (op.kind, edge_graph(shape)) {
+        (OperatorKind::PointCloud, _) | (_, None) => {
+            check(true, 0.0, "entries join points within the kernel radius or local Delaunay neighbourhoods")
+        }
+        (_, Some((edges, _))) => {
+            let mut set: rustc_hash::FxHashSet<(u32, u32)> = edges.iter().map(|e| (e[0], e[1])).collect();
+            set.shrink_to_fit();
+            let mut outside = 0usize;
+            for j in 0..n {
+                for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+                    let i = p.row_idx[pos];
+                    if i < j && l[pos] != 0.0 {
+                        let (a, b) = (index(i) as u32, index(j) as u32);
+                        if !set.contains(&(a.min(b), a.max(b))) {
+                            outside += 1;
+                        }
+                    }
+                }
+            }
+            check(
+                outside == 0,
+                outside as f64,
+                "non-zero entries joining vertices that are not neighbours in the input",
+            )
+        }
+    };
+    // Linear precision where linear functions are harmonic.
+    let linear_precision = flat_frame(shape).map(|axes| {
+        let boundary = super::boundary::boundary_vertices(shape);
+        let pos = shape.positions().unwrap_or(&[]);
+        let diam = crate::geometry::topology::BoundingBox::of(pos).map_or(1.0, |b| b.diagonal()).max(f64::MIN_POSITIVE);
+        let mut worst = 0.0f64;
+        let mut y = vec![0.0; n];
+        for axis in axes {
+            let u: Vec<f64> = (0..n).map(|k| vec3::dot(pos[index(k)], axis)).collect();
+            matvec(p, l, &u, &mut y);
+            for (k, v) in y.iter().enumerate() {
+                if !boundary[index(k)] {
+                    worst = worst.max(v.abs());
+                }
+            }
+        }
+        let rel = worst / (maxabs * diam);
+        check(rel <= 1e-10, rel, "max |(L u)_i| at interior vertices for linear u, relative to max |L_ij| · diameter")
+    });
+    // Constants in the kernel (Neumann only: Dirichlet elimination removes them).
+    let constants_in_kernel = op.interior.is_none().then(|| {
+        let ones = vec![1.0; n];
+        let mut y = vec![0.0; n];
+        matvec(p, l, &ones, &mut y);
+        let worst = y.iter().fold(0.0f64, |a, b| a.max(b.abs())) / maxabs;
+        let normalized = op.kind == OperatorKind::GraphNormalized;
+        check(
+            worst <= 1e-12 || normalized,
+            worst,
+            if normalized {
+                "the normalized Laplacian's kernel is D^{1/2}·1, not constants"
+            } else {
+                "max |L·1| / max |L_ij|"
+            },
+        )
+    });
+    // Mass.
+    let mdiag = op.pair.mass_diagonal();
+    let total_mass: f64 = m.iter().sum();
+    let mass_positive = check(
+        mdiag.iter().all(|&d| d > 0.0),
+        mdiag.iter().cloned().fold(f64::INFINITY, f64::min),
+        "smallest diagonal entry of M",
+    );
+    // PSD via Cholesky of L + εM.
+    let scale = (0..n).map(|j| l[p.diag_pos(j)].abs() / mdiag[j].max(f64::MIN_POSITIVE)).sum::<f64>() / n.max(1) as f64;
+    let eps = 1e-10 * scale.max(f64::MIN_POSITIVE);
+    let symbolic = Symbolic::analyze(&op.pair.pattern).ok();
+    let psd = symbolic
+        .as_ref()
+        .map(|s| spectrum::factor::Cholesky::factor(s, &op.pair.shifted(-eps), faer::Par::Seq).is_ok())
+        .unwrap_or(false);
+    let positive_semidefinite = check(psd, eps, "ε for which L + εM has a Cholesky factorization");
+    // Null space against components.
+    let comps = components(op);
+    let null_space = if !psd {
+        check(false, f64::NAN, "not computed: L is not positive semidefinite")
+    } else if comps + 1 >= n || comps > 500 {
+        check(true, comps as f64, format!("{comps} components; the null space was not computed (too many)"))
+    } else {
+        let o = EigenOptions { k: comps + 1, method: Method::Auto, ..Default::default() };
+        match spectrum::eigs(&op.pair, &o, symbolic.as_ref(), Control::default()) {
+            Ok(s) => {
+                let zero = 1e-8 * scale;
+                let dim = s.values.iter().filter(|v| v.abs() <= zero).count();
+                let expected = if op.interior.is_some() { 0 } else { comps };
+                check(
+                    dim == expected,
+                    dim as f64,
+                    format!(
+                        "eigenvalues ≤ {zero:e} among the smallest {}; connected components: {comps}{}",
+                        comps + 1,
+                        if op.interior.is_some() { " (Dirichlet: none expected)" } else { "" }
+                    ),
+                )
+            }
+            Err(e) => check(false, f64::NAN, format!("eigensolver failed: {e}")),
+        }
+    };
+    PropertyReport {
+        symmetric,
+        local_support,
+        linear_precision,
+        maximum_principle,
+        positive_semidefinite,
+        null_space,
+        constants_in_kernel,
+        mass_positive,
+        total_mass,
+    }
+}
+
+/// Orthonormal axes spanning the shape where it is flat (linear functions on them are harmonic): a planar
+/// surface (2 axes), a straight polyline (1), any tet mesh (3).
+fn flat_frame(shape: &Shape) -> Option<Vec<[f64; 3]>> {
+    match shape {
+        Shape::TetMesh(_) => Some(vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+        Shape::TriangleMesh(m) => {
+            let n =
+                m.faces.iter().map(|f| crate::geometry::topology::tri_area2(&m.vertices, f)).fold([0.0; 3], vec3::add);
+            let len = vec3::norm(n);
+            if len == 0.0 {
+                return None;
+            }
+            let n = vec3::scale(n, 1.0 / len);
+            let o = m.vertices[0];
+            let diam = crate::geometry::topology::BoundingBox::of(&m.vertices)?.diagonal();
+            let planar = m.vertices.iter().all(|p| vec3::dot(vec3::sub(*p, o), n).abs() <= 1e-12 * diam);
+            planar.then(|| {
+                let helper = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+                let u = vec3::cross(n, helper);
+                let u = vec3::scale(u, 1.0 / vec3::norm(u));
+                vec![u, vec3::cross(n, u)]
+            })
+        }
+        Shape::Polyline(p) => {
+            let (a, b) = (
+                p.vertices.first()?,
+                p.vertices.iter().max_by(|x, y| {
+                    vec3::norm(vec3::sub(**x, p.vertices[0])).total_cmp(&vec3::norm(vec3::sub(**y, p.vertices[0])))
+                })?,
+            );
+            let d = vec3::sub(*b, *a);
+            let len = vec3::norm(d);
+            if len == 0.0 {
+                return None;
+            }
+            let d = vec3::scale(d, 1.0 / len);
+            let straight = p.vertices.iter().all(|q| vec3::norm(vec3::cross(vec3::sub(*q, *a), d)) <= 1e-12 * len);
+            straight.then(|| vec![d])
+        }
+        _ => None,
+    }
+}

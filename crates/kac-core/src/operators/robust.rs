@@ -44,11 +44,12 @@ fn tufted_cover(v: &[Point], faces: &[[u32; 3]]) -> Result<IntrinsicTriangulatio
             let (f, k) = (h as usize / 3, h as usize % 3);
             let opp = v[faces[f][(k + 2) % 3] as usize];
             // The reversed copy of f has the same edge as half-edge (index of the edge's corner pair) reversed.
-            let back = (3 * (nf + f) + match k {
-                0 => 2,
-                1 => 1,
-                _ => 0,
-            }) as u32;
+            let back = (3 * (nf + f)
+                + match k {
+                    0 => 2,
+                    1 => 1,
+                    _ => 0,
+                }) as u32;
             let fwd = (3 * f + k) as u32;
             let runs_uw = faces[f][k] == u;
             let (h_uw, h_wu) = if runs_uw { (fwd, back) } else { (back, fwd) };
@@ -75,7 +76,10 @@ fn tufted_cover(v: &[Point], faces: &[[u32; 3]]) -> Result<IntrinsicTriangulatio
     // Half-edge k of a reversed copy [a, c, b] runs a→c, which is the forward face's half-edge 2 reversed, etc.
     let mut t = IntrinsicTriangulation { faces: all, twin, length };
     if t.twin.contains(&u32::MAX) {
-        return Err(OperatorError::InvalidParameter { name: "mesh", message: "internal: the tufted cover left an edge unglued".into() });
+        return Err(OperatorError::InvalidParameter {
+            name: "mesh",
+            message: "internal: the tufted cover left an edge unglued".into(),
+        });
     }
     t.faces.shrink_to_fit();
     Ok(t)
@@ -99,9 +103,17 @@ fn mollify(t: &mut IntrinsicTriangulation, factor: f64) -> f64 {
     delta
 }
 
-fn robust_from_faces(v: &[Point], faces: &[[u32; 3]], mollify_factor: f64, divide: f64) -> Result<(SparsePair, f64), OperatorError> {
+fn robust_from_faces(
+    v: &[Point],
+    faces: &[[u32; 3]],
+    mollify_factor: f64,
+    divide: f64,
+) -> Result<(SparsePair, f64), OperatorError> {
     if !(mollify_factor >= 0.0 && mollify_factor.is_finite()) {
-        return Err(OperatorError::InvalidParameter { name: "mollify", message: format!("{mollify_factor} is not a non-negative number") });
+        return Err(OperatorError::InvalidParameter {
+            name: "mollify",
+            message: format!("{mollify_factor} is not a non-negative number"),
+        });
     }
     let mut t = tufted_cover(v, faces)?;
     let delta = mollify(&mut t, mollify_factor);
@@ -121,7 +133,10 @@ fn robust_from_faces(v: &[Point], faces: &[[u32; 3]], mollify_factor: f64, divid
 }
 
 /// The robust Laplacian of a (possibly non-manifold, degenerate) triangle mesh; returns the pair and δ.
-pub fn robust_mesh_pair(m: &crate::geometry::TriangleMesh, mollify_factor: f64) -> Result<(SparsePair, f64), OperatorError> {
+pub fn robust_mesh_pair(
+    m: &crate::geometry::TriangleMesh,
+    mollify_factor: f64,
+) -> Result<(SparsePair, f64), OperatorError> {
     robust_from_faces(&m.vertices, &m.faces, mollify_factor, 2.0)
 }
 

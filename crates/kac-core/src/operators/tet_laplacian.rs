@@ -19,7 +19,11 @@ pub fn tet_pair(v: &[Point], tets: &[[u32; 4]], mass: Mass) -> Result<SparsePair
         let det = vec3::dot(e[0], vec3::cross(e[1], e[2]));
         let vol = det.abs() / 6.0;
         if !(vol > 0.0) || !vol.is_finite() {
-            return Err(OperatorError::DegenerateElement { element: "tetrahedron", index: ti, message: "zero volume".into() });
+            return Err(OperatorError::DegenerateElement {
+                element: "tetrahedron",
+                index: ti,
+                message: "zero volume".into(),
+            });
         }
         // Rows of J⁻¹ (J = [e1 e2 e3]) are the gradients of φ1..φ3; φ0's is minus their sum.
         let mut g = [[0.0; 3]; 4];

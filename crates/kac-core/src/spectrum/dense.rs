@@ -23,7 +23,9 @@ pub fn eigs_dense(pair: &SparsePair, k: usize) -> Result<Spectrum, EigenError> {
     let n = pair.n();
     let l = to_dense(pair, &pair.stiffness);
     let m = to_dense(pair, &pair.mass);
-    let chol = m.llt(Side::Lower).map_err(|e| EigenError::Factorization { message: format!("the mass matrix is not positive definite ({e:?})") })?;
+    let chol = m.llt(Side::Lower).map_err(|e| EigenError::Factorization {
+        message: format!("the mass matrix is not positive definite ({e:?})"),
+    })?;
     let r = chol.L();
     // C = R⁻¹ L R⁻ᵀ: solve R X = L, then R Cᵀ = Xᵀ.
     let mut x = l.clone();
@@ -31,7 +33,9 @@ pub fn eigs_dense(pair: &SparsePair, k: usize) -> Result<Spectrum, EigenError> {
     let mut c = x.transpose().to_owned();
     solve_lower_triangular_in_place(r, c.as_mut(), Par::Seq);
     let c = Mat::from_fn(n, n, |i, j| 0.5 * (c[(i, j)] + c[(j, i)]));
-    let evd = c.self_adjoint_eigen(Side::Lower).map_err(|e| EigenError::Factorization { message: format!("dense eigensolver failed ({e:?})") })?;
+    let evd = c
+        .self_adjoint_eigen(Side::Lower)
+        .map_err(|e| EigenError::Factorization { message: format!("dense eigensolver failed ({e:?})") })?;
     let s = evd.S();
     let u = evd.U();
     let mut phi = u.subcols(0, k).to_owned();

@@ -19,8 +19,9 @@ pub struct Symbolic {
 
 impl Symbolic {
     pub fn analyze(pattern: &Arc<Pattern>) -> Result<Self, String> {
-        let inner = factorize_symbolic_cholesky(pattern.faer(), Side::Lower, SymmetricOrdering::Amd, Default::default())
-            .map_err(|e| format!("symbolic Cholesky failed: {e:?}"))?;
+        let inner =
+            factorize_symbolic_cholesky(pattern.faer(), Side::Lower, SymmetricOrdering::Amd, Default::default())
+                .map_err(|e| format!("symbolic Cholesky failed: {e:?}"))?;
         Ok(Symbolic { pattern: pattern.clone(), inner: Arc::new(inner) })
     }
     /// Whether this analysis fits a pair (same pattern).
@@ -42,15 +43,28 @@ impl Cholesky {
         let mut l = vec![0.0f64; s.len_val()];
         let a = SparseColMatRef::new(symbolic.pattern.faer(), values);
         let mut mem = MemBuffer::new(s.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
-        s.factorize_numeric_llt(&mut l, a, Side::Lower, LltRegularization::default(), par, MemStack::new(&mut mem), Default::default())
-            .map_err(|e| format!("the matrix is not positive definite ({e:?})"))?;
+        s.factorize_numeric_llt(
+            &mut l,
+            a,
+            Side::Lower,
+            LltRegularization::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .map_err(|e| format!("the matrix is not positive definite ({e:?})"))?;
         Ok(Cholesky { symbolic: symbolic.clone(), values: l })
     }
     /// Solves K X = B in place for every column of `rhs`.
     pub fn solve_in_place(&self, rhs: MatMut<'_, f64>, par: Par) {
         let s = &self.symbolic.inner;
         let mut mem = MemBuffer::new(s.solve_in_place_scratch::<f64>(rhs.ncols(), par));
-        LltRef::<'_, usize, f64>::new(s, &self.values).solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(&mut mem));
+        LltRef::<'_, usize, f64>::new(s, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            rhs,
+            par,
+            MemStack::new(&mut mem),
+        );
     }
     /// Entries of the factor (a measure of fill-in).
     pub fn factor_nnz(&self) -> usize {

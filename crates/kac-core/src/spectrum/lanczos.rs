@@ -146,7 +146,12 @@ impl Ctx<'_> {
     }
 }
 
-pub fn eigs_block_lanczos(pair: &SparsePair, o: &EigenOptions, symbolic: Option<&Symbolic>, control: Control<'_>) -> Result<Spectrum, EigenError> {
+pub fn eigs_block_lanczos(
+    pair: &SparsePair,
+    o: &EigenOptions,
+    symbolic: Option<&Symbolic>,
+    control: Control<'_>,
+) -> Result<Spectrum, EigenError> {
     let t_start = Instant::now();
     let n = pair.n();
     let k = o.k;
@@ -245,13 +250,16 @@ pub fn eigs_block_lanczos(pair: &SparsePair, o: &EigenOptions, symbolic: Option<
         }
         // Rayleigh–Ritz on the expanded part.
         let hs = Mat::from_fn(m, m, |i, j| 0.5 * (h[(i, j)] + h[(j, i)]));
-        let evd = hs.self_adjoint_eigen(Side::Lower).map_err(|err| EigenError::Factorization { message: format!("projected eigenproblem: {err:?}") })?;
+        let evd = hs
+            .self_adjoint_eigen(Side::Lower)
+            .map_err(|err| EigenError::Factorization { message: format!("projected eigenproblem: {err:?}") })?;
         let (theta, s) = (evd.S(), evd.U());
         // Largest θ first.
         let order: Vec<usize> = (0..m).rev().collect();
         let mut es = Mat::<f64>::zeros(b, m);
         matmul(es.as_mut(), Accum::Replace, e.as_ref(), s, 1.0, Par::Seq);
-        let resid: Vec<f64> = order.iter().map(|&c| (0..b).map(|r| es[(r, c)] * es[(r, c)]).sum::<f64>().sqrt()).collect();
+        let resid: Vec<f64> =
+            order.iter().map(|&c| (0..b).map(|r| es[(r, c)] * es[(r, c)]).sum::<f64>().sqrt()).collect();
         let conv: Vec<bool> = order.iter().zip(&resid).map(|(&c, &r)| r <= o.tol * theta[c].abs()).collect();
         let leading = conv.iter().take_while(|&&x| x).count();
         if leading.min(k) > best_converged {

@@ -55,7 +55,17 @@ pub struct EigenOptions {
 
 impl Default for EigenOptions {
     fn default() -> Self {
-        EigenOptions { k: 10, tol: 1e-10, sigma: None, block: None, subspace: None, max_steps: 20_000, seed: 0x6b61_6321, threads: 0, method: Method::Auto }
+        EigenOptions {
+            k: 10,
+            tol: 1e-10,
+            sigma: None,
+            block: None,
+            subspace: None,
+            max_steps: 20_000,
+            seed: 0x6b61_6321,
+            threads: 0,
+            method: Method::Auto,
+        }
     }
 }
 
@@ -147,7 +157,12 @@ impl EigenError {
 }
 
 /// The k smallest eigenpairs of L φ = λ M φ.
-pub fn eigs(pair: &SparsePair, options: &EigenOptions, symbolic: Option<&factor::Symbolic>, control: Control<'_>) -> Result<Spectrum, EigenError> {
+pub fn eigs(
+    pair: &SparsePair,
+    options: &EigenOptions,
+    symbolic: Option<&factor::Symbolic>,
+    control: Control<'_>,
+) -> Result<Spectrum, EigenError> {
     let n = pair.n();
     let k = options.k;
     let dense = match options.method {
@@ -162,7 +177,11 @@ pub fn eigs(pair: &SparsePair, options: &EigenOptions, symbolic: Option<&factor:
     if !(options.tol > 0.0 && options.tol < 1.0) {
         return Err(EigenError::InvalidOption { name: "tol", message: format!("{} is not in (0, 1)", options.tol) });
     }
-    let mut s = if dense { dense::eigs_dense(pair, k)? } else { lanczos::eigs_block_lanczos(pair, options, symbolic, control)? };
+    let mut s = if dense {
+        dense::eigs_dense(pair, k)?
+    } else {
+        lanczos::eigs_block_lanczos(pair, options, symbolic, control)?
+    };
     finish(pair, &mut s);
     Ok(s)
 }
