@@ -3,10 +3,13 @@
 
 use clap::{Args, Parser, Subcommand};
 use kac_core::geometry::validate::Weld;
+use kac_core::operators::{Boundary, CloudParams, Mass, OperatorKind, OperatorOptions};
 use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
 use std::path::PathBuf;
 
 mod inspect;
+mod operator;
+mod spectrum;
 
 #[derive(Parser)]
 #[command(name = "kac", version, about = "Can you hear the shape of a drum? Spectral shape analysis.")]
@@ -19,6 +22,64 @@ struct Cli {
 enum Command {
     /// Read, validate and summarize a shape as JSON (kind, counts, id, bbox, area/volume, topology, repairs).
     Inspect(inspect::InspectArgs),
+    /// Build a Laplace operator (L, M): summary, property report, Matrix Market output.
+    Operator(operator::OperatorCmd),
+    /// The k smallest eigenpairs of L φ = λ M φ.
+    Spectrum(spectrum::SpectrumCmd),
+}
+
+/// Options choosing the operator, shared by every subcommand that builds one.
+#[derive(Args, Debug, Clone)]
+pub struct OperatorArgs {
+    /// cotan, intrinsic-delaunay, robust, graph, graph-normalized, graph-random-walk, point-cloud, tet, string
+    /// (default: by shape kind).
+    #[arg(long = "operator", value_parser = parse_operator)]
+    pub operator: Option<OperatorKind>,
+    /// consistent, lumped, voronoi (default: consistent for FEM operators, lumped for robust and point-cloud).
+    #[arg(long, value_parser = parse_mass)]
+    pub mass: Option<Mass>,
+    /// neumann (default) or dirichlet (the shape's boundary).
+    #[arg(long, default_value = "neumann", value_parser = ["neumann", "dirichlet"])]
+    pub boundary: String,
+    /// Dirichlet on these vertices instead (comma-separated indices of the validated shape).
+    #[arg(long, value_delimiter = ',')]
+    pub dirichlet_vertices: Option<Vec<u32>>,
+    /// Point clouds: neighbours per point.
+    #[arg(long, default_value_t = 16)]
+    pub neighbours: usize,
+    /// Point clouds: heat-kernel time t (default (2h)², h the mean nearest-neighbour distance).
+    #[arg(long)]
+    pub time: Option<f64>,
+}
+
+impl OperatorArgs {
+    pub fn build(&self, shape: &kac_core::Shape) -> Result<kac_core::operators::Operator, Failure> {
+        let boundary = match (&self.dirichlet_vertices, self.boundary.as_str()) {
+            (Some(v), _) => Boundary::DirichletVertices(v.clone()),
+            (None, "dirichlet") => Boundary::Dirichlet,
+            _ => Boundary::Neumann,
+        };
+        let o = OperatorOptions {
+            operator: self.operator,
+            mass: self.mass,
+            boundary,
+            cloud: CloudParams { k: self.neighbours, t: self.time, radius: None },
+            ..Default::default()
+        };
+        kac_core::operators::build(shape, &o).map_err(|e| Failure { code: 2, message: e.to_string() })
+    }
+}
+
+fn parse_operator(s: &str) -> Result<OperatorKind, String> {
+    OperatorKind::from_name(s)
+        .ok_or_else(|| format!("unknown operator '{s}'; one of: {}", OperatorKind::ALL.map(|k| k.name()).join(", ")))
+}
+
+fn parse_mass(s: &str) -> Result<Mass, String> {
+    match Mass::from_name(s) {
+        Some(m @ (Mass::Consistent | Mass::Lumped | Mass::Voronoi)) => Ok(m),
+        _ => Err(format!("unknown mass '{s}'; one of: consistent, lumped, voronoi")),
+    }
 }
 
 /// Options shared by every subcommand that reads a shape.
@@ -39,7 +100,7 @@ pub struct ShapeArgs {
 
 fn parse_format(s: &str) -> Result<Format, String> {
     Format::from_name(s).ok_or_else(|| {
-        format!("unknown format '{s}'; one of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json")
+        format!("unknown format '{s}'; one of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx")
     })
 }
 
@@ -89,6 +150,8 @@ pub fn run() -> i32 {
     };
     let result = match cli.command {
         Command::Inspect(a) => inspect::run(a),
+        Command::Operator(a) => operator::run(a),
+        Command::Spectrum(a) => spectrum::run(a),
     };
     match result {
         Ok(()) => 0,

@@ -10,6 +10,11 @@
 //! matrix; libigl's `cotmatrix` is `−L`), the eigenproblem is `L φ = λ M φ` with `M` the mass matrix,
 //! eigenvalues ascend, eigenvectors are `M`-orthonormal.
 
+// Compressed-column loops index parallel arrays (row indices and values) by position.
+#![allow(clippy::needless_range_loop)]
+// `!(x > 0.0)` is deliberate throughout: it is also true for NaN, which must fail every positivity check.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod error;
 pub mod geometry;
 pub mod io;

@@ -27,3 +27,26 @@ fn fuzz_regressions_do_not_panic() {
         }
     }
 }
+
+/// sprs 0.11's Matrix Market reader panicked on an index outside the declared size (found by the mutation
+/// property test); kac reads Matrix Market itself and names the entry and line.
+#[test]
+fn matrix_market_index_out_of_range_is_an_error_not_a_panic() {
+    let mm = b"%%MatrixMarket matrix coordinate real symmetric\n3 3 3\n2 1 1.5\n3 9 2\n3 1 0.5\n";
+    match load_bytes(mm, Format::Mtx, &ReadOptions::default(), &ValidateOptions::default()) {
+        Err(ShapeError::IndexOutOfRange {
+            index: 1, value: 8, location: kac_core::Location::Line { line: 4 }, ..
+        }) => {}
+        other => panic!("{other:?}"),
+    }
+    let v = load_bytes(
+        b"%%MatrixMarket matrix coordinate pattern general\n3 3 4\n1 2\n2 1\n2 3\n3 2\n",
+        Format::Mtx,
+        &ReadOptions::default(),
+        &ValidateOptions::default(),
+    )
+    .unwrap();
+    let kac_core::Shape::Graph(g) = &v.shape else { panic!() };
+    assert_eq!((g.vertex_count, g.edges.len()), (3, 2));
+    assert_eq!(g.weights, vec![1.0, 1.0], "a general matrix is symmetrized as (A + Aᵀ)/2");
+}

@@ -26,6 +26,7 @@ fn seeds() -> Vec<Vec<u8>> {
         b"# vtk DataFile Version 3.0\nt\nASCII\nDATASET POLYDATA\nPOINTS 4 float\n0 0 0 1 0 0 0 1 0 0 0 1\nPOLYGONS 1 5\n4 0 1 2 3\n".to_vec(),
         br#"{"vertices": [[0,0,0],[1,0,0],[0,1,0]], "faces": [[0,1,2]], "edges": [[0,1]], "weights": [2]}"#.to_vec(),
         b"0 0 0 0 0 1\n1 0 0 0 0 1\n".to_vec(),
+        b"%%MatrixMarket matrix coordinate real symmetric\n3 3 3\n2 1 1.5\n3 2 2\n3 1 0.5\n".to_vec(),
     ];
     let mut stl = vec![0u8; 80];
     stl.extend_from_slice(&1u32.to_le_bytes());

@@ -7,6 +7,8 @@ mod gltf;
 mod gmsh;
 mod json;
 mod medit;
+pub mod mtx;
+pub mod npy;
 mod obj;
 mod off;
 mod ply;
@@ -43,10 +45,12 @@ pub enum Format {
     Csv,
     /// kac's JSON: vertices with faces, tets, edges (+ weights), segments, or nothing (points).
     Json,
+    /// Matrix Market coordinate matrix read as a weighted graph's adjacency.
+    Mtx,
 }
 
 impl Format {
-    pub const ALL: [Format; 12] = [
+    pub const ALL: [Format; 13] = [
         Format::Obj,
         Format::Off,
         Format::Ply,
@@ -59,6 +63,7 @@ impl Format {
         Format::Xyz,
         Format::Csv,
         Format::Json,
+        Format::Mtx,
     ];
 
     pub fn name(self) -> &'static str {
@@ -75,6 +80,7 @@ impl Format {
             Format::Xyz => "xyz",
             Format::Csv => "csv",
             Format::Json => "json",
+            Format::Mtx => "mtx",
         }
     }
 
@@ -95,6 +101,7 @@ impl Format {
             "xyz" | "pts" | "txt" => Format::Xyz,
             "csv" => Format::Csv,
             "json" => Format::Json,
+            "mtx" => Format::Mtx,
             _ => return None,
         })
     }
@@ -140,6 +147,9 @@ impl Format {
         }
         if trimmed.starts_with("# vtk") {
             return Some(Format::Vtk);
+        }
+        if trimmed.starts_with("%%MatrixMarket") {
+            return Some(Format::Mtx);
         }
         if trimmed.starts_with('{') {
             return Some(if trimmed.contains("\"asset\"") { Format::Gltf } else { Format::Json });
@@ -225,7 +235,7 @@ pub fn choose_format(explicit: Option<Format>, path: Option<&Path>, bytes: &[u8]
         }
     }
     Format::sniff(bytes).ok_or_else(|| ShapeError::UnknownFormat {
-        message: "no format given and the content matches none of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json"
+        message: "no format given and the content matches none of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx"
             .into(),
     })
 }
@@ -244,6 +254,7 @@ pub fn read_bytes(bytes: &[u8], format: Format, options: &ReadOptions) -> Result
         Format::Xyz => xyz::read(bytes, options, false),
         Format::Csv => xyz::read(bytes, options, true),
         Format::Json => json::read(bytes, options),
+        Format::Mtx => mtx::read_graph(bytes, options),
     }
 }
 

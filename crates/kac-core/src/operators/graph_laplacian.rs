@@ -5,6 +5,7 @@
 //! - `graph-normalized`: L = I − D^{−1/2} W D^{−1/2}, M = I (isolated vertices: L_ii = 0);
 //! - `graph-random-walk`: the random-walk Laplacian I − D⁻¹W, posed symmetrically as (D − W) φ = λ D φ, so
 //!   M = D (isolated vertices get M_ii = 1 and eigenvalue 0).
+//!
 //! Units: those of the weights (dimensionless for unit weights).
 //!
 //! The string: P1 finite elements on a polyline with its real segment lengths h: L_ij = −1/h, L_ii = Σ 1/h;

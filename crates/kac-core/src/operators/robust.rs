@@ -7,6 +7,7 @@
 //!    is added to every length so every triangle is strictly valid (zero-area faces get a tiny positive area);
 //! 3. **intrinsic Delaunay** flips on the cover, then the cotangent Laplacian with lumped mass, both halved
 //!    (every face is on the cover twice).
+//!
 //! For point clouds, each point's triangles are those of its tangent-plane Delaunay neighbourhood (its Voronoi
 //! neighbours among the k nearest, in angular order); their union is a non-manifold mesh in which most
 //! triangles appear three times, so the result is divided by 3 more.
