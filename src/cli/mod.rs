@@ -7,6 +7,7 @@ use kac_core::operators::{Boundary, CloudParams, Mass, OperatorKind, OperatorOpt
 use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
 use std::path::PathBuf;
 
+mod generate;
 mod inspect;
 mod operator;
 mod spectrum;
@@ -26,6 +27,8 @@ enum Command {
     Operator(operator::OperatorCmd),
     /// The k smallest eigenpairs of L φ = λ M φ.
     Spectrum(spectrum::SpectrumCmd),
+    /// Write a shape with a known spectrum (icosphere, square, disk, torus, cube-tets, graphs).
+    Generate(generate::GenerateCmd),
 }
 
 /// Options choosing the operator, shared by every subcommand that builds one.
@@ -152,6 +155,7 @@ pub fn run() -> i32 {
         Command::Inspect(a) => inspect::run(a),
         Command::Operator(a) => operator::run(a),
         Command::Spectrum(a) => spectrum::run(a),
+        Command::Generate(a) => generate::run(a),
     };
     match result {
         Ok(()) => 0,

@@ -70,15 +70,22 @@ pub fn cotan_pair(
     lengths: impl Fn(usize) -> [f64; 3] + Sync,
     mass: Mass,
 ) -> Result<SparsePair, OperatorError> {
-    let per_face: Vec<([f64; 3], f64, [f64; 3])> = (0..faces.len())
+    let consistent = mass == Mass::Consistent;
+    // One parallel pass: each face emits its three edges (L and M values) and its three corner masses.
+    type FaceOut = ([(u32, u32, [f64; 2]); 3], [f64; 3], bool);
+    let per_face: Vec<FaceOut> = (0..faces.len())
         .into_par_iter()
         .map(|f| {
+            let face = &faces[f];
             let l = lengths(f);
             let (cot, area) = corner_cotangents(l);
-            (cot, area, l)
+            let ok = area > 0.0 && cot.iter().all(|x| x.is_finite());
+            let edges = [0, 1, 2].map(|k| (face[(k + 1) % 3], face[(k + 2) % 3], [-0.5 * cot[k], if consistent { area / 12.0 } else { 0.0 }]));
+            let cm = if consistent { [area / 6.0; 3] } else { corner_masses(mass, l, cot, area) };
+            (edges, cm, ok)
         })
         .collect();
-    if let Some(f) = per_face.iter().position(|(c, a, _)| !(*a > 0.0) || !c.iter().all(|x| x.is_finite())) {
+    if let Some(f) = per_face.iter().position(|x| !x.2) {
         return Err(OperatorError::DegenerateElement {
             element: "face",
             index: f,
@@ -88,29 +95,20 @@ pub fn cotan_pair(
     let mut off: Vec<(u32, u32, [f64; 2])> = Vec::with_capacity(3 * faces.len());
     let mut dl = vec![0.0; n];
     let mut dm = vec![0.0; n];
-    let consistent = mass == Mass::Consistent;
-    for (face, (cot, area, l)) in faces.iter().zip(&per_face) {
-        for k in 0..3 {
-            let (i, j) = (face[(k + 1) % 3], face[(k + 2) % 3]);
+    for (face, (edges, cm, _)) in faces.iter().zip(&per_face) {
+        for &(i, j, v) in edges {
             if i == j {
                 continue; // a self-edge of an intrinsic triangulation: f_i − f_i = 0, no contribution
             }
-            let w = 0.5 * cot[k];
-            off.push((i, j, [-w, if consistent { area / 12.0 } else { 0.0 }]));
-            dl[i as usize] += w;
-            dl[j as usize] += w;
+            off.push((i, j, v));
+            dl[i as usize] -= v[0];
+            dl[j as usize] -= v[0];
         }
-        if consistent {
-            for &v in face {
-                dm[v as usize] += area / 6.0;
-            }
-        } else {
-            let cm = corner_masses(mass, *l, *cot, *area);
-            for k in 0..3 {
-                dm[face[k] as usize] += cm[k];
-            }
+        for k in 0..3 {
+            dm[face[k] as usize] += cm[k];
         }
     }
+    drop(per_face);
     let (pattern, [stiffness, mass_values]) = assemble(n, &off, [&dl, &dm]);
     Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: mass_values, mass_is_diagonal: !consistent })
 }
