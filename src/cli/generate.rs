@@ -39,6 +39,9 @@ pub fn run(a: GenerateCmd) -> Result<(), Failure> {
         Shape::TriangleMesh(m) => write::off(m).into_bytes(),
         s => serde_json::to_vec(&write::json(s)).map_err(|e| Failure { code: 1, message: e.to_string() })?,
     };
-    std::fs::write(&a.out, bytes).map_err(|e| Failure { code: 1, message: format!("cannot write {}: {e}", a.out.display()) })?;
-    print_json(&serde_json::json!({ "file": a.out.display().to_string(), "kind": shape.kind(), "vertices": shape.vertex_count() }))
+    std::fs::write(&a.out, bytes)
+        .map_err(|e| Failure { code: 1, message: format!("cannot write {}: {e}", a.out.display()) })?;
+    print_json(
+        &serde_json::json!({ "file": a.out.display().to_string(), "kind": shape.kind(), "vertices": shape.vertex_count() }),
+    )
 }

@@ -15,10 +15,18 @@ fn main() {
     if std::env::args().any(|a| a == "--list" || a == "--test") {
         return;
     }
-    let levels: Vec<u32> = std::env::var("KAC_LEVELS").ok().map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect()).unwrap_or_else(|| vec![5, 6, 7]);
+    let levels: Vec<u32> = std::env::var("KAC_LEVELS")
+        .ok()
+        .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
+        .unwrap_or_else(|| vec![5, 6, 7]);
     for level in levels {
         let shape = Shape::TriangleMesh(generate::icosphere(level));
-        for (op, mass) in [(OperatorKind::Cotan, Mass::Consistent), (OperatorKind::Cotan, Mass::Lumped), (OperatorKind::IntrinsicDelaunay, Mass::Lumped), (OperatorKind::Robust, Mass::Lumped)] {
+        for (op, mass) in [
+            (OperatorKind::Cotan, Mass::Consistent),
+            (OperatorKind::Cotan, Mass::Lumped),
+            (OperatorKind::IntrinsicDelaunay, Mass::Lumped),
+            (OperatorKind::Robust, Mass::Lumped),
+        ] {
             let o = OperatorOptions { operator: Some(op), mass: Some(mass), ..Default::default() };
             let _ = operators::build(&shape, &o).unwrap();
             let times: Vec<f64> = (0..9)

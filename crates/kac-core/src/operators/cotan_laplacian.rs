@@ -80,7 +80,9 @@ pub fn cotan_pair(
             let l = lengths(f);
             let (cot, area) = corner_cotangents(l);
             let ok = area > 0.0 && cot.iter().all(|x| x.is_finite());
-            let edges = [0, 1, 2].map(|k| (face[(k + 1) % 3], face[(k + 2) % 3], [-0.5 * cot[k], if consistent { area / 12.0 } else { 0.0 }]));
+            let edges = [0, 1, 2].map(|k| {
+                (face[(k + 1) % 3], face[(k + 2) % 3], [-0.5 * cot[k], if consistent { area / 12.0 } else { 0.0 }])
+            });
             let cm = if consistent { [area / 6.0; 3] } else { corner_masses(mass, l, cot, area) };
             (edges, cm, ok)
         })
