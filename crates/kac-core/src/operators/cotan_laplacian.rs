@@ -11,7 +11,7 @@
 //! 2003): the circumcentric Voronoi area of each corner, with A/2 to an obtuse corner and A/4 to the others in
 //! obtuse triangles.
 
-use super::sparse::{assemble, SparsePair};
+use super::sparse::SparsePair;
 use super::{Mass, OperatorError};
 use crate::geometry::{vec3, Point};
 use rayon::prelude::*;
@@ -71,46 +71,142 @@ pub fn cotan_pair(
     mass: Mass,
 ) -> Result<SparsePair, OperatorError> {
     let consistent = mass == Mass::Consistent;
-    // One parallel pass: each face emits its three edges (L and M values) and its three corner masses.
-    type FaceOut = ([(u32, u32, [f64; 2]); 3], [f64; 3], bool);
-    let per_face: Vec<FaceOut> = (0..faces.len())
+    // Per face: corner cotangents, area and corner masses (parallel).
+    let per_face: Vec<([f64; 3], f64, [f64; 3])> = (0..faces.len())
         .into_par_iter()
         .map(|f| {
-            let face = &faces[f];
             let l = lengths(f);
             let (cot, area) = corner_cotangents(l);
-            let ok = area > 0.0 && cot.iter().all(|x| x.is_finite());
-            let edges = [0, 1, 2].map(|k| {
-                (face[(k + 1) % 3], face[(k + 2) % 3], [-0.5 * cot[k], if consistent { area / 12.0 } else { 0.0 }])
-            });
             let cm = if consistent { [area / 6.0; 3] } else { corner_masses(mass, l, cot, area) };
-            (edges, cm, ok)
+            (cot, area, cm)
         })
         .collect();
-    if let Some(f) = per_face.iter().position(|x| !x.2) {
+    if let Some(f) = per_face.iter().position(|(c, a, _)| !(*a > 0.0) || !c.iter().all(|x| x.is_finite())) {
         return Err(OperatorError::DegenerateElement {
             element: "face",
             index: f,
             message: "zero or undefined area: cotangent weights are infinite (drop it in validation, or use the 'robust' operator)".into(),
         });
     }
-    let mut off: Vec<(u32, u32, [f64; 2])> = Vec::with_capacity(3 * faces.len());
-    let mut dl = vec![0.0; n];
-    let mut dm = vec![0.0; n];
-    for (face, (edges, cm, _)) in faces.iter().zip(&per_face) {
-        for &(i, j, v) in edges {
-            if i == j {
-                continue; // a self-edge of an intrinsic triangulation: f_i − f_i = 0, no contribution
-            }
-            off.push((i, j, v));
-            dl[i as usize] -= v[0];
-            dl[j as usize] -= v[0];
-        }
-        for k in 0..3 {
-            dm[face[k] as usize] += cm[k];
+    // Vertex → (face, corner) adjacency.
+    let mut vf_ptr = vec![0u32; n + 1];
+    for face in faces {
+        for &v in face {
+            vf_ptr[v as usize + 1] += 1;
         }
     }
-    drop(per_face);
-    let (pattern, [stiffness, mass_values]) = assemble(n, &off, [&dl, &dm]);
+    for j in 0..n {
+        vf_ptr[j + 1] += vf_ptr[j];
+    }
+    let mut fill = vf_ptr.clone();
+    let mut vf = vec![0u32; 3 * faces.len()];
+    for (f, face) in faces.iter().enumerate() {
+        for (c, &v) in face.iter().enumerate() {
+            vf[fill[v as usize] as usize] = (3 * f + c) as u32;
+            fill[v as usize] += 1;
+        }
+    }
+    drop(fill);
+    // Column j gathers, from each face at its corner c, the edges to the two other corners: the edge to
+    // corner c+1 is opposite corner c+2 and vice versa. Entries: (row, L value, M value), merged by row.
+    let column = |j: usize, buf: &mut Vec<(u32, f64, f64)>| -> (f64, f64) {
+        buf.clear();
+        let (mut dl, mut dm) = (0.0, 0.0);
+        for &fc in &vf[vf_ptr[j] as usize..vf_ptr[j + 1] as usize] {
+            let (f, c) = (fc as usize / 3, fc as usize % 3);
+            let (cot, area, cm) = &per_face[f];
+            dm += cm[c];
+            for (other, opposite) in [((c + 1) % 3, (c + 2) % 3), ((c + 2) % 3, (c + 1) % 3)] {
+                let i = faces[f][other];
+                if i as usize == j {
+                    continue; // a self-edge of an intrinsic triangulation contributes nothing
+                }
+                let w = 0.5 * cot[opposite];
+                dl += w;
+                buf.push((i, -w, if consistent { area / 12.0 } else { 0.0 }));
+            }
+        }
+        buf.sort_unstable_by_key(|e| e.0);
+        let mut k = 0;
+        for r in 0..buf.len() {
+            if k > 0 && buf[k - 1].0 == buf[r].0 {
+                buf[k - 1].1 += buf[r].1;
+                buf[k - 1].2 += buf[r].2;
+            } else {
+                buf[k] = buf[r];
+                k += 1;
+            }
+        }
+        buf.truncate(k);
+        (dl, dm)
+    };
+    const CHUNK: usize = 2048;
+    let counts: Vec<usize> = (0..n)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map_init(Vec::new, |ids: &mut Vec<u32>, j| {
+            // Only the distinct neighbours are needed here: ids, no values.
+            ids.clear();
+            for &fc in &vf[vf_ptr[j] as usize..vf_ptr[j + 1] as usize] {
+                let (f, c) = (fc as usize / 3, fc as usize % 3);
+                for other in [(c + 1) % 3, (c + 2) % 3] {
+                    let i = faces[f][other];
+                    if i as usize != j {
+                        ids.push(i);
+                    }
+                }
+            }
+            ids.sort_unstable();
+            ids.dedup();
+            ids.len() + 1
+        })
+        .collect();
+    let mut col_ptr = vec![0usize; n + 1];
+    for j in 0..n {
+        col_ptr[j + 1] = col_ptr[j] + counts[j];
+    }
+    let nnz = col_ptr[n];
+    let mut row_idx = vec![0usize; nnz];
+    let mut lv = vec![0.0f64; nnz];
+    let mut mv = vec![0.0f64; nnz];
+    // Split the output arrays into per-chunk pieces and fill them in parallel.
+    let mut pieces = Vec::new();
+    {
+        let (mut r, mut l, mut m) = (&mut row_idx[..], &mut lv[..], &mut mv[..]);
+        let mut j0 = 0;
+        while j0 < n {
+            let j1 = (j0 + CHUNK).min(n);
+            let len = col_ptr[j1] - col_ptr[j0];
+            let (ra, rb) = r.split_at_mut(len);
+            let (la, lb) = l.split_at_mut(len);
+            let (ma, mb) = m.split_at_mut(len);
+            pieces.push((j0, j1, ra, la, ma));
+            (r, l, m) = (rb, lb, mb);
+            j0 = j1;
+        }
+    }
+    pieces.into_par_iter().for_each(|(j0, j1, rows, ls, ms)| {
+        let mut buf = Vec::new();
+        let mut w = 0;
+        for j in j0..j1 {
+            let (dl, dm) = column(j, &mut buf);
+            let mut placed = false;
+            for &(i, l, m) in buf.iter() {
+                if !placed && i as usize > j {
+                    (rows[w], ls[w], ms[w]) = (j, dl, dm);
+                    w += 1;
+                    placed = true;
+                }
+                (rows[w], ls[w], ms[w]) = (i as usize, l, m);
+                w += 1;
+            }
+            if !placed {
+                (rows[w], ls[w], ms[w]) = (j, dl, dm);
+                w += 1;
+            }
+        }
+    });
+    let pattern = super::sparse::Pattern { n, col_ptr, row_idx };
+    let (stiffness, mass_values) = (lv, mv);
     Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: mass_values, mass_is_diagonal: !consistent })
 }
