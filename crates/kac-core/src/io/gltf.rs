@@ -35,18 +35,54 @@ fn mul(a: &Mat4, b: &Mat4) -> Mat4 {
 
 const IDENTITY: Mat4 = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
 
-/// The JSON chunk of a GLB, or the whole input.
-fn json_part(bytes: &[u8]) -> Result<std::borrow::Cow<'_, [u8]>> {
-    if bytes.starts_with(b"glTF") {
-        let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| ShapeError::Syntax {
+/// Splits a GLB container into its JSON chunk and optional BIN chunk, with every length checked. Done here:
+/// gltf 1.4.1's `Glb::from_slice` subtracts the header size from the declared length unchecked (a panic on a
+/// declared length below 12, found by fuzzing).
+fn split_glb(bytes: &[u8]) -> Result<(&[u8], Option<&[u8]>)> {
+    let err =
+        |offset: usize, message: String| ShapeError::Syntax { format: FMT, location: Location::byte(offset), message };
+    let u32_at = |o: usize| -> Result<usize> {
+        bytes.get(o..o + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize).ok_or_else(|| {
+            ShapeError::Truncated {
+                format: FMT,
+                location: Location::byte(o),
+                message: "the GLB data ends inside a header".into(),
+            }
+        })
+    };
+    let version = u32_at(4)?;
+    if version != 2 {
+        return Err(ShapeError::Unsupported {
             format: FMT,
-            location: Location::byte(0),
-            message: format!("invalid GLB container: {e}"),
-        })?;
-        Ok(glb.json)
-    } else {
-        Ok(std::borrow::Cow::Borrowed(bytes))
+            location: Location::byte(4),
+            message: format!("GLB version {version}; glTF 2.0 is taken"),
+        });
     }
+    let length = u32_at(8)?;
+    if length < 20 || length > bytes.len() {
+        return Err(err(8, format!("declared length {length} does not fit the {} bytes given", bytes.len())));
+    }
+    let data = &bytes[..length];
+    let chunk = |o: usize| -> Result<Option<(&[u8], [u8; 4])>> {
+        if o >= data.len() {
+            return Ok(None);
+        }
+        let len = u32_at(o)?;
+        let kind = bytes.get(o + 4..o + 8).ok_or_else(|| err(o + 4, "truncated chunk header".into()))?;
+        let body = o.checked_add(8).and_then(|s| s.checked_add(len).map(|e| (s, e))).filter(|&(_, e)| e <= data.len());
+        let (s, e) = body.ok_or_else(|| err(o, format!("chunk of {len} bytes runs past the end")))?;
+        Ok(Some((&data[s..e], [kind[0], kind[1], kind[2], kind[3]])))
+    };
+    let (json, kind) = chunk(12)?.ok_or_else(|| err(12, "no JSON chunk".into()))?;
+    if &kind != b"JSON" {
+        return Err(err(16, "the first chunk must be JSON".into()));
+    }
+    let next = (12 + 8 + json.len()).next_multiple_of(4);
+    let bin = match chunk(next)? {
+        Some((b, k)) if &k == b"BIN\0" => Some(b),
+        _ => None,
+    };
+    Ok((json, bin))
 }
 
 /// Checks that every accessor a primitive names exists. gltf-json 1.4.1 indexes `accessors` with the POSITION
@@ -84,18 +120,20 @@ fn check_accessor_references(json: &[u8]) -> Result<()> {
 }
 
 pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
-    check_accessor_references(&json_part(bytes)?)?;
+    let (json, bin) = if bytes.starts_with(b"glTF") { split_glb(bytes)? } else { (bytes, None) };
+    check_accessor_references(json)?;
     // Backstop: any other panic inside the gltf crate's parsing becomes a typed error, never a crash.
-    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(bytes)).map_err(|_| ShapeError::Syntax {
+    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(json)).map_err(|_| ShapeError::Syntax {
         format: FMT,
         location: Location::Unknown,
         message: "the glTF document is internally inconsistent".into(),
     })?;
-    let doc = parsed.map_err(|e| ShapeError::Syntax {
+    let mut doc = parsed.map_err(|e| ShapeError::Syntax {
         format: FMT,
         location: Location::Unknown,
         message: format!("not a valid glTF 2.0 document: {e}"),
     })?;
+    doc.blob = bin.map(|b| b.to_vec());
     // Buffers: the GLB BIN chunk or data URIs.
     let mut buffers: Vec<Vec<u8>> = Vec::new();
     for buffer in doc.buffers() {
