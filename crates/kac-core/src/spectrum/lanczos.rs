@@ -72,11 +72,28 @@ impl Ctx<'_> {
         }
         let mut mw = Mat::<f64>::zeros(n, b);
         let mut c = Mat::<f64>::zeros(m, b);
-        for _ in 0..2 {
+        let mut self_norms = vec![0.0; b];
+        for pass in 0..2 {
             self.apply_m(w.rb(), mw.as_mut());
+            if pass == 0 {
+                for (col, sn) in self_norms.iter_mut().enumerate() {
+                    *sn = (0..n).map(|i| w[(i, col)] * mw[(i, col)]).sum();
+                }
+            }
             matmul(c.as_mut(), Accum::Replace, v.transpose(), mw.as_ref(), 1.0, Par::Seq);
             matmul(w.rb_mut(), Accum::Add, v, c.as_ref(), -1.0, Par::Seq);
             coef += &c;
+            if pass == 0 {
+                // DGKS: a second pass only if some column lost more than half its M-norm² to the projection
+                // (‖w − Vc‖²_M = ‖w‖²_M − ‖c‖², V being M-orthonormal).
+                let lost = (0..b).any(|col| {
+                    let c2: f64 = (0..m).map(|r| c[(r, col)] * c[(r, col)]).sum();
+                    c2 > 0.5 * self_norms[col]
+                });
+                if !lost {
+                    break;
+                }
+            }
         }
         coef
     }
