@@ -28,6 +28,13 @@ fn main() {
         let o = operators::build(&s, &OperatorOptions { operator: Some(kind), ..Default::default() }).unwrap();
         let total: f64 = o.pair.mass.iter().sum();
         let e = eigs(&o.pair, &EigenOptions { k: 9, ..Default::default() }, None, Control::default()).unwrap();
-        println!("{}: n = {n}, nonzeros = {}, total mass = {total:.4} (4π = 12.5664), λ = {:?}, {:.1} s, parameters {:?}", kind.name(), o.pair.nnz(), e.values.iter().map(|v| (v * 1e4).round() / 1e4).collect::<Vec<_>>(), t.elapsed().as_secs_f64(), o.parameters);
+        println!(
+            "{}: n = {n}, nonzeros = {}, total mass = {total:.4} (4π = 12.5664), λ = {:?}, {:.1} s, parameters {:?}",
+            kind.name(),
+            o.pair.nnz(),
+            e.values.iter().map(|v| (v * 1e4).round() / 1e4).collect::<Vec<_>>(),
+            t.elapsed().as_secs_f64(),
+            o.parameters
+        );
     }
 }
