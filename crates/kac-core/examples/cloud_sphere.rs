@@ -6,22 +6,7 @@ use kac_core::spectrum::{eigs, Control, EigenOptions};
 
 fn main() {
     let n: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(40_000);
-    let mut seed = 7u64;
-    let mut next = || {
-        seed = seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = seed;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let points = (0..n)
-        .map(|_| {
-            let z = 2.0 * next() - 1.0;
-            let phi = 2.0 * std::f64::consts::PI * next();
-            let r = (1.0 - z * z).sqrt();
-            [r * phi.cos(), r * phi.sin(), z]
-        })
-        .collect();
+    let points = kac_core::geometry::generate::random_sphere_points(n, 7);
     let s = Shape::PointCloud(PointCloud { points, normals: None });
     for kind in [OperatorKind::PointCloud, OperatorKind::Robust] {
         let t = std::time::Instant::now();

@@ -249,29 +249,10 @@ fn flat_meshes_have_linear_precision_and_cotan_reports_it() {
     assert!(properties::report(&cube, &op(&cube, None, None, Boundary::Neumann)).linear_precision.unwrap().holds);
 }
 
-/// Points uniformly at random on the unit sphere (deterministic).
-fn random_sphere(n: usize, mut seed: u64) -> Vec<[f64; 3]> {
-    let mut next = || {
-        seed = seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = seed;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
-    (0..n)
-        .map(|_| {
-            let z = 2.0 * next() - 1.0;
-            let phi = 2.0 * std::f64::consts::PI * next();
-            let r = (1.0 - z * z).sqrt();
-            [r * phi.cos(), r * phi.sin(), z]
-        })
-        .collect()
-}
-
 #[test]
 fn point_cloud_laplacians_on_a_random_sample_of_the_sphere() {
     // Randomly (not evenly) sampled: the local areas must still add up to 4π and λ₂..λ₄ must be near 2.
-    let pts = random_sphere(6000, 7);
+    let pts = generate::random_sphere_points(6000, 7);
     let s = Shape::PointCloud(PointCloud { points: pts, normals: None });
     // Measured (6000 points): Belkin–Niyogi ΣM = 12.72, λ₂..₄ ≈ 1.94–1.96; robust ΣM = 11.72, λ₂..₄ ≈ 1.83–1.87
     // (its local triangles do not all appear three times on random samples, so dividing by 3 undercounts).

@@ -234,3 +234,24 @@ pub fn petersen_graph() -> Graph {
     let edges: Vec<[u32; 2]> = edges.into_iter().map(|[a, b]| [a.min(b), a.max(b)]).collect();
     Graph { vertex_count: 10, positions: None, weights: vec![1.0; edges.len()], edges }
 }
+
+/// `n` points uniformly at random on the unit sphere (deterministic for a seed; SplitMix64): a randomly, not
+/// evenly, sampled cloud with known spectrum l(l+1) and area 4π.
+pub fn random_sphere_points(n: usize, seed: u64) -> Vec<Point> {
+    let mut state = seed;
+    let mut next = || {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    (0..n)
+        .map(|_| {
+            let z = 2.0 * next() - 1.0;
+            let phi = 2.0 * std::f64::consts::PI * next();
+            let r = (1.0 - z * z).sqrt();
+            [r * phi.cos(), r * phi.sin(), z]
+        })
+        .collect()
+}

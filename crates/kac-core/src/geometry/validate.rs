@@ -267,6 +267,37 @@ fn compact(vertices: &[Point], used: &[bool]) -> (Vec<Point>, Vec<u32>, Vec<usiz
     (out, map, dropped)
 }
 
+/// Welds the raw vertices as the options say and records the repair.
+fn weld_recorded(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs) -> (Vec<Point>, Vec<u32>) {
+    let (verts, weld_map, merged) = weld(&raw.vertices, o.weld);
+    r.add("welded_vertices", &[], merged, format!("{merged} vertices at equal positions merged"));
+    (verts, weld_map)
+}
+
+/// Drops vertices no element uses, renumbers the elements, records the repair (with input indices through
+/// `weld_map`), and returns the kept positions, the welded→kept map and the renumbered elements.
+fn drop_unreferenced<const A: usize>(
+    verts: &[Point],
+    weld_map: &[u32],
+    elems: &[[u32; A]],
+    element_name: &str,
+    r: &mut Repairs,
+) -> (Vec<Point>, Vec<u32>, Vec<[u32; A]>) {
+    let mut used = vec![false; verts.len()];
+    elems.iter().flatten().for_each(|&v| used[v as usize] = true);
+    let (vertices, cmap, dropped) = compact(verts, &used);
+    let dropped_input: Vec<usize> =
+        weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
+    r.add(
+        "unreferenced_vertices",
+        &dropped_input,
+        dropped.len(),
+        format!("{} vertex(es) used by no {element_name} dropped", dropped.len()),
+    );
+    let renumbered = elems.iter().map(|e| e.map(|v| cmap[v as usize])).collect();
+    (vertices, cmap, renumbered)
+}
+
 fn compose(first: &[u32], second: &[u32]) -> Vec<u32> {
     first.iter().map(|&m| if m == u32::MAX { u32::MAX } else { second[m as usize] }).collect()
 }
@@ -364,8 +395,7 @@ pub fn validate(raw: RawShape, options: &ValidateOptions) -> Result<Validated> {
 type Outcome = (Shape, Vec<u32>, Facts);
 
 fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Vec<String>) -> Result<Outcome> {
-    let (verts, weld_map, merged) = weld(&raw.vertices, o.weld);
-    r.add("welded_vertices", &[], merged, format!("{merged} vertices at equal positions merged"));
+    let (verts, weld_map) = weld_recorded(raw, o, r);
     // Triangulate (after welding, so polygons see their true corners), remembering each triangle's polygon.
     let mut tris: Vec<[u32; 3]> = Vec::with_capacity(raw.polygons.len());
     let mut origin: Vec<u32> = Vec::with_capacity(raw.polygons.len());
@@ -457,18 +487,7 @@ fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut 
             what: format!("no usable triangle is left of {} face(s)", raw.polygons.len()),
         });
     }
-    let mut used = vec![false; verts.len()];
-    faces.iter().flatten().for_each(|&v| used[v as usize] = true);
-    let (vertices, cmap, dropped) = compact(&verts, &used);
-    let dropped_input: Vec<usize> =
-        weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
-    r.add(
-        "unreferenced_vertices",
-        &dropped_input,
-        dropped.len(),
-        format!("{} vertex(es) used by no face dropped", dropped.len()),
-    );
-    let faces: Vec<[u32; 3]> = faces.iter().map(|t| t.map(|v| cmap[v as usize])).collect();
+    let (vertices, cmap, faces) = drop_unreferenced(&verts, &weld_map, &faces, "face", r);
     let mesh = TriangleMesh { vertices, faces };
     let topo = EdgeTopology::new(&mesh.faces);
     let facts = topology::surface_facts(&mesh, &topo);
@@ -505,8 +524,7 @@ fn is_zero_area(v: &[Point], t: &[u32; 3]) -> bool {
 }
 
 fn solid(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Vec<String>) -> Result<Outcome> {
-    let (verts, weld_map, merged) = weld(&raw.vertices, o.weld);
-    r.add("welded_vertices", &[], merged, format!("{merged} vertices at equal positions merged"));
+    let (verts, weld_map) = weld_recorded(raw, o, r);
     let mut tets = Vec::with_capacity(raw.tets.len());
     let (mut repeated, mut zero, mut inverted, mut dups) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut seen: HashMap<[u32; 4], ()> = HashMap::with_capacity_and_hasher(raw.tets.len(), Default::default());
@@ -555,18 +573,7 @@ fn solid(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Ve
     if tets.is_empty() {
         return Err(ShapeError::Empty { what: format!("no usable tetrahedron is left of {}", raw.tets.len()) });
     }
-    let mut used = vec![false; verts.len()];
-    tets.iter().flatten().for_each(|&v| used[v as usize] = true);
-    let (vertices, cmap, dropped) = compact(&verts, &used);
-    let dropped_input: Vec<usize> =
-        weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
-    r.add(
-        "unreferenced_vertices",
-        &dropped_input,
-        dropped.len(),
-        format!("{} vertex(es) used by no tetrahedron dropped", dropped.len()),
-    );
-    let tets: Vec<[u32; 4]> = tets.iter().map(|t| t.map(|v| cmap[v as usize])).collect();
+    let (vertices, cmap, tets) = drop_unreferenced(&verts, &weld_map, &tets, "tetrahedron", r);
     let mesh = TetMesh { vertices, tets };
     let (bfaces, nm_faces) = topology::tet_boundary(&mesh.tets);
     // The boundary surface on its own vertices, so its components and genus count only what it uses.
@@ -630,8 +637,7 @@ fn solid(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Ve
 }
 
 fn curve(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs) -> Result<Outcome> {
-    let (verts, weld_map, merged) = weld(&raw.vertices, o.weld);
-    r.add("welded_vertices", &[], merged, format!("{merged} vertices at equal positions merged"));
+    let (verts, weld_map) = weld_recorded(raw, o, r);
     let mut segs = Vec::with_capacity(raw.segments.len());
     let (mut zero, mut dups) = (Vec::new(), Vec::new());
     let mut seen: HashMap<[u32; 2], ()> = HashMap::default();
@@ -663,18 +669,7 @@ fn curve(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs) -> Result<Outcome
     if segs.is_empty() {
         return Err(ShapeError::Empty { what: format!("no usable segment is left of {}", raw.segments.len()) });
     }
-    let mut used = vec![false; verts.len()];
-    segs.iter().flatten().for_each(|&v| used[v as usize] = true);
-    let (vertices, cmap, dropped) = compact(&verts, &used);
-    let dropped_input: Vec<usize> =
-        weld_map.iter().enumerate().filter(|(_, &w)| cmap[w as usize] == u32::MAX).map(|(i, _)| i).collect();
-    r.add(
-        "unreferenced_vertices",
-        &dropped_input,
-        dropped.len(),
-        format!("{} vertex(es) used by no segment dropped", dropped.len()),
-    );
-    let segments: Vec<[u32; 2]> = segs.iter().map(|s| s.map(|v| cmap[v as usize])).collect();
+    let (vertices, cmap, segments) = drop_unreferenced(&verts, &weld_map, &segs, "segment", r);
     let n = vertices.len();
     let mut degree = vec![0usize; n];
     let mut uf = UnionFind::new(n);
