@@ -3,7 +3,7 @@
 
 use clap::{Args, Parser, Subcommand};
 use kac_core::geometry::validate::Weld;
-use kac_core::operators::{Boundary, CloudParams, Mass, OperatorKind, OperatorOptions};
+use kac_core::operators::{Boundary, CloudParams, Mass, Neighbourhood, OperatorKind, OperatorOptions};
 use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
 use std::path::PathBuf;
 
@@ -53,6 +53,9 @@ pub struct OperatorArgs {
     /// Point clouds: heat-kernel time t (default (2h)², h the mean nearest-neighbour distance).
     #[arg(long)]
     pub time: Option<f64>,
+    /// Point clouds: sum the heat kernel over `radius` (ε-ball, default) or `knn` (k nearest) neighbourhoods.
+    #[arg(long, default_value = "radius", value_parser = ["radius", "knn"])]
+    pub neighbourhood: String,
 }
 
 impl OperatorArgs {
@@ -66,7 +69,12 @@ impl OperatorArgs {
             operator: self.operator,
             mass: self.mass,
             boundary,
-            cloud: CloudParams { k: self.neighbours, t: self.time, radius: None },
+            cloud: CloudParams {
+                k: self.neighbours,
+                neighbourhood: if self.neighbourhood == "knn" { Neighbourhood::Knn } else { Neighbourhood::Radius },
+                t: self.time,
+                radius: None,
+            },
             ..Default::default()
         };
         kac_core::operators::build(shape, &o).map_err(|e| Failure { code: 2, message: e.to_string() })

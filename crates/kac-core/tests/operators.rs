@@ -250,6 +250,27 @@ fn flat_meshes_have_linear_precision_and_cotan_reports_it() {
 }
 
 #[test]
+fn point_cloud_knn_neighbourhoods() {
+    let s = Shape::PointCloud(PointCloud { points: generate::random_sphere_points(4000, 11), normals: None });
+    let o = operators::build(
+        &s,
+        &OperatorOptions {
+            cloud: operators::CloudParams { k: 24, neighbourhood: operators::Neighbourhood::Knn, ..Default::default() },
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(o.parameters["neighbourhood"], "knn");
+    let r = properties::report(&s, &o);
+    assert!(r.symmetric.holds && r.positive_semidefinite.holds && r.maximum_principle.holds);
+    let e = eigs(&o.pair, &EigenOptions { k: 4, ..Default::default() }, None, Control::default()).unwrap();
+    eprintln!("knn: λ = {:?}", e.values);
+    for l in &e.values[1..4] {
+        assert!((l - 2.0).abs() < 0.3, "λ = {l}");
+    }
+}
+
+#[test]
 fn point_cloud_laplacians_on_a_random_sample_of_the_sphere() {
     // Randomly (not evenly) sampled: the local areas must still add up to 4π and λ₂..λ₄ must be near 2.
     let pts = generate::random_sphere_points(6000, 7);

@@ -134,11 +134,24 @@ impl Boundary {
     }
 }
 
+/// Which neighbours the point-cloud heat kernel sums over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Neighbourhood {
+    /// All points within the kernel radius (default; the truncation is corrected exactly).
+    #[default]
+    Radius,
+    /// The symmetrized k-nearest-neighbour graph (uniform sparsity); t defaults so the k-th neighbour sits near
+    /// 3√t, and the truncation correction is that of r = 3√t (exact only where the k-th neighbour is there).
+    Knn,
+}
+
 /// Parameters of the point-cloud and robust operators.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CloudParams {
-    /// Neighbours per point for spacing, normals and local areas (default 16).
+    /// Neighbours per point for spacing, normals and local areas, and for `Knn` neighbourhoods (default 16).
     pub k: usize,
+    pub neighbourhood: Neighbourhood,
     /// Heat-kernel time t; default (2h)², h the mean distance to the nearest neighbour.
     pub t: Option<f64>,
     /// Kernel support radius; default 3√t.
@@ -147,7 +160,7 @@ pub struct CloudParams {
 
 impl Default for CloudParams {
     fn default() -> Self {
-        CloudParams { k: 16, t: None, radius: None }
+        CloudParams { k: 16, neighbourhood: Neighbourhood::Radius, t: None, radius: None }
     }
 }
 

@@ -7,10 +7,13 @@
 //! `L_ij = −A_i A_j e^{−|x_i − x_j|²/4t} / (4π t² m)` for |x_i − x_j| < r, `L_ii = −Σ_j L_ij`, `M = diag(A_i)`,
 //! where m = 1 − e^{−a}(1 + a), a = r²/4t, corrects for the kernel's truncation at r (the second moment of the
 //! truncated Gaussian), so that (M⁻¹L f)_i → −Δf(x_i) as t → 0. Defaults: t = (2h)², h the mean distance to the
-//! nearest neighbour; r = 3√t. Sign: L positive semidefinite. Units: L dimensionless·area, M area.
+//! nearest neighbour; r = 3√t. With `Knn` neighbourhoods the sum runs over the symmetrized k-nearest-neighbour
+//! graph instead, t defaults to (d_k/3)² (d_k the mean distance to the k-th neighbour, so the graph reaches about
+//! 3√t) and m is that of r = 3√t, an approximation where the k-th neighbour is nearer or farther. Sign: L positive semidefinite. Units: L
+//! dimensionless·area, M area.
 
 use super::sparse::{assemble, SparsePair};
-use super::{CloudParams, OperatorError};
+use super::{CloudParams, Neighbourhood, OperatorError};
 use crate::geometry::{vec3, Point};
 use kiddo::{KdTree, SquaredEuclidean};
 use rayon::prelude::*;
@@ -200,6 +203,12 @@ pub fn belkin_niyogi_pair(
         Some(t) => {
             return Err(OperatorError::InvalidParameter { name: "t", message: format!("{t} is not a positive time") })
         }
+        // k-NN neighbourhoods: the k-th neighbour at about 3√t on average, as the radius mode's default.
+        None if params.neighbourhood == Neighbourhood::Knn => {
+            let hk = (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[nb.k - 1] as usize], points[i]))).sum::<f64>()
+                / n as f64;
+            hk * hk / 9.0
+        }
         None => 4.0 * h * h,
     };
     let r = match params.radius {
@@ -223,18 +232,37 @@ pub fn belkin_niyogi_pair(
     let a = r * r / (4.0 * t);
     let moment = 1.0 - (-a).exp() * (1.0 + a);
     let scale = 1.0 / (4.0 * std::f64::consts::PI * t * t * moment);
-    let off: Vec<(u32, u32, [f64; 2])> = (0..n)
-        .into_par_iter()
-        .flat_map_iter(|i| {
-            let found = nb.tree.within_unsorted::<SquaredEuclidean>(&points[i], r * r);
-            let areas = &areas;
-            found.into_iter().filter(move |f| (f.item as usize) > i).map(move |f| {
-                let j = f.item as usize;
-                let w = areas[i] * areas[j] * (-f.distance / (4.0 * t)).exp() * scale;
-                (i as u32, j as u32, [-w, 0.0])
+    let weight = |i: usize, j: usize, d2: f64| areas[i] * areas[j] * (-d2 / (4.0 * t)).exp() * scale;
+    let off: Vec<(u32, u32, [f64; 2])> = match params.neighbourhood {
+        Neighbourhood::Radius => (0..n)
+            .into_par_iter()
+            .flat_map_iter(|i| {
+                let found = nb.tree.within_unsorted::<SquaredEuclidean>(&points[i], r * r);
+                found.into_iter().filter(move |f| (f.item as usize) > i).map(move |f| {
+                    let j = f.item as usize;
+                    (i as u32, j as u32, [-weight(i, j, f.distance), 0.0])
+                })
             })
-        })
-        .collect();
+            .collect(),
+        Neighbourhood::Knn => {
+            let mut pairs: Vec<(u32, u32)> = (0..n)
+                .flat_map(|i| nb.of(i).iter().map(move |&j| (i.min(j as usize) as u32, i.max(j as usize) as u32)))
+                .filter(|p| p.0 != p.1)
+                .collect();
+            pairs.sort_unstable();
+            pairs.dedup();
+            pairs
+                .into_par_iter()
+                .map(|(i, j)| {
+                    let d2 = vec3::dot(
+                        vec3::sub(points[i as usize], points[j as usize]),
+                        vec3::sub(points[i as usize], points[j as usize]),
+                    );
+                    (i, j, [-weight(i as usize, j as usize, d2), 0.0])
+                })
+                .collect()
+        }
+    };
     let mut diag = vec![0.0; n];
     for &(i, j, [w, _]) in &off {
         diag[i as usize] -= w;
@@ -243,6 +271,7 @@ pub fn belkin_niyogi_pair(
     let (pattern, [stiffness, mass]) = assemble(n, &off, [&diag, &areas]);
     let mut used = serde_json::Map::new();
     used.insert("k".into(), nb.k.into());
+    used.insert("neighbourhood".into(), serde_json::to_value(params.neighbourhood).unwrap_or_default());
     used.insert("spacing_h".into(), h.into());
     used.insert("t".into(), t.into());
     used.insert("radius".into(), r.into());
