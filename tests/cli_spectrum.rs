@@ -93,4 +93,9 @@ fn operator_report_and_matrix_market() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("does not apply"));
     let out = kac().args(["spectrum", "-k", "0"]).arg(&sq).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
+    // Band mode: Dirichlet eigenvalues of the unit square in [10, 60] are 2π² and 5π² (×2).
+    let out = kac().args(["spectrum", "--boundary", "dirichlet", "--band", "10,60"]).arg(&sq).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["k"], 3, "{v}");
 }

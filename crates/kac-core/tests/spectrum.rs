@@ -201,3 +201,24 @@ fn every_operator_solves() {
         assert!(s.residuals.iter().all(|r| *r < 1e-6), "{op:?}: {:?}", s.residuals);
     }
 }
+
+#[test]
+fn band_mode_returns_every_eigenvalue_in_the_interval() {
+    // Unit square, Dirichlet: π²(m² + n²) in [40, 110] are 5π² (×2), 8π², 10π² (×2), i.e. 49.3, 79.0, 98.7.
+    let sq = mesh(generate::unit_square(40));
+    let o = operators::build(&sq, &opts(Mass::Consistent, Boundary::Dirichlet)).unwrap();
+    let s = kac_core::spectrum::eigs_band(
+        &o.pair,
+        40.0,
+        110.0,
+        &EigenOptions { method: Method::Sparse, ..Default::default() },
+        Control::default(),
+    )
+    .unwrap();
+    let pi2 = std::f64::consts::PI.powi(2);
+    assert_close(&s.values, &[5.0, 5.0, 8.0, 10.0, 10.0].map(|x| x * pi2), 1e-2, "band");
+    assert_eq!(s.vectors.ncols(), 5);
+    // The same values as the first k of an ordinary solve.
+    let all = solve(&sq, opts(Mass::Consistent, Boundary::Dirichlet), 6, Method::Sparse);
+    assert_close(&s.values, &all.values[1..6], 1e-10, "band vs k smallest");
+}

@@ -217,3 +217,38 @@ fn finish(pair: &SparsePair, s: &mut Spectrum) {
         s.residuals[j] = r / (lam.abs().max(sigma_floor) * mnorm);
     }
 }
+
+/// All eigenpairs with λ in [a, b]. The shift stays below the spectrum (K must be positive definite), so this
+/// asks for the smallest k pairs with k doubling (from 16) until the largest found exceeds b or k reaches the
+/// solver's limit; the symbolic analysis is done once and reused. Efficient for bands near the bottom of the
+/// spectrum, which is where shape analysis looks.
+pub fn eigs_band(
+    pair: &SparsePair,
+    a: f64,
+    b: f64,
+    options: &EigenOptions,
+    control: Control<'_>,
+) -> Result<Spectrum, EigenError> {
+    if !(a <= b) || !a.is_finite() || !b.is_finite() {
+        return Err(EigenError::InvalidOption { name: "band", message: format!("[{a}, {b}] is not an interval") });
+    }
+    let n = pair.n();
+    let symbolic = factor::Symbolic::analyze(&pair.pattern).map_err(|message| EigenError::Factorization { message })?;
+    let mut k = 16usize.min(n.saturating_sub(1)).max(1);
+    loop {
+        let s = eigs(pair, &EigenOptions { k, ..options.clone() }, Some(&symbolic), control)?;
+        let top = s.values.last().copied().unwrap_or(f64::INFINITY);
+        let limit = if s.stats.method == "dense" { n } else { n - 1 };
+        if top > b || k >= limit {
+            let keep: Vec<usize> = (0..s.values.len()).filter(|&j| s.values[j] >= a && s.values[j] <= b).collect();
+            let vectors = Mat::from_fn(n, keep.len(), |i, j| s.vectors[(i, keep[j])]);
+            return Ok(Spectrum {
+                values: keep.iter().map(|&j| s.values[j]).collect(),
+                residuals: keep.iter().map(|&j| s.residuals[j]).collect(),
+                vectors,
+                stats: s.stats,
+            });
+        }
+        k = (2 * k).min(limit);
+    }
+}
