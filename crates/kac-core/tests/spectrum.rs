@@ -222,3 +222,37 @@ fn band_mode_returns_every_eigenvalue_in_the_interval() {
     let all = solve(&sq, opts(Mass::Consistent, Boundary::Dirichlet), 6, Method::Sparse);
     assert_close(&s.values, &all.values[1..6], 1e-10, "band vs k smallest");
 }
+
+#[test]
+fn flat_torus_has_fourfold_clusters() {
+    // The flat square torus [0,1)² (intrinsic: built from edge lengths, it has no embedding in R³):
+    // λ = 4π²(m² + n²): 0, then 4π² with multiplicity 4, then 8π² with multiplicity 4.
+    use kac_core::operators::intrinsic_delaunay::IntrinsicTriangulation;
+    let n = 40usize;
+    let h = 1.0 / n as f64;
+    let idx = |i: usize, j: usize| ((j % n) * n + i % n) as u32;
+    let mut faces = Vec::new();
+    let mut lengths = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            // Half-edge k of a face runs from corner k to k+1: legs h, diagonal h√2.
+            faces.push([a, b, c]);
+            lengths.extend([h, h, h * 2f64.sqrt()]);
+            faces.push([a, c, d]);
+            lengths.extend([h * 2f64.sqrt(), h, h]);
+        }
+    }
+    let t = IntrinsicTriangulation::new(faces, lengths).unwrap();
+    assert!(t.twin.iter().all(|&x| x != u32::MAX), "closed: every edge glued");
+    let pair = t.pair(n * n, Mass::Consistent).unwrap();
+    let s = eigs(&pair, &EigenOptions { k: 9, method: Method::Sparse, ..Default::default() }, None, Control::default())
+        .unwrap();
+    let c = 4.0 * std::f64::consts::PI.powi(2);
+    assert!(s.values[0].abs() < 1e-8);
+    assert_close(&s.values[1..5], &[c; 4], 4e-3, "4π² cluster");
+    // The uniform diagonals distinguish the (1, 1) and (1, −1) modes: the 8π² cluster splits 2 + 2 at O(h²).
+    assert_close(&s.values[5..9], &[2.0 * c; 4], 1.5e-2, "8π² cluster");
+    // Members of a cluster agree far better than the discretization error: the cluster is complete.
+    assert!((s.values[4] - s.values[1]).abs() < 1e-8 * c, "{:?}", &s.values[1..5]);
+}
