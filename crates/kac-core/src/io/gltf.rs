@@ -193,7 +193,7 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
         if let Some(mesh) = node.mesh() {
             instances += 1;
             for prim in mesh.primitives() {
-                read_primitive(&doc, &buffers, &mesh, &prim, &global, &mut raw, &mut polygons, options)?;
+                read_primitive(&buffers, &mesh, &prim, &global, &mut raw, &mut polygons, options)?;
             }
         }
         for child in node.children() {
@@ -249,9 +249,7 @@ fn accessor_bytes<'b>(
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 fn read_primitive(
-    _doc: &gltf::Gltf,
     buffers: &[Vec<u8>],
     mesh: &gltf::Mesh<'_>,
     prim: &gltf::Primitive<'_>,

@@ -275,6 +275,15 @@ fn push_vertex(out: &mut Output, p: [f64; 3], location: impl FnOnce() -> Locatio
     Ok(())
 }
 
+/// A list value as a vertex index; a non-integral or out-of-range value becomes one that fails the range check.
+fn as_index(v: f64) -> i64 {
+    if v.fract() == 0.0 && v.abs() < 9.0e15 {
+        v as i64
+    } else {
+        i64::MIN
+    }
+}
+
 fn push_indices(
     out: &mut Output,
     r: Role,
@@ -305,7 +314,7 @@ fn push_indices(
     }
     let mut buf = [0u32; 4];
     for (k, &v) in idx.iter().enumerate() {
-        let vi = if v.fract() == 0.0 && v.abs() < 9.0e15 { v as i64 } else { i64::MIN };
+        let vi = as_index(v);
         let checked = text::check_index(vi, out.nv, element, element_index, &location)?;
         match r {
             Role::Face => out.polygons.indices.push(checked),
@@ -537,7 +546,7 @@ fn read_binary(body: &[u8], base: usize, big: bool, elements: &[ElementDecl], ou
                     })?;
                     for k in 0..n {
                         let v = item.decode(&data[k * size..], big);
-                        let vi = if v.fract() == 0.0 && v.abs() < 9.0e15 { v as i64 } else { i64::MIN };
+                        let vi = as_index(v);
                         out.polygons
                             .indices
                             .push(text::check_index(vi, out.nv, Element::Face, f, || Location::byte(start))?);

@@ -139,13 +139,12 @@ impl Ctx<'_> {
             for _attempt in 0..3 {
                 let mut x = Mat::<f64>::from_fn(n, 1, |_, _| rng.next());
                 let vv = if v.ncols() > 0 { Some(v) } else { None };
-                for _ in 0..2 {
-                    if let Some(vv) = vv {
-                        self.orthogonalize(vv, x.as_mut());
-                    }
-                    if j > 0 {
-                        self.orthogonalize(q.as_ref().subcols(0, j), x.as_mut());
-                    }
+                // `orthogonalize` already reorthogonalizes as needed (DGKS); Q ⊥ V, so one call against each.
+                if let Some(vv) = vv {
+                    self.orthogonalize(vv, x.as_mut());
+                }
+                if j > 0 {
+                    self.orthogonalize(q.as_ref().subcols(0, j), x.as_mut());
                 }
                 let mut mx = Mat::<f64>::zeros(n, 1);
                 self.apply_m(x.as_ref(), mx.as_mut());
@@ -211,8 +210,9 @@ pub fn eigs_block_lanczos(
     };
     let numeric_s = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let mean_mass = pair.mass_diagonal().iter().sum::<f64>() / n as f64;
-    let ctx = Ctx { pair, mdiag: pair.mass_is_diagonal.then(|| pair.mass_diagonal()), mean_mass };
+    let mdiag = pair.mass_diagonal();
+    let mean_mass = mdiag.iter().sum::<f64>() / n as f64;
+    let ctx = Ctx { pair, mdiag: pair.mass_is_diagonal.then_some(mdiag), mean_mass };
     let mut rng = Rng(o.seed);
 
     let mut v = Mat::<f64>::zeros(n, msize);
