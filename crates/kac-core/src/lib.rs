@@ -15,10 +15,12 @@
 // `!(x > 0.0)` is deliberate throughout: it is also true for NaN, which must fail every positivity check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod descriptors;
 pub mod error;
 pub mod geometry;
 pub mod io;
 pub mod operators;
+pub mod pde;
 pub mod spectrum;
 
 pub use error::{Element, Location, ShapeError};

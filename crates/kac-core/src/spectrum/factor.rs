@@ -66,6 +66,30 @@ impl Cholesky {
             MemStack::new(&mut mem),
         );
     }
+    /// log det K = 2 Σ log L_jj from the factor's diagonal (the ordering does not change the determinant).
+    pub fn log_det(&self) -> f64 {
+        use faer::sparse::linalg::cholesky::{supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
+        match self.symbolic.inner.raw() {
+            SymbolicCholeskyRaw::Simplicial(s) => {
+                let (cp, ri) = (s.col_ptr(), s.row_idx());
+                (0..s.ncols())
+                    .map(|j| {
+                        debug_assert_eq!(ri[cp[j]], j, "the diagonal leads each column of a simplicial factor");
+                        2.0 * self.values[cp[j]].ln()
+                    })
+                    .sum()
+            }
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                let f = SupernodalLltRef::<'_, usize, f64>::new(s, &self.values);
+                (0..s.n_supernodes())
+                    .map(|sn| {
+                        let block = f.supernode(sn).val();
+                        (0..block.ncols()).map(|j| 2.0 * block[(j, j)].ln()).sum::<f64>()
+                    })
+                    .sum()
+            }
+        }
+    }
     /// Entries of the factor (a measure of fill-in).
     pub fn factor_nnz(&self) -> usize {
         self.values.len()

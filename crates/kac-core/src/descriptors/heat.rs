@@ -1,0 +1,115 @@
+//! The heat kernel read from the spectrum: k_t(x, y) = Σ_i e^{−λ_i t} φ_i(x) φ_i(y) (φ_i M-orthonormal),
+//! the heat trace Z(t) = Σ_i e^{−λ_i t}, spectral heat diffusion of a function with a bound on what the
+//! truncation to k eigenpairs leaves out, and the heat content of a Dirichlet problem.
+//!
+//! Truncation: write u₀ = Σ_{i≤k} c_i φ_i + r with r M-orthogonal to the computed eigenvectors. Every eigenvalue
+//! not computed is at least λ_k (the largest computed), so the part of e^{−tL}u₀ the sum leaves out has M-norm at
+//! most e^{−λ_k t} ‖r‖_M. That bound is returned with every diffusion.
+
+use super::{check_times, Basis, DescriptorError};
+use crate::operators::sparse::{matvec, SparsePair};
+use faer::Mat;
+use serde::Serialize;
+
+/// Z(t) = Σ_i e^{−λ_i t} over the computed eigenvalues, for each t. It is the trace of the heat kernel, so on a
+/// closed surface of area A and Euler characteristic χ it approaches A/(4πt) + χ/6 as t → 0, provided enough
+/// eigenvalues are summed that e^{−λ_k t} is negligible.
+pub fn heat_trace(values: &[f64], times: &[f64]) -> Vec<f64> {
+    times.iter().map(|&t| values.iter().map(|&l| (-l * t).exp()).sum()).collect()
+}
+
+/// The part of the heat trace the truncation can miss is at most (n − k) e^{−λ_k t}: reported with the trace.
+pub fn heat_trace_tail_bound(values: &[f64], n: usize, t: f64) -> f64 {
+    let k = values.len();
+    let lk = values.last().copied().unwrap_or(0.0);
+    (n.saturating_sub(k)) as f64 * (-lk * t).exp()
+}
+
+/// Rows of the heat kernel: column j is k_t(sources[j], ·) at every vertex (a density with respect to the
+/// area: Σ_y M-integral of a row is 1 up to truncation on a closed surface).
+pub fn heat_kernel_rows(basis: &Basis<'_>, sources: &[usize], t: f64) -> Result<Mat<f64>, DescriptorError> {
+    check_times("t", &[t])?;
+    let n = basis.n();
+    if let Some(s) = sources.iter().find(|&&s| s >= n) {
+        return Err(DescriptorError::param("sources", format!("vertex {s} does not exist ({n} vertices)")));
+    }
+    let phi = basis.vectors;
+    // W[i, j] = e^{−λ_i t} φ_i(s_j): then rows = Φ W.
+    let w = Mat::from_fn(basis.k(), sources.len(), |i, j| (-basis.values[i] * t).exp() * phi[(sources[j], i)]);
+    Ok(phi * w.as_ref())
+}
+
+/// Heat diffusion of u₀ by the spectrum.
+#[derive(Debug, Clone, Serialize)]
+pub struct SpectralDiffusion {
+    pub times: Vec<f64>,
+    /// n × T: u(·, t_j) in column j.
+    #[serde(skip)]
+    pub values: Mat<f64>,
+    /// ‖r‖_M, the part of u₀ outside the computed eigenvectors.
+    pub residual_norm: f64,
+    /// ‖u₀‖_M.
+    pub initial_norm: f64,
+    /// For each time, e^{−λ_k t} ‖r‖_M: the M-norm of what the truncated sum can miss.
+    pub truncation_bound: Vec<f64>,
+    pub eigenpairs: usize,
+}
+
+/// u(t) = Σ_i e^{−λ_i t} ⟨u₀, φ_i⟩_M φ_i: the solution of ∂u/∂t = Δu (M u̇ = −L u) from u₀, for each time.
+pub fn diffuse_spectral(
+    basis: &Basis<'_>,
+    pair: &SparsePair,
+    u0: &[f64],
+    times: &[f64],
+) -> Result<SpectralDiffusion, DescriptorError> {
+    check_times("times", times)?;
+    let n = basis.n();
+    if u0.len() != n || pair.n() != n {
+        return Err(DescriptorError::param("u0", format!("{} values for {n} vertices", u0.len())));
+    }
+    let mut mu = vec![0.0; n];
+    matvec(&pair.pattern, &pair.mass, u0, &mut mu);
+    let phi = basis.vectors;
+    let c: Vec<f64> = (0..basis.k()).map(|i| (0..n).map(|x| phi[(x, i)] * mu[x]).sum()).collect();
+    let norm2: f64 = u0.iter().zip(&mu).map(|(a, b)| a * b).sum();
+    let captured: f64 = c.iter().map(|c| c * c).sum();
+    let residual = (norm2 - captured).max(0.0).sqrt();
+    let w = Mat::from_fn(basis.k(), times.len(), |i, j| (-basis.values[i] * times[j]).exp() * c[i]);
+    let lk = basis.max_value();
+    Ok(SpectralDiffusion {
+        times: times.to_vec(),
+        values: phi * w.as_ref(),
+        residual_norm: residual,
+        initial_norm: norm2.max(0.0).sqrt(),
+        truncation_bound: times.iter().map(|t| (-lk * t).exp() * residual).collect(),
+        eigenpairs: basis.k(),
+    })
+}
+
+/// Heat content Q(t) = ∫ u(t) of the Dirichlet problem with u₀ = 1 (heat leaving through a boundary held at
+/// zero): Q(t) = Σ_i e^{−λ_i t} ⟨1, φ_i⟩_M², with the truncation bound e^{−λ_k t} ‖r‖²_M (r the part of 1
+/// outside the basis). `pair` is the Dirichlet-condensed operator the basis belongs to.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeatContent {
+    pub times: Vec<f64>,
+    pub content: Vec<f64>,
+    /// Q(0) = ∫ 1 over the kept (interior) vertices' mass.
+    pub total_mass: f64,
+    pub truncation_bound: Vec<f64>,
+}
+
+pub fn heat_content(basis: &Basis<'_>, pair: &SparsePair, times: &[f64]) -> Result<HeatContent, DescriptorError> {
+    let ones = vec![1.0; basis.n()];
+    let d = diffuse_spectral(basis, pair, &ones, times)?;
+    let mut m1 = vec![0.0; basis.n()];
+    matvec(&pair.pattern, &pair.mass, &ones, &mut m1);
+    let phi = basis.vectors;
+    let c: Vec<f64> = (0..basis.k()).map(|i| (0..basis.n()).map(|x| phi[(x, i)] * m1[x]).sum()).collect();
+    let lk = basis.max_value();
+    Ok(HeatContent {
+        times: times.to_vec(),
+        content: times.iter().map(|&t| c.iter().zip(basis.values).map(|(c, l)| (-l * t).exp() * c * c).sum()).collect(),
+        total_mass: m1.iter().sum(),
+        truncation_bound: times.iter().map(|t| (-lk * t).exp() * d.residual_norm * d.residual_norm).collect(),
+    })
+}
