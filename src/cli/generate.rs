@@ -17,6 +17,7 @@ pub struct GenerateCmd {
     /// Resolution (cells, rings or vertices, by shape).
     #[arg(long, default_value_t = 16)]
     pub n: usize,
+    /// Output file; the format follows the extension (.off, .obj, .ply, .json).
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -35,9 +36,13 @@ pub fn run(a: GenerateCmd) -> Result<(), Failure> {
         "petersen" => Shape::Graph(generate::petersen_graph()),
         other => return Err(Failure { code: 2, message: format!("unknown shape '{other}'") }),
     };
-    let bytes = match &shape {
-        Shape::TriangleMesh(m) => write::off(m).into_bytes(),
-        s => serde_json::to_vec(&write::json(s)).map_err(|e| Failure { code: 1, message: e.to_string() })?,
+    // The format follows the extension (.off, .obj, .ply, .json); OFF for meshes and kac JSON otherwise by default.
+    let ext = a.out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let bytes = match (&shape, ext.as_str()) {
+        (s, "obj") => write::obj(s).into_bytes(),
+        (s, "ply") => write::ply(s, true, None),
+        (Shape::TriangleMesh(m), "off" | "") => write::off(m).into_bytes(),
+        (s, _) => serde_json::to_vec(&write::json(s)).map_err(|e| Failure { code: 1, message: e.to_string() })?,
     };
     std::fs::write(&a.out, bytes)
         .map_err(|e| Failure { code: 1, message: format!("cannot write {}: {e}", a.out.display()) })?;

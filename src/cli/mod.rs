@@ -1,12 +1,14 @@
 //! Command-line parsing and the subcommands. Exit codes: 0 success, 2 unreadable input or bad arguments,
 //! 1 any other failure.
 
+use crate::analysis::{BoundarySpec, OperatorSpec};
 use clap::{Args, Parser, Subcommand};
 use kac_core::geometry::validate::Weld;
-use kac_core::operators::{Boundary, CloudParams, Mass, Neighbourhood, OperatorKind, OperatorOptions};
+use kac_core::operators::{Mass, Neighbourhood, OperatorKind};
 use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
 use std::path::PathBuf;
 
+mod analyses;
 mod generate;
 mod inspect;
 mod operator;
@@ -29,6 +31,26 @@ enum Command {
     Spectrum(spectrum::SpectrumCmd),
     /// Write a shape with a known spectrum (icosphere, square, disk, torus, cube-tets, graphs).
     Generate(generate::GenerateCmd),
+    /// Heat kernel signature per vertex (or its scale-invariant form, --scale-invariant).
+    Hks(analyses::HksCmd),
+    /// Wave kernel signature per vertex.
+    Wks(analyses::WksCmd),
+    /// Shape-DNA (normalized eigenvalues) with Weyl's-law estimates; lapy .ev output.
+    ShapeDna(analyses::ShapeDnaCmd),
+    /// Heat trace, and heat kernel rows from source vertices (spectral or backward Euler).
+    Heat(analyses::HeatCmd),
+    /// Geodesic distance from source vertices by the heat method (triangle meshes).
+    Geodesic(analyses::GeodesicCmd),
+    /// Number of spanning trees of the shape's edge graph (Kirchhoff's theorem).
+    Trees(analyses::TreesCmd),
+    /// Laplacian eigenmap or GPS embedding, with the Fiedler vector and bisection.
+    Embed(analyses::EmbedCmd),
+    /// Smooth vertex coordinates or a function: (M + αL) u = M ū.
+    Smooth(analyses::SmoothCmd),
+    /// Harmonic interpolation of values on some vertices, or semi-supervised labels.
+    Interpolate(analyses::InterpolateCmd),
+    /// Distance between two shapes (or .ev files) by shape-DNA.
+    Compare(analyses::CompareCmd),
 }
 
 /// Options choosing the operator, shared by every subcommand that builds one.
@@ -44,7 +66,7 @@ pub struct OperatorArgs {
     /// neumann (default) or dirichlet (the shape's boundary).
     #[arg(long, default_value = "neumann", value_parser = ["neumann", "dirichlet"])]
     pub boundary: String,
-    /// Dirichlet on these vertices instead (comma-separated indices of the validated shape).
+    /// Dirichlet on these vertices instead (comma-separated indices in the input file's numbering).
     #[arg(long, value_delimiter = ',')]
     pub dirichlet_vertices: Option<Vec<u32>>,
     /// Point clouds: neighbours per point.
@@ -59,25 +81,26 @@ pub struct OperatorArgs {
 }
 
 impl OperatorArgs {
-    pub fn build(&self, shape: &kac_core::Shape) -> Result<kac_core::operators::Operator, Failure> {
-        let boundary = match (&self.dirichlet_vertices, self.boundary.as_str()) {
-            (Some(v), _) => Boundary::DirichletVertices(v.clone()),
-            (None, "dirichlet") => Boundary::Dirichlet,
-            _ => Boundary::Neumann,
-        };
-        let o = OperatorOptions {
+    /// The operator request these flags describe.
+    pub fn spec(&self) -> OperatorSpec {
+        OperatorSpec {
             operator: self.operator,
             mass: self.mass,
-            boundary,
-            cloud: CloudParams {
-                k: self.neighbours,
-                neighbourhood: if self.neighbourhood == "knn" { Neighbourhood::Knn } else { Neighbourhood::Radius },
-                t: self.time,
-                radius: None,
-            },
-            ..Default::default()
-        };
-        kac_core::operators::build(shape, &o).map_err(|e| Failure { code: 2, message: e.to_string() })
+            boundary: if self.boundary == "dirichlet" { BoundarySpec::Dirichlet } else { BoundarySpec::Neumann },
+            dirichlet_vertices: self.dirichlet_vertices.clone(),
+            neighbours: self.neighbours,
+            time: self.time,
+            neighbourhood: if self.neighbourhood == "knn" { Neighbourhood::Knn } else { Neighbourhood::Radius },
+        }
+    }
+    pub fn build(&self, v: &Validated) -> Result<kac_core::operators::Operator, Failure> {
+        crate::analysis::build_operator(v, &self.spec()).map_err(Failure::from)
+    }
+}
+
+impl From<crate::analysis::AnalysisError> for Failure {
+    fn from(e: crate::analysis::AnalysisError) -> Self {
+        Failure { code: if e.client { 2 } else { 1 }, message: e.message }
     }
 }
 
@@ -164,6 +187,16 @@ pub fn run() -> i32 {
         Command::Operator(a) => operator::run(a),
         Command::Spectrum(a) => spectrum::run(a),
         Command::Generate(a) => generate::run(a),
+        Command::Hks(a) => analyses::hks(a),
+        Command::Wks(a) => analyses::wks(a),
+        Command::ShapeDna(a) => analyses::shape_dna(a),
+        Command::Heat(a) => analyses::heat(a),
+        Command::Geodesic(a) => analyses::geodesic(a),
+        Command::Trees(a) => analyses::trees(a),
+        Command::Embed(a) => analyses::embed(a),
+        Command::Smooth(a) => analyses::smooth(a),
+        Command::Interpolate(a) => analyses::interpolate(a),
+        Command::Compare(a) => analyses::compare(a),
     };
     match result {
         Ok(()) => 0,

@@ -25,7 +25,7 @@ pub struct OperatorCmd {
 pub fn run(a: OperatorCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
     let t = Instant::now();
-    let op = a.op.build(&v.shape)?;
+    let op = a.op.build(&v)?;
     let assembly_s = t.elapsed().as_secs_f64();
     let mut out = json!({
         "shape_id": v.id.hex(),

@@ -46,7 +46,7 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
     let read_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let op = a.op.build(&v.shape)?;
+    let op = a.op.build(&v)?;
     let assembly_s = t1.elapsed().as_secs_f64();
     let method = match a.method.as_str() {
         "dense" => Method::Dense,

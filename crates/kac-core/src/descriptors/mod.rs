@@ -132,7 +132,7 @@ pub fn lin_space(a: f64, b: f64, count: usize) -> Vec<f64> {
     (0..count).map(|i| a + (b - a) * i as f64 / (count - 1) as f64).collect()
 }
 
-pub(crate) fn check_times(name: &'static str, times: &[f64]) -> Result<(), DescriptorError> {
+pub fn check_times(name: &'static str, times: &[f64]) -> Result<(), DescriptorError> {
     if times.is_empty() {
         return Err(DescriptorError::param(name, "no values given"));
     }

@@ -1,0 +1,795 @@
+//! Analyses: what a client can ask of a stored shape, as one serde type shared by the CLI subcommands and the
+//! service's job API. Each analysis names its operator, solver and descriptor parameters; [`run`] computes it
+//! from a validated shape (reusing cached eigenpairs through [`SpectrumCache`]) and returns a JSON summary that
+//! echoes every parameter plus the per-vertex arrays, kept apart so that they can be written as `.npy` or shown
+//! as colours.
+//!
+//! Vertex indices in requests and rows of per-vertex arrays follow the numbering of the uploaded file (welded
+//! input vertices share their value; vertices validation dropped get NaN).
+
+use kac_core::descriptors::graph::{components, eigenmap, fiedler, spanning_trees};
+use kac_core::descriptors::heat::{diffuse_spectral, heat_kernel_rows, heat_trace, heat_trace_tail_bound};
+use kac_core::descriptors::shape_dna::{self, Measures, ShapeDnaOptions};
+use kac_core::descriptors::signatures::{self, HksOptions, SiHksOptions, WksOptions};
+use kac_core::descriptors::weyl::weyl_estimate;
+use kac_core::descriptors::{Basis, DescriptorError};
+use kac_core::operators::{self, Boundary, CloudParams, Mass, Neighbourhood, Operator, OperatorKind, OperatorOptions};
+use kac_core::pde::{self, geodesic};
+use kac_core::spectrum::{self, Control, EigenOptions, Spectrum};
+use kac_core::{Shape, Validated};
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+use std::sync::Arc;
+
+/// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
+pub const ALGORITHM_VERSION: u32 = 1;
+
+/// Which operator to build (see `kac_core::operators`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OperatorSpec {
+    /// Default: by shape kind.
+    pub operator: Option<OperatorKind>,
+    /// Default: consistent for FEM operators, lumped for robust and point-cloud.
+    pub mass: Option<Mass>,
+    pub boundary: BoundarySpec,
+    /// Dirichlet on these vertices (input numbering) instead of the shape's boundary.
+    pub dirichlet_vertices: Option<Vec<u32>>,
+    /// Point clouds: neighbours per point.
+    pub neighbours: usize,
+    /// Point clouds: heat-kernel time.
+    pub time: Option<f64>,
+    pub neighbourhood: Neighbourhood,
+}
+
+impl Default for OperatorSpec {
+    fn default() -> Self {
+        OperatorSpec {
+            operator: None,
+            mass: None,
+            boundary: BoundarySpec::Neumann,
+            dirichlet_vertices: None,
+            neighbours: 16,
+            time: None,
+            neighbourhood: Neighbourhood::Radius,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum BoundarySpec {
+    #[default]
+    Neumann,
+    Dirichlet,
+}
+
+/// Eigensolver parameters shared by every spectral analysis.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SolverSpec {
+    /// Relative residual tolerance (default 1e-10).
+    pub tol: f64,
+}
+
+impl Default for SolverSpec {
+    fn default() -> Self {
+        SolverSpec { tol: 1e-10 }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum HeatMethod {
+    /// Σ e^{−λt} over the computed eigenpairs (with a truncation bound).
+    #[default]
+    Spectral,
+    /// Backward Euler, (M + τL) u_{j+1} = M u_j, no eigenpairs.
+    Implicit,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum EmbedScaling {
+    /// Laplacian eigenmap: the eigenvectors themselves.
+    #[default]
+    None,
+    /// Global point signature: φ/√λ.
+    Gps,
+}
+
+/// One analysis of a shape. JSON: `{"analysis": "hks", "k": 100, "count": 50, ...}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "analysis", rename_all = "kebab-case")]
+pub enum Analysis {
+    /// The k smallest eigenpairs.
+    Spectrum {
+        #[serde(default = "k_default")]
+        k: usize,
+        /// Return the eigenvectors as a per-vertex array.
+        #[serde(default)]
+        eigenvectors: bool,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    /// Heat kernel signature (or its scale-invariant form with `scale_invariant`).
+    Hks {
+        #[serde(default = "k_signature")]
+        k: usize,
+        #[serde(default)]
+        options: HksOptions,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    SiHks {
+        #[serde(default = "k_signature")]
+        k: usize,
+        #[serde(default)]
+        options: SiHksOptions,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    Wks {
+        #[serde(default = "k_signature")]
+        k: usize,
+        #[serde(default)]
+        options: WksOptions,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    Gps {
+        #[serde(default = "k_default")]
+        k: usize,
+        dimensions: Option<usize>,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    /// Shape-DNA and Weyl's-law estimates.
+    ShapeDna {
+        #[serde(default)]
+        options: ShapeDnaOptions,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    /// Heat trace, and heat kernel rows / diffusion from source vertices.
+    Heat {
+        #[serde(default = "k_signature")]
+        k: usize,
+        /// Default: the HKS time grid with 10 times.
+        times: Option<Vec<f64>>,
+        #[serde(default)]
+        sources: Vec<u32>,
+        #[serde(default)]
+        method: HeatMethod,
+        /// Backward-Euler steps per time (implicit method).
+        #[serde(default = "steps_default")]
+        steps: usize,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    /// Geodesic distance from source vertices by the heat method (triangle meshes).
+    Geodesic {
+        sources: Vec<u32>,
+        #[serde(default)]
+        options: geodesic::HeatMethodOptions,
+    },
+    /// Spanning trees of the shape's edge graph (Kirchhoff).
+    Trees {},
+    /// Laplacian eigenmap / GPS coordinates, with the Fiedler vector and bisection.
+    Embed {
+        #[serde(default = "dimensions_default")]
+        dimensions: usize,
+        #[serde(default)]
+        scaling: EmbedScaling,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    /// (M + αL) u = M ū for a per-vertex function ū (default: the vertex coordinates, i.e. implicit fairing).
+    Smooth {
+        alpha: f64,
+        function: Option<Vec<f64>>,
+        /// Keep ū on the shape's boundary (reproduces linear functions on flat meshes).
+        #[serde(default)]
+        fixed_boundary: bool,
+        #[serde(default)]
+        operator: OperatorSpec,
+    },
+    /// Harmonic interpolation of values given on some vertices, or semi-supervised labels.
+    Interpolate {
+        /// [vertex, value] pairs.
+        #[serde(default)]
+        values: Vec<(u32, f64)>,
+        /// [vertex, class] pairs (instead of values).
+        #[serde(default)]
+        labels: Vec<(u32, u32)>,
+        #[serde(default)]
+        operator: OperatorSpec,
+    },
+}
+
+fn k_default() -> usize {
+    10
+}
+fn k_signature() -> usize {
+    100
+}
+fn steps_default() -> usize {
+    1
+}
+fn dimensions_default() -> usize {
+    3
+}
+
+impl Analysis {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Analysis::Spectrum { .. } => "spectrum",
+            Analysis::Hks { .. } => "hks",
+            Analysis::SiHks { .. } => "si-hks",
+            Analysis::Wks { .. } => "wks",
+            Analysis::Gps { .. } => "gps",
+            Analysis::ShapeDna { .. } => "shape-dna",
+            Analysis::Heat { .. } => "heat",
+            Analysis::Geodesic { .. } => "geodesic",
+            Analysis::Trees { .. } => "trees",
+            Analysis::Embed { .. } => "embed",
+            Analysis::Smooth { .. } => "smooth",
+            Analysis::Interpolate { .. } => "interpolate",
+        }
+    }
+}
+
+/// Why an analysis failed, with a stable code and whether the request (not the server) was at fault.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AnalysisError {
+    pub code: &'static str,
+    pub message: String,
+    /// The request cannot succeed as given (4xx); otherwise a computation failed (5xx / failed job).
+    pub client: bool,
+}
+
+impl std::fmt::Display for AnalysisError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl From<DescriptorError> for AnalysisError {
+    fn from(e: DescriptorError) -> Self {
+        let client = !matches!(e, DescriptorError::Solve { .. });
+        AnalysisError { code: e.code(), message: e.to_string(), client }
+    }
+}
+
+impl From<operators::OperatorError> for AnalysisError {
+    fn from(e: operators::OperatorError) -> Self {
+        AnalysisError { code: e.code(), message: e.to_string(), client: true }
+    }
+}
+
+impl From<spectrum::EigenError> for AnalysisError {
+    fn from(e: spectrum::EigenError) -> Self {
+        let client = matches!(e, spectrum::EigenError::InvalidK { .. } | spectrum::EigenError::InvalidOption { .. });
+        AnalysisError { code: e.code(), message: e.to_string(), client }
+    }
+}
+
+fn bad(code: &'static str, message: impl Into<String>) -> AnalysisError {
+    AnalysisError { code, message: message.into(), client: true }
+}
+
+/// A per-vertex array in the input numbering, row-major (rows × cols).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VertexArray {
+    pub name: &'static str,
+    pub rows: usize,
+    pub cols: usize,
+    pub data: Vec<f64>,
+    /// What the columns are (times, energies, frequencies, …), for JSON and file headers.
+    pub columns: Option<Vec<f64>>,
+}
+
+impl VertexArray {
+    /// Rows as nested JSON arrays (NaN and ±∞ as null).
+    pub fn to_json(&self) -> Value {
+        Value::Array(
+            self.data
+                .chunks(self.cols.max(1))
+                .map(|r| {
+                    Value::Array(
+                        r.iter().map(|&v| serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number)).collect(),
+                    )
+                })
+                .collect(),
+        )
+    }
+}
+
+/// The result of an analysis: a JSON summary and per-vertex arrays.
+#[derive(Debug, Clone)]
+pub struct Output {
+    pub summary: Value,
+    pub arrays: Vec<VertexArray>,
+}
+
+/// The cache key of a spectrum: operator and solver parameters (the shape id is the caller's).
+pub fn spectrum_key(op: &OperatorSpec, solver: &SolverSpec) -> String {
+    serde_json::to_string(&json!({ "operator": op, "solver": solver, "version": ALGORITHM_VERSION }))
+        .unwrap_or_default()
+}
+
+/// Computed eigenpairs with the operator they belong to.
+pub struct Eigen {
+    pub operator: Operator,
+    pub spectrum: Spectrum,
+}
+
+/// Where computed eigenpairs are kept between analyses (the service's cache; the CLI has none). `get` returns
+/// an entry with at least `k` pairs for the key, if one exists.
+pub trait SpectrumCache: Sync {
+    fn get(&self, key: &str, k: usize) -> Option<Arc<Eigen>>;
+    fn put(&self, key: &str, eigen: Arc<Eigen>);
+}
+
+/// Hooks passed down to the eigensolver.
+#[derive(Default, Clone, Copy)]
+pub struct Hooks<'a> {
+    pub control: Control<'a>,
+    pub cache: Option<&'a dyn SpectrumCache>,
+    /// Solver threads (0: rayon's pool).
+    pub threads: usize,
+}
+
+/// Maps input vertex indices to validated ones.
+fn map_vertices(v: &Validated, list: &[u32], what: &str) -> Result<Vec<usize>, AnalysisError> {
+    list.iter()
+        .map(|&i| match v.vertex_map.get(i as usize) {
+            Some(&m) if m != u32::MAX => Ok(m as usize),
+            Some(_) => Err(bad("invalid-parameter", format!("{what}: vertex {i} was dropped by validation"))),
+            None => Err(bad(
+                "invalid-parameter",
+                format!("{what}: vertex {i} does not exist ({} vertices)", v.vertex_map.len()),
+            )),
+        })
+        .collect()
+}
+
+pub fn build_operator(v: &Validated, spec: &OperatorSpec) -> Result<Operator, AnalysisError> {
+    let boundary = match (&spec.dirichlet_vertices, spec.boundary) {
+        (Some(list), _) => Boundary::DirichletVertices(
+            map_vertices(v, list, "dirichlet_vertices")?.iter().map(|&i| i as u32).collect(),
+        ),
+        (None, BoundarySpec::Dirichlet) => Boundary::Dirichlet,
+        (None, BoundarySpec::Neumann) => Boundary::Neumann,
+    };
+    let o = OperatorOptions {
+        operator: spec.operator,
+        mass: spec.mass,
+        boundary,
+        cloud: CloudParams { k: spec.neighbours, neighbourhood: spec.neighbourhood, t: spec.time, radius: None },
+        ..Default::default()
+    };
+    Ok(operators::build(&v.shape, &o)?)
+}
+
+/// Zero modes to expect: connected components of the operator for a Neumann problem, none for Dirichlet.
+fn expected_zero_modes(op: &Operator) -> usize {
+    if op.interior.is_some() {
+        0
+    } else {
+        components(&op.pair).1
+    }
+}
+
+/// Eigenpairs for an analysis: from the cache when it holds enough, else solved (and cached).
+pub fn eigenpairs(
+    v: &Validated,
+    spec: &OperatorSpec,
+    solver: &SolverSpec,
+    k: usize,
+    hooks: Hooks<'_>,
+) -> Result<Arc<Eigen>, AnalysisError> {
+    let key = format!("{}:{}", v.id.hex(), spectrum_key(spec, solver));
+    if let Some(e) = hooks.cache.and_then(|c| c.get(&key, k)) {
+        return Ok(e);
+    }
+    let operator = build_operator(v, spec)?;
+    let n = operator.pair.n();
+    if k == 0 || k > n {
+        return Err(bad("invalid-k", format!("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {n})")));
+    }
+    let opts = EigenOptions { k, tol: solver.tol, threads: hooks.threads, ..Default::default() };
+    let spectrum = spectrum::eigs(&operator.pair, &opts, None, hooks.control)?;
+    let e = Arc::new(Eigen { operator, spectrum });
+    if let Some(c) = hooks.cache {
+        c.put(&key, e.clone());
+    }
+    Ok(e)
+}
+
+/// A truncated view of cached eigenpairs (the first k).
+fn basis_of(e: &Eigen, k: usize) -> Basis<'_> {
+    let k = k.min(e.spectrum.values.len());
+    Basis::new(
+        &e.spectrum.values[..k],
+        e.spectrum.vectors.as_ref().subcols(0, k),
+        kac_core::descriptors::zero_threshold(&e.operator.pair),
+    )
+}
+
+/// Spreads an (operator rows × cols) matrix to the input numbering: Dirichlet vertices 0, dropped ones NaN.
+pub fn to_input_rows(v: &Validated, op: &Operator, m: faer::MatRef<'_, f64>, name: &'static str) -> VertexArray {
+    spread(v, m, name, |col| op.expand(col))
+}
+
+/// Spreads a (validated vertices × cols) matrix to the input numbering.
+pub fn validated_to_input(v: &Validated, m: faer::MatRef<'_, f64>, name: &'static str) -> VertexArray {
+    spread(v, m, name, |col| col.to_vec())
+}
+
+fn spread(
+    v: &Validated,
+    m: faer::MatRef<'_, f64>,
+    name: &'static str,
+    expand: impl Fn(&[f64]) -> Vec<f64>,
+) -> VertexArray {
+    let cols = m.ncols();
+    let rows = v.vertex_map.len();
+    let mut data = vec![f64::NAN; rows * cols];
+    for j in 0..cols {
+        let col: Vec<f64> = m.col(j).iter().copied().collect();
+        let full = expand(&col);
+        for (input, &mapped) in v.vertex_map.iter().enumerate() {
+            if mapped != u32::MAX {
+                data[input * cols + j] = full[mapped as usize];
+            }
+        }
+    }
+    VertexArray { name, rows, cols, data, columns: None }
+}
+
+fn operator_json(op: &Operator) -> Value {
+    json!({
+        "operator": op.kind.name(),
+        "mass": op.mass.name(),
+        "boundary": op.boundary,
+        "size": op.pair.n(),
+        "parameters": op.parameters,
+    })
+}
+
+fn spectrum_json(e: &Eigen, k: usize) -> Value {
+    let s = &e.spectrum;
+    let k = k.min(s.values.len());
+    json!({
+        "eigenvalues": &s.values[..k],
+        "residuals": &s.residuals[..k.min(s.residuals.len())],
+        "solver": {
+            "method": s.stats.method, "sigma": s.stats.sigma, "block": s.stats.block, "subspace": s.stats.subspace,
+            "restarts": s.stats.restarts, "block_steps": s.stats.block_steps, "solves": s.stats.solves,
+            "factor_nonzeros": s.stats.factor_nnz,
+        },
+        "timings": s.stats.timings,
+    })
+}
+
+fn merge(mut a: Value, b: Value) -> Value {
+    if let (Some(a), Value::Object(b)) = (a.as_object_mut(), b) {
+        a.extend(b);
+    }
+    a
+}
+
+pub fn measures(v: &Validated, op: Option<&Operator>) -> Measures {
+    let mass_total = op.map(|o| o.pair.mass.iter().sum::<f64>());
+    Measures::of(&v.summary(), mass_total)
+}
+
+/// Runs an analysis on a validated shape.
+pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
+    let head = json!({ "shape_id": v.id.hex(), "analysis": analysis.name(), "algorithm_version": ALGORITHM_VERSION });
+    let out = match analysis {
+        Analysis::Spectrum { k, eigenvectors, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let mut arrays = vec![];
+            if *eigenvectors {
+                let k = (*k).min(e.spectrum.values.len());
+                let mut a = to_input_rows(v, &e.operator, e.spectrum.vectors.as_ref().subcols(0, k), "eigenvectors");
+                a.columns = Some(e.spectrum.values[..k].to_vec());
+                arrays.push(a);
+            }
+            let summary = merge(
+                merge(
+                    json!({ "k": k, "residual_norm": "‖Lφ − λMφ‖₂ / (max(|λ|, |σ|)·‖Mφ‖₂)", "sign_convention": signatures::SIGN_CONVENTION }),
+                    operator_json(&e.operator),
+                ),
+                spectrum_json(&e, *k),
+            );
+            Output { summary, arrays }
+        }
+        Analysis::Hks { k, options, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let h = signatures::hks(&basis_of(&e, *k), options)?;
+            let mut a = to_input_rows(v, &e.operator, h.values.as_ref(), "hks");
+            a.columns = Some(h.times.clone());
+            let summary = merge(json!({ "k": k, "hks": h, "options": options }), operator_json(&e.operator));
+            Output { summary, arrays: vec![a] }
+        }
+        Analysis::SiHks { k, options, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let h = signatures::si_hks(&basis_of(&e, *k), options)?;
+            let mut a = to_input_rows(v, &e.operator, h.values.as_ref(), "si_hks");
+            a.columns = Some(h.frequencies.iter().map(|&f| f as f64).collect());
+            let summary = merge(json!({ "k": k, "si_hks": h, "options": options }), operator_json(&e.operator));
+            Output { summary, arrays: vec![a] }
+        }
+        Analysis::Wks { k, options, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let w = signatures::wks(&basis_of(&e, *k), options)?;
+            let mut a = to_input_rows(v, &e.operator, w.values.as_ref(), "wks");
+            a.columns = Some(w.energies.clone());
+            let summary = merge(json!({ "k": k, "wks": w, "options": options }), operator_json(&e.operator));
+            Output { summary, arrays: vec![a] }
+        }
+        Analysis::Gps { k, dimensions, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let g = signatures::gps(&basis_of(&e, *k), *dimensions)?;
+            let mut a = to_input_rows(v, &e.operator, g.values.as_ref(), "gps");
+            a.columns = Some(g.eigenvalues.clone());
+            let summary = merge(json!({ "k": k, "gps": g }), operator_json(&e.operator));
+            Output { summary, arrays: vec![a] }
+        }
+        Analysis::ShapeDna { options, operator, solver } => {
+            let op = build_operator(v, operator)?;
+            let zeros = if options.include_zero { 0 } else { expected_zero_modes(&op) };
+            let want = (options.k + zeros).min(op.pair.n());
+            let e = eigenpairs(v, operator, solver, want, hooks)?;
+            let b = basis_of(&e, want);
+            let m = measures(v, Some(&e.operator));
+            let dna = shape_dna::shape_dna(b.values, b.zero_tol, &m, options)?;
+            let weyl = weyl_estimate(b.values, b.zero_tol, &m).ok();
+            let summary = merge(
+                json!({ "shape_dna": dna, "weyl": weyl, "measures": m, "options": options, "residuals": &e.spectrum.residuals[..want.min(e.spectrum.residuals.len())] }),
+                operator_json(&e.operator),
+            );
+            Output { summary, arrays: vec![] }
+        }
+        Analysis::Heat { k, times, sources, method, steps, operator, solver } => {
+            let src = map_vertices(v, sources, "sources")?;
+            match method {
+                HeatMethod::Spectral => {
+                    let e = eigenpairs(v, operator, solver, *k, hooks)?;
+                    let b = basis_of(&e, *k);
+                    let times = match times {
+                        Some(t) => t.clone(),
+                        None => signatures::default_hks_times(&b, 10)?,
+                    };
+                    kac_core::descriptors::check_times("times", &times)?;
+                    let trace = heat_trace(b.values, &times);
+                    let tail: Vec<f64> = times.iter().map(|&t| heat_trace_tail_bound(b.values, b.n(), t)).collect();
+                    let mut arrays = vec![];
+                    let src_op = to_operator_rows(&e.operator, &src)?;
+                    let mut rows_json = vec![];
+                    for (s_in, &s) in sources.iter().zip(&src_op) {
+                        // k_t(s, ·) for every t, and what truncation can miss of the flow of the hat function at s.
+                        let mut kt = faer::Mat::<f64>::zeros(b.n(), times.len());
+                        for (j, &t) in times.iter().enumerate() {
+                            let row = heat_kernel_rows(&b, &[s], t)?;
+                            kt.col_mut(j).copy_from(row.col(0));
+                        }
+                        let mut u0 = vec![0.0; b.n()];
+                        u0[s] = 1.0;
+                        let d = diffuse_spectral(&b, &e.operator.pair, &u0, &times)?;
+                        rows_json.push(json!({ "source": s_in, "hat_function_truncation_bound": d.truncation_bound }));
+                        let mut a = to_input_rows(v, &e.operator, kt.as_ref(), "heat_kernel");
+                        a.columns = Some(times.clone());
+                        arrays.push(a);
+                    }
+                    // Dirichlet problems also lose heat through the boundary: Q(t) = ∫ u(t) from u₀ = 1.
+                    let content = match e.operator.interior {
+                        Some(_) => Some(kac_core::descriptors::heat::heat_content(&b, &e.operator.pair, &times)?),
+                        None => None,
+                    };
+                    let summary = merge(
+                        json!({ "method": "spectral", "k": k, "times": times, "heat_content": content, "heat_trace": trace, "heat_trace_tail_bound": tail, "sources": rows_json, "arrays": "one per source: the heat kernel k_t(source, ·), a column per time" }),
+                        operator_json(&e.operator),
+                    );
+                    Output { summary, arrays }
+                }
+                HeatMethod::Implicit => {
+                    let op = build_operator(v, operator)?;
+                    let times =
+                        times.clone().ok_or_else(|| bad("invalid-parameter", "the implicit method needs times"))?;
+                    let src_op = to_operator_rows(&op, &src)?;
+                    let mut arrays = vec![];
+                    for &s in &src_op {
+                        let mut u0 = vec![0.0; op.pair.n()];
+                        u0[s] = 1.0;
+                        let u = pde::heat_implicit(&op.pair, &u0, &times, *steps)?;
+                        let mut a = to_input_rows(v, &op, u.as_ref(), "heat");
+                        a.columns = Some(times.clone());
+                        arrays.push(a);
+                    }
+                    let summary = merge(
+                        json!({ "method": "implicit", "steps": steps, "times": times, "sources": sources, "arrays": "one per source: backward-Euler flow of u₀ = the hat function at the source, a column per time" }),
+                        operator_json(&op),
+                    );
+                    Output { summary, arrays }
+                }
+            }
+        }
+        Analysis::Geodesic { sources, options } => {
+            let Shape::TriangleMesh(mesh) = &v.shape else {
+                return Err(bad(
+                    "not-applicable",
+                    format!("geodesics by the heat method need a triangle mesh, not a {}", v.shape.kind().as_str()),
+                ));
+            };
+            let src = map_vertices(v, sources, "sources")?;
+            let g = geodesic::heat_method(mesh, &src, options)?;
+            let n = mesh.vertices.len();
+            let mut m = faer::Mat::<f64>::zeros(n, 1 + usize::from(g.varadhan.is_some()));
+            for i in 0..n {
+                m[(i, 0)] = g.distance[i];
+                if let Some(va) = &g.varadhan {
+                    m[(i, 1)] = va[i];
+                }
+            }
+            let a = validated_to_input(v, m.as_ref(), "distance");
+            let finite: Vec<f64> = g.distance.iter().copied().filter(|d| d.is_finite()).collect();
+            let max = finite.iter().copied().fold(0.0, f64::max);
+            let summary = json!({
+                "geodesic": g, "options": options, "max_distance": max,
+                "columns": if g.varadhan.is_some() { vec!["heat_method", "varadhan"] } else { vec!["heat_method"] },
+                "operator": "cotan", "mass": "lumped",
+            });
+            Output { summary, arrays: vec![a] }
+        }
+        Analysis::Trees {} => {
+            let (edges, weights) = operators::edge_graph(&v.shape)
+                .ok_or_else(|| bad("not-applicable", "a point cloud has no edges; build a graph first"))?;
+            let t = spanning_trees(v.shape.vertex_count(), &edges, &weights)?;
+            Output { summary: json!({ "trees": t }), arrays: vec![] }
+        }
+        Analysis::Embed { dimensions, scaling, operator, solver } => {
+            let op = build_operator(v, operator)?;
+            let zeros = expected_zero_modes(&op);
+            let want = (dimensions + zeros).min(op.pair.n());
+            let e = eigenpairs(v, operator, solver, want, hooks)?;
+            let b = basis_of(&e, want);
+            let (coords, vals) = eigenmap(&b, *dimensions, *scaling == EmbedScaling::Gps)?;
+            let f = fiedler(&b, &e.operator.pair, false).ok();
+            let mut a = to_input_rows(v, &e.operator, coords.as_ref(), "embedding");
+            a.columns = Some(vals.clone());
+            let mut arrays = vec![a];
+            if let Some(f) = &f {
+                let fm = faer::Mat::from_fn(f.vector.len(), 1, |i, _| f.vector[i]);
+                arrays.push(to_input_rows(v, &e.operator, fm.as_ref(), "fiedler"));
+            }
+            let summary = merge(
+                json!({ "dimensions": dimensions, "scaling": scaling, "eigenvalues": vals, "fiedler": f, "components": components(&e.operator.pair).1, "sign_convention": signatures::SIGN_CONVENTION }),
+                operator_json(&e.operator),
+            );
+            Output { summary, arrays }
+        }
+        Analysis::Smooth { alpha, function, fixed_boundary, operator } => {
+            let op = build_operator(v, operator)?;
+            let n = op.pair.n();
+            if op.interior.is_some() {
+                return Err(bad(
+                    "invalid-parameter",
+                    "smoothing takes a Neumann operator; use fixed_boundary to clamp",
+                ));
+            }
+            let (ubar, what) = match function {
+                Some(f) => {
+                    let mapped = from_input_rows(v, f, "function")?;
+                    (faer::Mat::from_fn(n, 1, |i, _| mapped[i]), "function")
+                }
+                None => {
+                    let pos = v
+                        .shape
+                        .positions()
+                        .ok_or_else(|| bad("not-applicable", "the shape has no coordinates; give a function"))?;
+                    (faer::Mat::from_fn(n, 3, |i, j| pos[i][j]), "coordinates")
+                }
+            };
+            let fixed = fixed_boundary.then(|| operators::boundary::boundary_vertices(&v.shape));
+            let u = pde::smooth(&op.pair, ubar.as_ref(), *alpha, fixed.as_deref())?;
+            let a = to_input_rows(v, &op, u.as_ref(), "smoothed");
+            let summary = merge(
+                json!({ "alpha": alpha, "smoothed": what, "fixed_boundary": fixed_boundary, "equation": "(M + αL) u = M ū" }),
+                operator_json(&op),
+            );
+            Output { summary, arrays: vec![a] }
+        }
+        Analysis::Interpolate { values, labels, operator } => {
+            let op = build_operator(v, operator)?;
+            if op.interior.is_some() {
+                return Err(bad("invalid-parameter", "interpolation fixes its own vertices; use a Neumann operator"));
+            }
+            match (values.is_empty(), labels.is_empty()) {
+                (false, true) => {
+                    let idx = map_vertices(v, &values.iter().map(|x| x.0).collect::<Vec<_>>(), "values")?;
+                    let known: Vec<(usize, f64)> = idx.into_iter().zip(values.iter().map(|x| x.1)).collect();
+                    let u = pde::harmonic(&op.pair, &known)?;
+                    let um = faer::Mat::from_fn(u.len(), 1, |i, _| u[i]);
+                    let a = to_input_rows(v, &op, um.as_ref(), "interpolated");
+                    Output {
+                        summary: merge(json!({ "known": values.len(), "method": "harmonic" }), operator_json(&op)),
+                        arrays: vec![a],
+                    }
+                }
+                (true, false) => {
+                    let idx = map_vertices(v, &labels.iter().map(|x| x.0).collect::<Vec<_>>(), "labels")?;
+                    let l: Vec<(usize, u32)> = idx.into_iter().zip(labels.iter().map(|x| x.1)).collect();
+                    let r = pde::labels(&op.pair, &l)?;
+                    let lm = faer::Mat::from_fn(r.label.len(), 1, |i, _| r.label[i] as f64);
+                    let mut a = to_input_rows(v, &op, lm.as_ref(), "labels");
+                    a.columns = None;
+                    let mut s = to_input_rows(v, &op, r.scores.as_ref(), "scores");
+                    s.columns = Some(r.classes.iter().map(|&c| c as f64).collect());
+                    Output {
+                        summary: merge(
+                            json!({ "labels": r, "method": "harmonic (Zhu et al. 2003)" }),
+                            operator_json(&op),
+                        ),
+                        arrays: vec![a, s],
+                    }
+                }
+                _ => return Err(bad("invalid-parameter", "give either values or labels (not both, not neither)")),
+            }
+        }
+    };
+    Ok(Output { summary: merge(head, out.summary), arrays: out.arrays })
+}
+
+/// Validated vertex indices → rows of the (possibly Dirichlet-condensed) operator.
+fn to_operator_rows(op: &Operator, list: &[usize]) -> Result<Vec<usize>, AnalysisError> {
+    match &op.interior {
+        None => Ok(list.to_vec()),
+        Some(keep) => list
+            .iter()
+            .map(|&i| {
+                keep.binary_search(&(i as u32))
+                    .map_err(|_| bad("invalid-parameter", format!("vertex {i} is on the Dirichlet boundary")))
+            })
+            .collect(),
+    }
+}
+
+/// A per-vertex function in the input numbering → the validated numbering (welded vertices: the first value).
+fn from_input_rows(v: &Validated, f: &[f64], what: &str) -> Result<Vec<f64>, AnalysisError> {
+    if f.len() != v.vertex_map.len() {
+        return Err(bad(
+            "invalid-parameter",
+            format!("{what}: {} values for {} input vertices", f.len(), v.vertex_map.len()),
+        ));
+    }
+    let mut out = vec![f64::NAN; v.shape.vertex_count()];
+    for (i, &m) in v.vertex_map.iter().enumerate() {
+        if m != u32::MAX && out[m as usize].is_nan() {
+            out[m as usize] = f[i];
+        }
+    }
+    if let Some(i) = out.iter().position(|x| !x.is_finite()) {
+        return Err(bad("invalid-parameter", format!("{what}: vertex {i} has no finite value")));
+    }
+    Ok(out)
+}

@@ -1,0 +1,173 @@
+//! The descriptor and PDE subcommands as users run them: JSON fields, .npy and .ev files, exit codes, and the
+//! numbers checked against closed forms where one exists.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn kac() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_kac"))
+}
+
+fn run_json(args: &[&str]) -> Value {
+    let out = kac().args(args).output().unwrap();
+    assert!(out.status.success(), "kac {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+fn generate(dir: &Path, name: &str, extra: &[&str], file: &str) -> PathBuf {
+    let p = dir.join(file);
+    let mut args = vec!["generate", name, "--out", p.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    run_json(&args);
+    p
+}
+
+fn column(v: &Value, array: &str, col: usize) -> Vec<f64> {
+    v["arrays"][array]["values"].as_array().unwrap().iter().map(|r| r[col].as_f64().unwrap()).collect()
+}
+
+#[test]
+fn hks_wks_and_si_hks_of_the_sphere() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = generate(dir.path(), "icosphere", &["--level", "3"], "s.obj");
+    let s = s.to_str().unwrap();
+    let v = run_json(&["hks", s, "-k", "16", "--times", "0.5,1"]);
+    assert_eq!(v["analysis"], "hks");
+    assert_eq!(v["hks"]["times"], serde_json::json!([0.5, 1.0]));
+    assert_eq!((v["operator"].as_str(), v["mass"].as_str()), (Some("cotan"), Some("consistent")));
+    // The unit sphere: HKS(x, t) = Σ_l (2l+1) e^{−l(l+1)t} / 4π (l ≤ 3 for 16 eigenpairs), at every vertex.
+    let want: f64 = (0..4).map(|l| (2 * l + 1) as f64 * (-(l * (l + 1)) as f64 * 0.5f64).exp()).sum::<f64>()
+        / (4.0 * std::f64::consts::PI);
+    for h in column(&v, "hks", 0) {
+        assert!((h - want).abs() / want < 0.02, "{h} vs {want}");
+    }
+    let npy = dir.path().join("w.npy");
+    let w = run_json(&["wks", s, "-k", "30", "--count", "8", "--out", npy.to_str().unwrap()]);
+    assert_eq!(w["wks"]["energies"].as_array().unwrap().len(), 8);
+    assert_eq!(w["wks"]["variance"], 6.0);
+    let bytes = std::fs::read(&npy).unwrap();
+    let (rows, cols, _) = kac_npy(&bytes);
+    assert_eq!((rows, cols), (642, 8));
+    let si = run_json(&["hks", s, "-k", "30", "--scale-invariant", "--frequencies", "4"]);
+    assert_eq!(si["si_hks"]["frequencies"], serde_json::json!([0, 1, 2, 3]));
+    assert_eq!(si["arrays"]["si_hks"]["cols"], 4);
+}
+
+fn kac_npy(bytes: &[u8]) -> (usize, usize, Vec<f64>) {
+    // Parse just enough of the header: shape (r, c).
+    let hlen = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let header = std::str::from_utf8(&bytes[10..10 + hlen]).unwrap();
+    let shape = header.split("'shape': (").nth(1).unwrap().split(')').next().unwrap();
+    let dims: Vec<usize> =
+        shape.split(',').filter(|s| !s.trim().is_empty()).map(|s| s.trim().parse().unwrap()).collect();
+    let data = bytes[10 + hlen..].chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect();
+    (dims[0], dims[1], data)
+}
+
+#[test]
+fn shape_dna_ev_files_and_compare() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = generate(dir.path(), "icosphere", &["--level", "3"], "s.off");
+    let t = generate(dir.path(), "torus", &["--n", "12"], "t.off");
+    let ev = dir.path().join("s.ev");
+    let v = run_json(&[
+        "shape-dna",
+        s.to_str().unwrap(),
+        "-k",
+        "8",
+        "--normalization",
+        "area",
+        "--ev",
+        ev.to_str().unwrap(),
+    ]);
+    let dna = &v["shape_dna"];
+    assert_eq!((dna["k"].as_u64(), dna["zero_modes_dropped"].as_u64()), (Some(8), Some(1)));
+    assert_eq!(dna["normalization"], "area");
+    // λ·A on the unit sphere: 2·4π for the first three.
+    let first = dna["values"][0].as_f64().unwrap();
+    assert!((first - 8.0 * std::f64::consts::PI).abs() < 0.1, "{first}");
+    assert!(v["weyl"]["measure_estimate_leading"].is_number());
+    let text = std::fs::read_to_string(&ev).unwrap();
+    assert!(text.contains("Eigenvalues:") && text.contains(" Area: "), "{text}");
+    // Comparing the shape with its own .ev (area taken from the file's header) gives 0.
+    let c = run_json(&["compare", s.to_str().unwrap(), ev.to_str().unwrap(), "-k", "8", "--normalization", "area"]);
+    assert!(c["distance"].as_f64().unwrap() < 1e-9, "{}", c["distance"]);
+    let c = run_json(&["compare", s.to_str().unwrap(), t.to_str().unwrap(), "-k", "8", "--normalization", "area"]);
+    assert!(c["distance"].as_f64().unwrap() > 1.0);
+    assert_eq!(c["metric"], "euclidean");
+    // A bad normalization is refused by clap with exit 2; a missing measure is refused by the analysis.
+    let out = kac().args(["shape-dna", s.to_str().unwrap(), "--normalization", "size"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let out = kac().args(["shape-dna", t.to_str().unwrap(), "--normalization", "volume", "-k", "3"]).output().unwrap();
+    assert!(out.status.success(), "a closed torus has an enclosed volume");
+}
+
+#[test]
+fn trees_embed_heat_geodesic_smooth_interpolate() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = generate(dir.path(), "petersen", &[], "p.json");
+    let v = run_json(&["trees", p.to_str().unwrap()]);
+    assert_eq!(v["trees"]["count"], "2000");
+    let c = generate(dir.path(), "cycle", &["--n", "12"], "c.json");
+    assert_eq!(run_json(&["trees", c.to_str().unwrap()])["trees"]["count"], "12");
+    let path = generate(dir.path(), "path", &["--n", "20"], "path.json");
+    let e = run_json(&["embed", path.to_str().unwrap(), "-d", "2"]);
+    let lam = e["fiedler"]["algebraic_connectivity"].as_f64().unwrap();
+    assert!((lam - (2.0 - 2.0 * (std::f64::consts::PI / 20.0).cos())).abs() < 1e-10);
+    assert_eq!(e["fiedler"]["cut_edges"], 1);
+    assert_eq!(e["arrays"]["embedding"]["cols"], 2);
+
+    let s = generate(dir.path(), "icosphere", &["--level", "3"], "s.off");
+    let s = s.to_str().unwrap();
+    let h = run_json(&["heat", s, "-k", "40", "--times", "0.5", "--source", "3"]);
+    let z = h["heat_trace"][0].as_f64().unwrap();
+    // Z(t) = Σ_l (2l+1) e^{−l(l+1)t} on the unit sphere; 40 pairs hold l ≤ 5 and four of l = 6.
+    let want: f64 = (0..6).map(|l| (2 * l + 1) as f64 * (-((l * (l + 1)) as f64) * 0.5).exp()).sum::<f64>()
+        + 4.0 * (-21.0f64).exp();
+    assert!((z - want).abs() < 0.03, "Z(0.5) = {z}, series {want}");
+    assert_eq!(h["arrays"]["heat_kernel"]["rows"], 642);
+    let i = run_json(&["heat", s, "--method", "implicit", "--times", "0.1", "--steps", "4", "--source", "3"]);
+    assert_eq!(i["method"], "implicit");
+    let g = run_json(&["geodesic", s, "--source", "0"]);
+    let d = column(&g, "distance", 0);
+    assert_eq!(d[0], 0.0);
+    let far = d.iter().copied().fold(0.0, f64::max);
+    assert!((far - std::f64::consts::PI).abs() < 0.1, "the antipode is π away: {far}");
+    let out = kac().args(["geodesic", s, "--source", "100000"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("vertex 100000 does not exist"));
+
+    // Linear functions survive harmonic interpolation and clamped smoothing on a flat square.
+    let q = generate(dir.path(), "square", &["--n", "8"], "q.obj");
+    let q = q.to_str().unwrap();
+    // f = x given on the boundary.
+    let mut known = vec![];
+    for j in 0..=8 {
+        for i in 0..=8 {
+            if i == 0 || i == 8 || j == 0 || j == 8 {
+                known.push(format!("{}:{}", j * 9 + i, i as f64 / 8.0));
+            }
+        }
+    }
+    let v = run_json(&["interpolate", q, "--values", &known.join(",")]);
+    let u = column(&v, "interpolated", 0);
+    for (idx, x) in u.iter().enumerate() {
+        assert!((x - (idx % 9) as f64 / 8.0).abs() < 1e-10);
+    }
+    let fun = dir.path().join("f.txt");
+    std::fs::write(
+        &fun,
+        (0..81).map(|k| format!("{}\n", (k % 9) as f64 / 8.0 + 2.0 * (k / 9) as f64 / 8.0)).collect::<String>(),
+    )
+    .unwrap();
+    let v = run_json(&["smooth", q, "--alpha", "0.05", "--fixed-boundary", "--function", fun.to_str().unwrap()]);
+    let u = column(&v, "smoothed", 0);
+    for (k, x) in u.iter().enumerate() {
+        assert!((x - ((k % 9) as f64 / 8.0 + 2.0 * (k / 9) as f64 / 8.0)).abs() < 1e-10);
+    }
+    let l = run_json(&["interpolate", q, "--labels", "0:5,80:9"]);
+    assert_eq!(l["labels"]["classes"], serde_json::json!([5, 9]));
+    let out = kac().args(["interpolate", q, "--values", "0:1", "--labels", "1:2"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
