@@ -25,7 +25,7 @@ use std::sync::Arc;
 pub const ALGORITHM_VERSION: u32 = 1;
 
 /// Which operator to build (see `kac_core::operators`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OperatorSpec {
     /// Default: by shape kind.
@@ -56,7 +56,7 @@ impl Default for OperatorSpec {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(utoipa::ToSchema, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum BoundarySpec {
     #[default]
@@ -65,7 +65,7 @@ pub enum BoundarySpec {
 }
 
 /// Eigensolver parameters shared by every spectral analysis.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SolverSpec {
     /// Relative residual tolerance (default 1e-10).
@@ -78,7 +78,7 @@ impl Default for SolverSpec {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(utoipa::ToSchema, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum HeatMethod {
     /// Σ e^{−λt} over the computed eigenpairs (with a truncation bound).
@@ -88,7 +88,7 @@ pub enum HeatMethod {
     Implicit,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(utoipa::ToSchema, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum EmbedScaling {
     /// Laplacian eigenmap: the eigenvectors themselves.
@@ -99,7 +99,7 @@ pub enum EmbedScaling {
 }
 
 /// One analysis of a shape. JSON: `{"analysis": "hks", "k": 100, "count": 50, ...}`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "analysis", rename_all = "kebab-case")]
 pub enum Analysis {
     /// The k smallest eigenpairs.
@@ -214,9 +214,11 @@ pub enum Analysis {
     Interpolate {
         /// [vertex, value] pairs.
         #[serde(default)]
+        #[schema(value_type = Vec<Vec<f64>>)]
         values: Vec<(u32, f64)>,
         /// [vertex, class] pairs (instead of values).
         #[serde(default)]
+        #[schema(value_type = Vec<Vec<u32>>)]
         labels: Vec<(u32, u32)>,
         #[serde(default)]
         operator: OperatorSpec,

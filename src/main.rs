@@ -3,6 +3,7 @@
 
 mod analysis;
 mod cli;
+mod service;
 
 fn main() {
     std::process::exit(cli::run());

@@ -51,6 +51,10 @@ enum Command {
     Interpolate(analyses::InterpolateCmd),
     /// Distance between two shapes (or .ev files) by shape-DNA.
     Compare(analyses::CompareCmd),
+    /// Run the HTTP service (REST API under /v1, OpenAPI at /openapi.json, docs at /docs).
+    Serve(crate::service::config::Config),
+    /// Print the OpenAPI document.
+    Openapi,
 }
 
 /// Options choosing the operator, shared by every subcommand that builds one.
@@ -197,6 +201,11 @@ pub fn run() -> i32 {
         Command::Smooth(a) => analyses::smooth(a),
         Command::Interpolate(a) => analyses::interpolate(a),
         Command::Compare(a) => analyses::compare(a),
+        Command::Serve(c) => crate::service::serve(c).map_err(|message| Failure { code: 1, message }),
+        Command::Openapi => {
+            println!("{}", crate::service::openapi::document());
+            Ok(())
+        }
     };
     match result {
         Ok(()) => 0,

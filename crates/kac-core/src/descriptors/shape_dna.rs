@@ -22,6 +22,7 @@ use super::DescriptorError;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Normalization {
@@ -58,6 +59,7 @@ impl Normalization {
     }
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Reweighting {
@@ -79,6 +81,7 @@ impl Reweighting {
 }
 
 /// The measures of a shape that normalizations use.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 pub struct Measures {
     /// Intrinsic dimension: 1 curves, 2 surfaces (meshes, point clouds), 3 solids.
@@ -112,6 +115,7 @@ pub fn weyl_eigenvalue(n: f64, dimension: u8, measure: f64) -> f64 {
     (2.0 * PI).powi(2) * (n / (omega * measure)).powf(2.0 / d)
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct ShapeDnaOptions {
@@ -256,6 +260,7 @@ pub fn shape_dna(
 }
 
 /// Distances between fingerprints of equal length.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Metric {

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::LN_10;
 
 /// Heat kernel signature (Sun, Ovsjanikov & Guibas 2009): HKS(x, t) = k_t(x, x) = Σ_i e^{−λ_i t} φ_i(x)².
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct HksOptions {
@@ -89,6 +90,7 @@ pub fn hks(basis: &Basis<'_>, opts: &HksOptions) -> Result<Hks, DescriptorError>
 /// scaling the shape by β multiplies the HKS by β⁻² and shifts τ by 2 log_α β. The log removes the factor into
 /// an additive constant, the derivative in τ (a forward difference) removes the constant, and the modulus of
 /// the discrete Fourier transform over τ removes the shift. The first `frequencies` moduli are the descriptor.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct SiHksOptions {
@@ -188,6 +190,7 @@ pub fn si_hks(basis: &Basis<'_>, opts: &SiHksOptions) -> Result<SiHks, Descripto
 /// Wave kernel signature (Aubry, Schlickewei & Cremers 2011): the probability of finding a quantum particle of
 /// log-energy e at x, WKS(x, e) = Σ_i φ_i(x)² exp(−(e − log λ_i)² / 2σ²) / C_e with
 /// C_e = Σ_i exp(−(e − log λ_i)² / 2σ²). Zero modes are left out (log 0).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct WksOptions {

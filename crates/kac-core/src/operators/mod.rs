@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use sparse::SparsePair;
 
 /// The operators kac builds (CLI and API names in kebab-case).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum OperatorKind {
@@ -86,6 +87,7 @@ impl OperatorKind {
 }
 
 /// Mass matrices. `Identity` and `Degree` are what the graph Laplacians use (reported, not chosen).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Mass {
@@ -135,6 +137,7 @@ impl Boundary {
 }
 
 /// Which neighbours the point-cloud heat kernel sums over.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Neighbourhood {

@@ -23,6 +23,7 @@ use crate::spectrum::factor::{Cholesky, Symbolic};
 use faer::{Mat, Par};
 use serde::{Deserialize, Serialize};
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct HeatMethodOptions {

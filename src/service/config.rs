@@ -1,0 +1,48 @@
+//! `kac serve` configuration: every flag has an environment variable and a documented default, so the service
+//! starts on a fresh machine with no configuration at all.
+
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug, Clone)]
+pub struct Config {
+    /// Address to listen on (port 0: any free port; the chosen address is printed on stdout).
+    #[arg(long, env = "KAC_ADDR", default_value = "127.0.0.1:8080")]
+    pub addr: String,
+    /// Directory for stored results.
+    #[arg(long, env = "KAC_DATA_DIR", default_value = "kac-data")]
+    pub data_dir: PathBuf,
+    /// Worker threads running jobs (0: one per core).
+    #[arg(long, env = "KAC_WORKERS", default_value_t = 0)]
+    pub workers: usize,
+    /// Jobs queued or running at most; beyond it submissions get 503 with Retry-After.
+    #[arg(long, env = "KAC_QUEUE_CAPACITY", default_value_t = 64)]
+    pub queue_capacity: usize,
+    /// Largest request body in bytes (uploads).
+    #[arg(long, env = "KAC_MAX_BODY_BYTES", default_value_t = 256 * 1024 * 1024)]
+    pub max_body_bytes: usize,
+    /// Largest shape, in vertices.
+    #[arg(long, env = "KAC_MAX_VERTICES", default_value_t = 2_000_000)]
+    pub max_vertices: usize,
+    /// Largest number of eigenpairs an analysis may ask for.
+    #[arg(long, env = "KAC_MAX_K", default_value_t = 1000)]
+    pub max_k: usize,
+    /// Seconds a job may run before it is stopped and failed.
+    #[arg(long, env = "KAC_JOB_TIMEOUT_S", default_value_t = 600)]
+    pub job_timeout_s: u64,
+    /// Longest `wait` a synchronous request may ask for, in seconds.
+    #[arg(long, env = "KAC_MAX_WAIT_S", default_value_t = 60)]
+    pub max_wait_s: u64,
+    /// Bytes of eigenpairs kept in memory for reuse across analyses.
+    #[arg(long, env = "KAC_CACHE_BYTES", default_value_t = 1024 * 1024 * 1024)]
+    pub cache_bytes: usize,
+    /// Threads each eigensolve uses (jobs run side by side on the workers).
+    #[arg(long, env = "KAC_SOLVER_THREADS", default_value_t = 1)]
+    pub solver_threads: usize,
+    /// Testing only: jobs of this analysis panic inside the worker (checks that a panic fails one job).
+    #[arg(long, hide = true)]
+    pub test_panic_analysis: Option<String>,
+    /// Testing only: every job sleeps this many milliseconds before it starts computing (fills the queue).
+    #[arg(long, hide = true, default_value_t = 0)]
+    pub test_job_delay_ms: u64,
+}

@@ -1,0 +1,202 @@
+//! RFC 9457 problem details for every error the service returns. Domain errors map to HTTP in one exhaustive
+//! match ([`ApiError::problem`]); `type` is `/problems/{code}` with a stable code, served as documentation.
+
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use kac_core::ShapeError;
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+/// An RFC 9457 problem document.
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+pub struct Problem {
+    /// `/problems/{code}`: stable, documented at that path.
+    #[serde(rename = "type")]
+    pub type_: String,
+    pub title: String,
+    pub status: u16,
+    pub detail: String,
+    /// The stable code (the last segment of `type`).
+    pub code: String,
+    #[serde(flatten)]
+    #[schema(value_type = Object)]
+    pub extra: Map<String, Value>,
+}
+
+/// Everything a handler can fail with.
+#[derive(Debug)]
+pub enum ApiError {
+    Shape(ShapeError),
+    Analysis(crate::analysis::AnalysisError),
+    NotFound { what: &'static str, id: String },
+    RouteNotFound { path: String },
+    MethodNotAllowed,
+    BodyTooLarge { limit: usize },
+    BadRequest { code: &'static str, detail: String },
+    UnsupportedMediaType { detail: String },
+    QueueFull { capacity: usize, retry_after_s: u64 },
+    Limit { code: &'static str, detail: String },
+    NotReady { detail: String },
+    Internal { detail: String },
+}
+
+impl ApiError {
+    pub fn bad(code: &'static str, detail: impl Into<String>) -> Self {
+        ApiError::BadRequest { code, detail: detail.into() }
+    }
+
+    /// The one mapping from errors to status, code, title and extra members.
+    pub fn problem(&self) -> (StatusCode, Problem) {
+        let mut extra = Map::new();
+        let (status, code, title, detail): (StatusCode, &str, &str, String) = match self {
+            ApiError::Shape(e) => {
+                let status = match e {
+                    ShapeError::UnknownFormat { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                    ShapeError::LimitExceeded { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+                    ShapeError::Io { .. } => StatusCode::INTERNAL_SERVER_ERROR,
+                    ShapeError::Syntax { .. }
+                    | ShapeError::Truncated { .. }
+                    | ShapeError::NonFinite { .. }
+                    | ShapeError::IndexOutOfRange { .. }
+                    | ShapeError::InvalidElement { .. }
+                    | ShapeError::Empty { .. }
+                    | ShapeError::Unsupported { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+                };
+                if let Ok(Value::Object(m)) = serde_json::to_value(e) {
+                    extra.insert("error".into(), Value::Object(m));
+                }
+                (status, e.code(), "The shape cannot be read", e.to_string())
+            }
+            ApiError::Analysis(e) => {
+                let status =
+                    if e.client { StatusCode::UNPROCESSABLE_ENTITY } else { StatusCode::INTERNAL_SERVER_ERROR };
+                (status, e.code, "The analysis cannot be computed", e.message.clone())
+            }
+            ApiError::NotFound { what, id } => {
+                (StatusCode::NOT_FOUND, "not-found", "Not found", format!("no {what} with id '{id}'"))
+            }
+            ApiError::RouteNotFound { path } => {
+                (StatusCode::NOT_FOUND, "route-not-found", "Not found", format!("no route {path}; see /openapi.json"))
+            }
+            ApiError::MethodNotAllowed => (
+                StatusCode::METHOD_NOT_ALLOWED,
+                "method-not-allowed",
+                "Method not allowed",
+                "this method is not allowed on this resource; see /openapi.json".into(),
+            ),
+            ApiError::BodyTooLarge { limit } => {
+                extra.insert("limit_bytes".into(), (*limit).into());
+                (
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    "body-too-large",
+                    "Request body too large",
+                    format!("the request body exceeds the limit of {limit} bytes (--max-body-bytes)"),
+                )
+            }
+            ApiError::BadRequest { code, detail } => (StatusCode::BAD_REQUEST, code, "Bad request", detail.clone()),
+            ApiError::UnsupportedMediaType { detail } => {
+                (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported-media-type", "Unsupported media type", detail.clone())
+            }
+            ApiError::QueueFull { capacity, retry_after_s } => {
+                extra.insert("capacity".into(), (*capacity).into());
+                extra.insert("retry_after_s".into(), (*retry_after_s).into());
+                (
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "queue-full",
+                    "The job queue is full",
+                    format!("{capacity} jobs are queued or running; retry later"),
+                )
+            }
+            ApiError::Limit { code, detail } => {
+                (StatusCode::PAYLOAD_TOO_LARGE, code, "A limit was exceeded", detail.clone())
+            }
+            ApiError::NotReady { detail } => {
+                (StatusCode::SERVICE_UNAVAILABLE, "not-ready", "Not ready", detail.clone())
+            }
+            ApiError::Internal { detail } => {
+                (StatusCode::INTERNAL_SERVER_ERROR, "internal-error", "Internal error", detail.clone())
+            }
+        };
+        (
+            status,
+            Problem {
+                type_: format!("/problems/{code}"),
+                title: title.into(),
+                status: status.as_u16(),
+                detail,
+                code: code.into(),
+                extra,
+            },
+        )
+    }
+}
+
+pub fn problem_response(status: StatusCode, p: &Problem) -> Response {
+    let mut r = (status, serde_json::to_string(p).unwrap_or_default()).into_response();
+    r.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static("application/problem+json"));
+    r
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let (status, p) = self.problem();
+        let mut r = problem_response(status, &p);
+        if let ApiError::QueueFull { retry_after_s, .. } = self {
+            r.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(retry_after_s));
+        }
+        r
+    }
+}
+
+impl From<ShapeError> for ApiError {
+    fn from(e: ShapeError) -> Self {
+        ApiError::Shape(e)
+    }
+}
+
+impl From<crate::analysis::AnalysisError> for ApiError {
+    fn from(e: crate::analysis::AnalysisError) -> Self {
+        ApiError::Analysis(e)
+    }
+}
+
+/// Every stable problem code with a one-line description (served at `/problems/{code}`).
+pub const CODES: &[(&str, &str)] = &[
+    ("malformed-input", "The file does not follow its format's syntax; the detail names the line or byte."),
+    ("truncated-input", "The file ends before the data it declares."),
+    ("non-finite-value", "A coordinate or weight is NaN or infinite."),
+    ("index-out-of-range", "An element refers to a vertex that does not exist."),
+    ("invalid-element", "An element breaks a rule (too few vertices, repeated index, …); the detail names it."),
+    ("empty-shape", "Nothing usable is left after validation."),
+    ("unsupported-content", "The file uses a feature of its format that kac does not read."),
+    ("unknown-format", "No format was given and none could be recognized."),
+    ("limit-exceeded", "The shape is larger than the configured limit (--max-vertices)."),
+    ("io-error", "The server could not read or write its storage."),
+    ("not-found", "No resource with this id."),
+    ("route-not-found", "No such route."),
+    ("method-not-allowed", "The method is not allowed on this resource."),
+    ("body-too-large", "The request body exceeds --max-body-bytes."),
+    ("invalid-json", "The request body is not valid JSON for this endpoint."),
+    ("invalid-request", "A parameter is missing or malformed."),
+    ("unsupported-media-type", "The Content-Type cannot be used here."),
+    ("queue-full", "The job queue is at capacity; retry after Retry-After seconds."),
+    ("k-too-large", "k exceeds the configured limit (--max-k)."),
+    ("not-ready", "The service is not ready (draining or storage unavailable)."),
+    ("internal-error", "An unexpected failure; the job or request can be retried."),
+    ("job-panicked", "The computation panicked; the job failed and the service kept serving."),
+    ("job-timeout", "The job ran longer than --job-timeout-s and was stopped."),
+    ("canceled", "The job was canceled."),
+    ("invalid-k", "k is out of range for the operator's size."),
+    ("invalid-option", "An eigensolver option is out of range."),
+    ("factorization-failed", "L − σM could not be factored."),
+    ("no-convergence", "The eigensolver did not converge within its step limit."),
+    ("invalid-parameter", "A descriptor or operator parameter is out of range."),
+    ("too-few-eigenpairs", "The descriptor needs more eigenpairs than were requested."),
+    ("not-applicable", "The analysis does not apply to this kind of shape."),
+    ("solve-failed", "A linear system could not be solved."),
+    ("operator-not-applicable", "The operator does not apply to this kind of shape."),
+    ("mass-not-applicable", "The mass matrix does not apply to this operator."),
+    ("degenerate-element", "An element is degenerate for this operator."),
+    ("non-manifold", "The operator needs a manifold mesh; use 'robust'."),
+    ("invalid-boundary", "The boundary condition cannot be applied (no boundary, unknown vertex, …)."),
+];

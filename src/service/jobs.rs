@@ -1,0 +1,366 @@
+//! Jobs: a bounded queue in front of a rayon pool. A job's id is a hash of (shape id, canonical analysis,
+//! algorithm version), so the same request finds the same job. Progress comes from the eigensolver's callback,
+//! cancellation goes through its stop flag, a timer stops jobs that run too long, and a panic inside a job fails
+//! that job only.
+
+use super::error::{ApiError, Problem};
+use super::store::{ResultStore, StoredResult, StoredShape};
+use super::AppState;
+use crate::analysis::{self, Analysis, Hooks};
+use kac_core::spectrum::{Control, Progress};
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use tokio::sync::watch;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    Enqueued,
+    Processing,
+    Succeeded,
+    Failed,
+    Canceled,
+}
+
+impl Status {
+    pub fn terminal(self) -> bool {
+        matches!(self, Status::Succeeded | Status::Failed | Status::Canceled)
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Status::Enqueued => "enqueued",
+            Status::Processing => "processing",
+            Status::Succeeded => "succeeded",
+            Status::Failed => "failed",
+            Status::Canceled => "canceled",
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+pub struct JobProgress {
+    /// `queued`, `operator`, `factorization`, `iteration`, `descriptor`, `done`.
+    pub phase: String,
+    /// Converged eigenpairs so far, of `wanted` (spectral analyses).
+    pub converged: usize,
+    pub wanted: usize,
+}
+
+/// What clients see of a job.
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+pub struct JobView {
+    pub id: String,
+    pub shape_id: String,
+    pub analysis: String,
+    pub status: Status,
+    pub progress: JobProgress,
+    /// RFC 3339 timestamps.
+    pub created_at: String,
+    pub started_at: Option<String>,
+    pub finished_at: Option<String>,
+    pub error: Option<Problem>,
+    /// Link to the result once succeeded.
+    pub result: Option<String>,
+    /// The request, canonical (defaults filled in).
+    #[schema(value_type = Object)]
+    pub request: serde_json::Value,
+}
+
+pub struct Job {
+    pub view: watch::Sender<JobView>,
+    pub stop: AtomicBool,
+    pub timed_out: AtomicBool,
+    pub analysis: Analysis,
+}
+
+impl Job {
+    pub fn snapshot(&self) -> JobView {
+        self.view.borrow().clone()
+    }
+}
+
+pub fn now() -> String {
+    // RFC 3339 in UTC from the system clock, without a date-time crate: days → civil date (Howard Hinnant's
+    // algorithm).
+    let d = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    let secs = d.as_secs() as i64;
+    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{:03}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60,
+        d.subsec_millis()
+    )
+}
+
+/// The job id of a request: SHA-256 over the shape id, the canonical analysis JSON and the algorithm version
+/// (first 32 hex digits).
+pub fn job_id(shape_id: &str, canonical: &serde_json::Value) -> String {
+    let mut h = Sha256::new();
+    h.update(shape_id.as_bytes());
+    h.update([0]);
+    h.update(serde_json::to_vec(canonical).unwrap_or_default());
+    h.update([0]);
+    h.update(analysis::ALGORITHM_VERSION.to_le_bytes());
+    h.finalize().iter().take(16).map(|b| format!("{b:02x}")).collect()
+}
+
+pub struct Jobs {
+    pub pool: rayon::ThreadPool,
+    pub jobs: Mutex<HashMap<String, Arc<Job>>>,
+    /// Enqueued plus processing.
+    pub active: AtomicUsize,
+    pub capacity: usize,
+}
+
+impl Jobs {
+    pub fn new(workers: usize, capacity: usize) -> Self {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(workers)
+            .thread_name(|i| format!("kac-worker-{i}"))
+            .build()
+            .expect("a rayon pool with at least one thread");
+        Jobs { pool, jobs: Mutex::new(HashMap::new()), active: AtomicUsize::new(0), capacity }
+    }
+    pub fn get(&self, id: &str) -> Option<Arc<Job>> {
+        self.jobs.lock().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
+    }
+    pub fn list(&self) -> Vec<JobView> {
+        let mut v: Vec<JobView> =
+            self.jobs.lock().unwrap_or_else(|e| e.into_inner()).values().map(|j| j.snapshot()).collect();
+        v.sort_by(|a, b| a.created_at.cmp(&b.created_at).then(a.id.cmp(&b.id)));
+        v
+    }
+}
+
+/// Submits a job, or returns the existing one for the same request (true: newly enqueued).
+pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(Arc<Job>, bool), ApiError> {
+    check_limits(state, &analysis)?;
+    let canonical = serde_json::to_value(&analysis).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
+    let id = job_id(&shape.id, &canonical);
+    let jobs = &state.jobs;
+    let job = {
+        let mut map = jobs.jobs.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(j) = map.get(&id) {
+            let st = j.snapshot().status;
+            if !matches!(st, Status::Failed | Status::Canceled) {
+                return Ok((j.clone(), false));
+            }
+        }
+        // Reserve a place in the queue.
+        let active = jobs.active.load(Ordering::SeqCst);
+        if active >= jobs.capacity {
+            return Err(ApiError::QueueFull { capacity: jobs.capacity, retry_after_s: 2 });
+        }
+        jobs.active.fetch_add(1, Ordering::SeqCst);
+        let view = JobView {
+            id: id.clone(),
+            shape_id: shape.id.clone(),
+            analysis: analysis.name().into(),
+            status: Status::Enqueued,
+            progress: JobProgress { phase: "queued".into(), converged: 0, wanted: 0 },
+            created_at: now(),
+            started_at: None,
+            finished_at: None,
+            error: None,
+            result: None,
+            request: canonical,
+        };
+        let job = Arc::new(Job {
+            view: watch::Sender::new(view),
+            stop: AtomicBool::new(false),
+            timed_out: AtomicBool::new(false),
+            analysis,
+        });
+        map.insert(id.clone(), job.clone());
+        job
+    };
+    state.metrics.jobs_submitted.fetch_add(1, Ordering::Relaxed);
+    let st = state.clone();
+    let j = job.clone();
+    jobs.pool.spawn_fifo(move || execute(&st, &j, &shape));
+    // Stop the job when it runs too long.
+    let (st, j) = (state.clone(), job.clone());
+    let timeout = std::time::Duration::from_secs(state.config.job_timeout_s);
+    tokio::spawn(async move {
+        tokio::time::sleep(timeout).await;
+        if !j.snapshot().status.terminal() {
+            j.timed_out.store(true, Ordering::SeqCst);
+            j.stop.store(true, Ordering::SeqCst);
+        }
+        drop(st);
+    });
+    Ok((job, true))
+}
+
+fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
+    let k = match a {
+        Analysis::Spectrum { k, .. }
+        | Analysis::Hks { k, .. }
+        | Analysis::SiHks { k, .. }
+        | Analysis::Wks { k, .. }
+        | Analysis::Gps { k, .. }
+        | Analysis::Heat { k, .. } => *k,
+        Analysis::ShapeDna { options, .. } => options.k,
+        Analysis::Embed { dimensions, .. } => *dimensions,
+        _ => 0,
+    };
+    if k > state.config.max_k {
+        return Err(ApiError::Limit {
+            code: "k-too-large",
+            detail: format!("k = {k} is above the limit of {} (--max-k)", state.config.max_k),
+        });
+    }
+    Ok(())
+}
+
+fn finish(job: &Job, status: Status, error: Option<Problem>, result: Option<String>) {
+    job.view.send_modify(|v| {
+        v.status = status;
+        v.finished_at = Some(now());
+        v.error = error;
+        v.result = result;
+        if status == Status::Succeeded {
+            v.progress.phase = "done".into();
+        }
+    });
+}
+
+fn execute(state: &AppState, job: &Arc<Job>, shape: &StoredShape) {
+    let started = std::time::Instant::now();
+    let outcome = run_job(state, job, shape);
+    state.jobs.active.fetch_sub(1, Ordering::SeqCst);
+    state.metrics.record_job(job.analysis.name(), outcome.name(), started.elapsed().as_secs_f64());
+}
+
+fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
+    if job.stop.load(Ordering::SeqCst) {
+        finish(job, Status::Canceled, Some(canceled()), None);
+        return Status::Canceled;
+    }
+    job.view.send_modify(|v| {
+        v.status = Status::Processing;
+        v.started_at = Some(now());
+        v.progress.phase = "operator".into();
+    });
+    if state.config.test_job_delay_ms > 0 {
+        std::thread::sleep(std::time::Duration::from_millis(state.config.test_job_delay_ms));
+        if job.stop.load(Ordering::SeqCst) {
+            finish(job, Status::Canceled, Some(canceled()), None);
+            return Status::Canceled;
+        }
+    }
+    let progress = |p: Progress| {
+        job.view.send_modify(|v| {
+            v.progress = JobProgress { phase: p.phase.into(), converged: p.converged, wanted: p.wanted };
+        });
+    };
+    let hooks = Hooks {
+        control: Control { progress: Some(&progress), stop: Some(&job.stop) },
+        cache: Some(&*state.cache),
+        threads: state.config.solver_threads,
+    };
+    let panic_on = state.config.test_panic_analysis.as_deref() == Some(job.analysis.name());
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        if panic_on {
+            panic!("test hook: the '{}' analysis panics", job.analysis.name());
+        }
+        analysis::run(&shape.validated, &job.analysis, hooks)
+    }));
+    match result {
+        Err(panic) => {
+            let msg = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".into());
+            let (_, mut p) = ApiError::Internal { detail: format!("the computation panicked: {msg}") }.problem();
+            p.code = "job-panicked".into();
+            p.type_ = "/problems/job-panicked".into();
+            finish(job, Status::Failed, Some(p), None);
+            Status::Failed
+        }
+        Ok(Err(e)) if e.code == "canceled" => {
+            if job.timed_out.load(Ordering::SeqCst) {
+                let (_, mut p) = ApiError::Internal {
+                    detail: format!("the job ran longer than {} s (--job-timeout-s)", state.config.job_timeout_s),
+                }
+                .problem();
+                p.code = "job-timeout".into();
+                p.type_ = "/problems/job-timeout".into();
+                finish(job, Status::Failed, Some(p), None);
+                Status::Failed
+            } else {
+                finish(job, Status::Canceled, Some(canceled()), None);
+                Status::Canceled
+            }
+        }
+        Ok(Err(e)) => {
+            let (_, p) = ApiError::Analysis(e).problem();
+            finish(job, Status::Failed, Some(p), None);
+            Status::Failed
+        }
+        Ok(Ok(out)) => {
+            job.view.send_modify(|v| v.progress.phase = "storing".into());
+            let id = job.snapshot().id;
+            match store_result(&*state.results, &id, out) {
+                Ok(_) => {
+                    finish(job, Status::Succeeded, None, Some(format!("/v1/results/{id}")));
+                    Status::Succeeded
+                }
+                Err(e) => {
+                    let (_, p) =
+                        ApiError::Internal { detail: format!("the result could not be stored: {e}") }.problem();
+                    finish(job, Status::Failed, Some(p), None);
+                    Status::Failed
+                }
+            }
+        }
+    }
+}
+
+fn canceled() -> Problem {
+    let (_, mut p) = ApiError::bad("canceled", "the job was canceled").problem();
+    p.status = 409;
+    p.title = "Canceled".into();
+    p
+}
+
+/// Serializes a result (summary with every array inline) and stores it with its strong ETag.
+pub fn store_result(results: &dyn ResultStore, id: &str, out: analysis::Output) -> std::io::Result<Arc<StoredResult>> {
+    let mut summary = out.summary;
+    let mut arrays = serde_json::Map::new();
+    for a in &out.arrays {
+        arrays.insert(
+            a.name.into(),
+            serde_json::json!({
+                "rows": a.rows, "cols": a.cols, "columns": a.columns,
+                "npy": format!("/v1/results/{id}/arrays/{}.npy", a.name),
+                "ply": format!("/v1/results/{id}/arrays/{}.ply", a.name),
+                "values": a.to_json(),
+            }),
+        );
+    }
+    if let Some(o) = summary.as_object_mut() {
+        o.insert("result_id".into(), id.into());
+        if !arrays.is_empty() {
+            o.insert("arrays".into(), serde_json::Value::Object(arrays));
+        }
+    }
+    let body = serde_json::to_vec(&summary).map_err(std::io::Error::other)?;
+    let etag = format!("\"{}\"", Sha256::digest(&body).iter().take(16).map(|b| format!("{b:02x}")).collect::<String>());
+    results.put(StoredResult { id: id.to_string(), summary, arrays: out.arrays, body, etag })
+}

@@ -1,0 +1,113 @@
+//! `kac serve`: the HTTP service, a thin layer over `kac_core` and [`crate::analysis`]. Shapes are uploaded and
+//! addressed by content hash; analyses run as jobs on a rayon pool behind a bounded queue; results are immutable
+//! JSON (and `.npy` / coloured PLY per array) with strong ETags; every error is RFC 9457 problem+json.
+
+pub mod config;
+pub mod error;
+pub mod jobs;
+pub mod openapi;
+pub mod routes;
+pub mod store;
+
+use config::Config;
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, AtomicU64};
+use std::sync::{Arc, Mutex};
+use store::{EigenCache, FileResults, MemoryShapes, ResultStore, ShapeStore};
+
+/// Counters the service keeps about itself.
+#[derive(Default)]
+pub struct Metrics {
+    pub jobs_submitted: AtomicU64,
+    /// (analysis, status) → (count, total seconds).
+    pub jobs_finished: Mutex<BTreeMap<(String, String), (u64, f64)>>,
+}
+
+impl Metrics {
+    pub fn record_job(&self, analysis: &str, status: &str, seconds: f64) {
+        let mut m = self.jobs_finished.lock().unwrap_or_else(|e| e.into_inner());
+        let e = m.entry((analysis.to_string(), status.to_string())).or_default();
+        e.0 += 1;
+        e.1 += seconds;
+    }
+}
+
+pub struct Inner {
+    pub config: Config,
+    pub shapes: Arc<dyn ShapeStore>,
+    pub results: Arc<dyn ResultStore>,
+    pub cache: Arc<EigenCache>,
+    pub jobs: jobs::Jobs,
+    pub metrics: Metrics,
+    pub draining: AtomicBool,
+}
+
+pub type AppState = Arc<Inner>;
+
+impl Inner {
+    pub fn new(config: Config) -> std::io::Result<AppState> {
+        std::fs::create_dir_all(&config.data_dir)?;
+        let workers = if config.workers == 0 {
+            std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+        } else {
+            config.workers
+        };
+        Ok(Arc::new(Inner {
+            shapes: Arc::new(MemoryShapes::default()),
+            results: Arc::new(FileResults::open(&config.data_dir)?),
+            cache: Arc::new(EigenCache::new(config.cache_bytes)),
+            jobs: jobs::Jobs::new(workers, config.queue_capacity.max(1)),
+            metrics: Metrics::default(),
+            draining: AtomicBool::new(false),
+            config,
+        }))
+    }
+}
+
+/// Starts the server and runs until SIGINT or SIGTERM; prints `{"listening": "ADDR"}` on stdout first.
+pub fn serve(config: Config) -> Result<(), String> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| format!("cannot start the runtime: {e}"))?;
+    rt.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(&config.addr)
+            .await
+            .map_err(|e| format!("cannot listen on {}: {e}", config.addr))?;
+        let addr = listener.local_addr().map_err(|e| e.to_string())?;
+        let state = Inner::new(config).map_err(|e| format!("cannot open the data directory: {e}"))?;
+        let app = routes::router(state.clone());
+        println!("{}", serde_json::json!({ "listening": addr.to_string() }));
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+        let st = state.clone();
+        axum::serve(listener, app)
+            .with_graceful_shutdown(async move {
+                shutdown_signal().await;
+                st.draining.store(true, std::sync::atomic::Ordering::SeqCst);
+            })
+            .await
+            .map_err(|e| format!("server error: {e}"))
+    })
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+}

@@ -1,0 +1,800 @@
+//! Routes under `/v1`, operations endpoints, the OpenAPI document and the interactive docs.
+
+use super::error::{problem_response, ApiError, CODES};
+use super::jobs::{self, JobView, Status};
+use super::openapi::ApiDoc;
+use super::store::{StoredResult, StoredShape};
+use super::AppState;
+use crate::analysis::{self, Analysis, Hooks, OperatorSpec, SolverSpec};
+use axum::body::Bytes;
+use axum::extract::rejection::{BytesRejection, JsonRejection};
+use axum::extract::{DefaultBodyLimit, FromRequest, Multipart, Path, Query, Request, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode, Uri};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use kac_core::descriptors::shape_dna::{self, Metric, Normalization, Reweighting, ShapeDnaOptions};
+use kac_core::io::Format;
+use kac_core::{ReadOptions, ValidateOptions};
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use utoipa::OpenApi;
+use utoipa_swagger_ui::SwaggerUi;
+
+pub fn router(state: AppState) -> Router {
+    let limit = state.config.max_body_bytes;
+    Router::new()
+        .route("/livez", get(livez))
+        .route("/readyz", get(readyz))
+        .route("/v1/shapes", post(upload_shape).get(list_shapes))
+        .route("/v1/shapes/{id}", get(get_shape).delete(delete_shape))
+        .route("/v1/jobs", post(create_job).get(list_jobs))
+        .route("/v1/jobs/{id}", get(get_job).delete(cancel_job))
+        .route("/v1/jobs/{id}/cancel", post(cancel_job))
+        .route("/v1/jobs/{id}/events", get(job_events))
+        .route("/v1/results/{id}", get(get_result))
+        .route("/v1/results/{id}/arrays/{file}", get(get_array))
+        .route("/v1/analyze", post(analyze))
+        .route("/v1/compare", post(compare))
+        .route("/problems/{code}", get(problem_doc))
+        .merge(SwaggerUi::new("/docs").url("/openapi.json", ApiDoc::openapi()))
+        .fallback(not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(DefaultBodyLimit::max(limit))
+        .with_state(state)
+}
+
+async fn not_found(uri: Uri) -> ApiError {
+    ApiError::RouteNotFound { path: uri.path().to_string() }
+}
+
+async fn method_not_allowed() -> ApiError {
+    ApiError::MethodNotAllowed
+}
+
+fn body_error(state: &AppState, e: BytesRejection) -> ApiError {
+    if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+        ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
+    } else {
+        ApiError::bad("invalid-request", e.body_text())
+    }
+}
+
+fn json_error(state: &AppState, e: JsonRejection) -> ApiError {
+    match e {
+        JsonRejection::MissingJsonContentType(_) => {
+            ApiError::UnsupportedMediaType { detail: "send the request body as application/json".into() }
+        }
+        JsonRejection::BytesRejection(b) => body_error(state, b),
+        other if other.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+            ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
+        }
+        other => ApiError::bad("invalid-json", other.body_text()),
+    }
+}
+
+fn with_location(mut r: Response, location: &str) -> Response {
+    if let Ok(v) = HeaderValue::from_str(location) {
+        r.headers_mut().insert(header::LOCATION, v);
+    }
+    r
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Operations
+
+/// Liveness: the process serves requests.
+#[utoipa::path(get, path = "/livez", tag = "operations", responses((status = 200, description = "alive")))]
+async fn livez() -> Json<Value> {
+    Json(json!({ "status": "alive" }))
+}
+
+/// Readiness: not ready while draining (after SIGTERM).
+#[utoipa::path(get, path = "/readyz", tag = "operations", responses(
+    (status = 200, description = "ready"),
+    (status = 503, description = "draining", body = super::error::Problem, content_type = "application/problem+json")))]
+async fn readyz(State(st): State<AppState>) -> Result<Json<Value>, ApiError> {
+    if st.draining.load(Ordering::SeqCst) {
+        return Err(ApiError::NotReady { detail: "the service is shutting down".into() });
+    }
+    Ok(Json(json!({ "status": "ready", "queue": st.jobs.active.load(Ordering::SeqCst), "capacity": st.jobs.capacity })))
+}
+
+/// What a problem `type` means.
+#[utoipa::path(get, path = "/problems/{code}", tag = "operations",
+    params(("code" = String, Path, description = "problem code")),
+    responses((status = 200, description = "the code's description"),
+              (status = 404, description = "unknown code", body = super::error::Problem, content_type = "application/problem+json")))]
+async fn problem_doc(Path(code): Path<String>) -> Result<Json<Value>, ApiError> {
+    CODES
+        .iter()
+        .find(|(c, _)| *c == code)
+        .map(|(c, d)| Json(json!({ "type": format!("/problems/{c}"), "code": c, "description": d })))
+        .ok_or(ApiError::NotFound { what: "problem code", id: code })
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Shapes
+
+/// A stored shape.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct ShapeResource {
+    /// Content hash of the canonical geometry.
+    pub id: String,
+    /// The format it was read from.
+    pub format: String,
+    pub created_at: String,
+    /// Size of the upload in bytes.
+    pub bytes: usize,
+    /// The validation summary (kind, counts, area, volume, topology, repairs), as `kac inspect` prints it.
+    #[schema(value_type = Object)]
+    pub summary: Value,
+    #[schema(value_type = Object)]
+    pub links: Value,
+}
+
+fn shape_resource(s: &StoredShape) -> ShapeResource {
+    ShapeResource {
+        id: s.id.clone(),
+        format: s.format.clone(),
+        created_at: s.created_at.clone(),
+        bytes: s.bytes,
+        summary: s.summary.clone(),
+        links: json!({ "self": format!("/v1/shapes/{}", s.id), "jobs": format!("/v1/jobs?shape_id={}", s.id) }),
+    }
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct UploadQuery {
+    /// Format name (obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx); default: from the
+    /// Content-Type, the multipart file name, or the content.
+    pub format: Option<String>,
+}
+
+/// An upload: bytes, and what may tell their format.
+struct Upload {
+    bytes: Bytes,
+    format: Option<Format>,
+    filename: Option<String>,
+    media_type: Option<String>,
+    /// Other multipart text fields (the synchronous form reads `analysis` from here).
+    fields: Vec<(String, String)>,
+}
+
+fn parse_format(name: &str) -> Result<Format, ApiError> {
+    Format::from_name(name).ok_or_else(|| {
+        ApiError::bad(
+            "invalid-request",
+            format!(
+                "unknown format '{name}'; one of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx"
+            ),
+        )
+    })
+}
+
+async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> Result<Upload, ApiError> {
+    let ct = req.headers().get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
+    let mut up = Upload {
+        bytes: Bytes::new(),
+        format: q_format.as_deref().map(parse_format).transpose()?,
+        filename: None,
+        media_type: None,
+        fields: vec![],
+    };
+    if ct.to_ascii_lowercase().starts_with("multipart/form-data") {
+        let mut mp = Multipart::from_request(req, st)
+            .await
+            .map_err(|e| ApiError::bad("invalid-request", format!("multipart: {}", e.body_text())))?;
+        let mut got = false;
+        loop {
+            let field = match mp.next_field().await {
+                Ok(Some(f)) => f,
+                Ok(None) => break,
+                Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+                    return Err(ApiError::BodyTooLarge { limit: st.config.max_body_bytes })
+                }
+                Err(e) => return Err(ApiError::bad("invalid-request", format!("multipart: {}", e.body_text()))),
+            };
+            let name = field.name().unwrap_or("").to_string();
+            let filename = field.file_name().map(str::to_string);
+            let media = field.content_type().map(str::to_string);
+            let data = field.bytes().await.map_err(|e| {
+                if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                    ApiError::BodyTooLarge { limit: st.config.max_body_bytes }
+                } else {
+                    ApiError::bad("invalid-request", format!("multipart: {}", e.body_text()))
+                }
+            })?;
+            if !got && (filename.is_some() || name == "file" || name == "shape") {
+                up.bytes = data;
+                up.filename = filename;
+                up.media_type = media;
+                got = true;
+            } else if name == "format" {
+                let f = String::from_utf8_lossy(&data).trim().to_string();
+                up.format = Some(parse_format(&f)?);
+            } else {
+                up.fields.push((name, String::from_utf8_lossy(&data).into_owned()));
+            }
+        }
+        if !got {
+            return Err(ApiError::bad("invalid-request", "the multipart body has no file part (name it 'file')"));
+        }
+    } else {
+        up.media_type = (!ct.is_empty()).then_some(ct);
+        up.bytes = Bytes::from_request(req, st).await.map_err(|e| body_error(st, e))?;
+    }
+    Ok(up)
+}
+
+/// Parses and validates an upload (on the blocking pool) and stores it: (created, shape).
+async fn ingest(st: &AppState, up: Upload) -> Result<(bool, Arc<StoredShape>), ApiError> {
+    if up.bytes.is_empty() {
+        return Err(ApiError::bad("invalid-request", "the request body is empty; send the shape file"));
+    }
+    let format = match up.format {
+        Some(f) => f,
+        None => {
+            let by_name = up
+                .filename
+                .as_deref()
+                .and_then(|n| std::path::Path::new(n).extension())
+                .and_then(|e| e.to_str())
+                .and_then(Format::from_name);
+            let by_media = up
+                .media_type
+                .as_deref()
+                .filter(|m| !m.starts_with("application/octet-stream") && !m.starts_with("text/plain"))
+                .and_then(Format::from_media_type);
+            match by_name.or(by_media) {
+                Some(f) => f,
+                None => kac_core::io::choose_format(None, None, &up.bytes)?,
+            }
+        }
+    };
+    let max_vertices = st.config.max_vertices;
+    let bytes = up.bytes.clone();
+    let v = tokio::task::spawn_blocking(move || {
+        let read = ReadOptions { max_vertices, ..Default::default() };
+        kac_core::load_bytes(&bytes, format, &read, &ValidateOptions::default())
+    })
+    .await
+    .map_err(|e| ApiError::Internal { detail: format!("validation panicked: {e}") })??;
+    if v.shape.vertex_count() > max_vertices {
+        return Err(ApiError::Shape(kac_core::ShapeError::LimitExceeded {
+            what: "the vertex count".into(),
+            value: v.shape.vertex_count() as u64,
+            limit: max_vertices as u64,
+        }));
+    }
+    let summary = serde_json::to_value(v.summary()).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
+    let stored = StoredShape {
+        id: v.id.hex(),
+        validated: v,
+        summary,
+        format: format.name().into(),
+        created_at: jobs::now(),
+        bytes: up.bytes.len(),
+    };
+    Ok(st.shapes.insert(stored))
+}
+
+/// Upload a shape: the file as the raw body (format from `?format=`, the Content-Type, or the content) or as a
+/// multipart part named `file`. Idempotent by content hash: 201 the first time, 200 after.
+#[utoipa::path(post, path = "/v1/shapes", tag = "shapes", params(UploadQuery),
+    request_body(content = Vec<u8>, description = "the shape file (raw or multipart/form-data with a 'file' part)", content_type = "application/octet-stream"),
+    responses(
+        (status = 201, description = "stored", body = ShapeResource, headers(("Location" = String))),
+        (status = 200, description = "already stored", body = ShapeResource, headers(("Location" = String))),
+        (status = 400, description = "bad request", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 413, description = "too large", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 415, description = "unknown format", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "invalid shape", body = super::error::Problem, content_type = "application/problem+json")))]
+async fn upload_shape(
+    State(st): State<AppState>,
+    Query(q): Query<UploadQuery>,
+    req: Request,
+) -> Result<Response, ApiError> {
+    let up = read_upload(&st, q.format, req).await?;
+    let (created, shape) = ingest(&st, up).await?;
+    let status = if created { StatusCode::CREATED } else { StatusCode::OK };
+    let loc = format!("/v1/shapes/{}", shape.id);
+    Ok(with_location((status, Json(shape_resource(&shape))).into_response(), &loc))
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct Page {
+    /// At most this many (default 100, at most 1000).
+    pub limit: Option<usize>,
+    pub offset: Option<usize>,
+}
+
+/// List stored shapes (id order).
+#[utoipa::path(get, path = "/v1/shapes", tag = "shapes", params(Page), responses((status = 200, description = "a page of shapes")))]
+async fn list_shapes(State(st): State<AppState>, Query(p): Query<Page>) -> Json<Value> {
+    let limit = p.limit.unwrap_or(100).min(1000);
+    let offset = p.offset.unwrap_or(0);
+    let (items, total) = st.shapes.list(offset, limit);
+    let items: Vec<ShapeResource> = items.iter().map(|s| shape_resource(s)).collect();
+    Json(json!({ "total": total, "offset": offset, "limit": limit, "items": items }))
+}
+
+/// A stored shape with its validation summary.
+#[utoipa::path(get, path = "/v1/shapes/{id}", tag = "shapes", params(("id" = String, Path)),
+    responses((status = 200, body = ShapeResource),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn get_shape(State(st): State<AppState>, Path(id): Path<String>) -> Result<Json<ShapeResource>, ApiError> {
+    st.shapes.get(&id).map(|s| Json(shape_resource(&s))).ok_or(ApiError::NotFound { what: "shape", id })
+}
+
+/// Delete a stored shape (its finished results stay available by id).
+#[utoipa::path(delete, path = "/v1/shapes/{id}", tag = "shapes", params(("id" = String, Path)),
+    responses((status = 204, description = "deleted"),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn delete_shape(State(st): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+    if st.shapes.remove(&id) {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::NotFound { what: "shape", id })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Jobs
+
+/// A job request: the shape and the analysis with its parameters (`{"shape_id": "…", "analysis": "hks", "k": 50}`).
+#[derive(Deserialize, Serialize, utoipa::ToSchema)]
+pub struct JobRequest {
+    pub shape_id: String,
+    #[serde(flatten)]
+    pub analysis: Analysis,
+}
+
+fn job_response(status: StatusCode, v: &JobView) -> Response {
+    with_location((status, Json(job_json(v))).into_response(), &format!("/v1/jobs/{}", v.id))
+}
+
+fn job_json(v: &JobView) -> Value {
+    let mut j = serde_json::to_value(v).unwrap_or(Value::Null);
+    if let Some(o) = j.as_object_mut() {
+        o.insert(
+            "links".into(),
+            json!({ "self": format!("/v1/jobs/{}", v.id), "events": format!("/v1/jobs/{}/events", v.id), "shape": format!("/v1/shapes/{}", v.shape_id) }),
+        );
+    }
+    j
+}
+
+/// Submit an analysis of a stored shape: 202 with the job (a repeated request returns the existing job, 200).
+#[utoipa::path(post, path = "/v1/jobs", tag = "jobs", request_body = JobRequest,
+    responses(
+        (status = 202, description = "enqueued", body = JobView, headers(("Location" = String))),
+        (status = 200, description = "the same request was already submitted", body = JobView, headers(("Location" = String))),
+        (status = 400, body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 404, description = "no such shape", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 413, description = "k above --max-k", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "queue full", body = super::error::Problem, content_type = "application/problem+json", headers(("Retry-After" = u64)))))]
+async fn create_job(
+    State(st): State<AppState>,
+    body: Result<Json<JobRequest>, JsonRejection>,
+) -> Result<Response, ApiError> {
+    let Json(req) = body.map_err(|e| json_error(&st, e))?;
+    let shape = st.shapes.get(&req.shape_id).ok_or(ApiError::NotFound { what: "shape", id: req.shape_id.clone() })?;
+    let (job, created) = jobs::submit(&st, shape, req.analysis)?;
+    Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job.snapshot()))
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct JobFilter {
+    /// enqueued, processing, succeeded, failed, canceled.
+    pub status: Option<String>,
+    pub shape_id: Option<String>,
+    /// Analysis name (spectrum, hks, …).
+    pub analysis: Option<String>,
+    pub limit: Option<usize>,
+    pub offset: Option<usize>,
+}
+
+/// List jobs, oldest first, with filters.
+#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobFilter), responses((status = 200, description = "a page of jobs")))]
+async fn list_jobs(State(st): State<AppState>, Query(f): Query<JobFilter>) -> Json<Value> {
+    let all: Vec<JobView> = st
+        .jobs
+        .list()
+        .into_iter()
+        .filter(|j| f.status.as_deref().is_none_or(|s| j.status.name() == s))
+        .filter(|j| f.shape_id.as_deref().is_none_or(|s| j.shape_id == s))
+        .filter(|j| f.analysis.as_deref().is_none_or(|a| j.analysis == a))
+        .collect();
+    let limit = f.limit.unwrap_or(100).min(1000);
+    let offset = f.offset.unwrap_or(0);
+    let items: Vec<Value> = all.iter().skip(offset).take(limit).map(job_json).collect();
+    Json(json!({ "total": all.len(), "offset": offset, "limit": limit, "items": items }))
+}
+
+/// A job: status, progress, timestamps, error (problem detail) and result link.
+#[utoipa::path(get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path)),
+    responses((status = 200, body = JobView), (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn get_job(State(st): State<AppState>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
+    st.jobs.get(&id).map(|j| Json(job_json(&j.snapshot()))).ok_or(ApiError::NotFound { what: "job", id })
+}
+
+/// Cancel a job (POST `/v1/jobs/{id}/cancel` or DELETE `/v1/jobs/{id}`): an enqueued job never starts, a running
+/// eigensolve stops at its next block step. Finished jobs are left as they are.
+#[utoipa::path(post, path = "/v1/jobs/{id}/cancel", tag = "jobs", params(("id" = String, Path)),
+    responses((status = 202, description = "cancellation requested", body = JobView),
+              (status = 200, description = "already finished", body = JobView),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let job = st.jobs.get(&id).ok_or(ApiError::NotFound { what: "job", id })?;
+    let view = job.snapshot();
+    if view.status.terminal() {
+        return Ok(job_response(StatusCode::OK, &view));
+    }
+    job.stop.store(true, Ordering::SeqCst);
+    if view.status == Status::Enqueued {
+        job.view.send_modify(|v| {
+            if v.status == Status::Enqueued {
+                v.status = Status::Canceled;
+                v.finished_at = Some(jobs::now());
+            }
+        });
+    }
+    Ok(job_response(StatusCode::ACCEPTED, &job.snapshot()))
+}
+
+/// Progress as server-sent events: one `job` event with the job object on every change, until it finishes.
+#[utoipa::path(get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path)),
+    responses((status = 200, description = "text/event-stream of job objects", content_type = "text/event-stream"),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn job_events(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let job = st.jobs.get(&id).ok_or(ApiError::NotFound { what: "job", id })?;
+    let rx = job.view.subscribe();
+    let stream = futures_util::stream::unfold((rx, false, true), |(mut rx, done, first)| async move {
+        if done {
+            return None;
+        }
+        if !first && rx.changed().await.is_err() {
+            return None;
+        }
+        let v = rx.borrow_and_update().clone();
+        let terminal = v.status.terminal();
+        let ev = Event::default().event("job").json_data(job_json(&v)).unwrap_or_default();
+        Some((Ok::<_, std::convert::Infallible>(ev), (rx, terminal, false)))
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Results
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct ResultQuery {
+    /// Include per-vertex values inline (default true; false gives the summary and the array links only).
+    pub values: Option<bool>,
+}
+
+fn immutable(mut r: Response, etag: &str) -> Response {
+    let h = r.headers_mut();
+    if let Ok(v) = HeaderValue::from_str(etag) {
+        h.insert(header::ETAG, v);
+    }
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("public, max-age=31536000, immutable"));
+    r
+}
+
+fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+    headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"))
+}
+
+fn result_body(r: &StoredResult, values: bool) -> (Vec<u8>, String) {
+    if values {
+        return (r.body.clone(), r.etag.clone());
+    }
+    let mut s = r.summary.clone();
+    if let Some(arrays) = s.get_mut("arrays").and_then(Value::as_object_mut) {
+        for a in arrays.values_mut() {
+            if let Some(o) = a.as_object_mut() {
+                o.remove("values");
+            }
+        }
+    }
+    let body = serde_json::to_vec(&s).unwrap_or_default();
+    let etag = format!("\"{}-summary\"", r.etag.trim_matches('"'));
+    (body, etag)
+}
+
+fn result_response(r: &StoredResult, headers: &HeaderMap, values: bool) -> Response {
+    let (body, etag) = result_body(r, values);
+    if not_modified(headers, &etag) {
+        return immutable(StatusCode::NOT_MODIFIED.into_response(), &etag);
+    }
+    let mut resp = (StatusCode::OK, body).into_response();
+    resp.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static("application/json"));
+    immutable(resp, &etag)
+}
+
+/// A finished result (immutable; strong ETag, `If-None-Match` → 304).
+#[utoipa::path(get, path = "/v1/results/{id}", tag = "results", params(("id" = String, Path), ResultQuery),
+    responses((status = 200, description = "the result JSON: every parameter used, the numbers, per-vertex arrays with .npy and .ply links"),
+              (status = 304, description = "not modified"),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn get_result(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+    Query(q): Query<ResultQuery>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let r = st.results.get(&id).ok_or(ApiError::NotFound { what: "result", id })?;
+    Ok(result_response(&r, &headers, q.values.unwrap_or(true)))
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct ArrayQuery {
+    /// PLY: which column colours the vertices (default 0).
+    pub column: Option<usize>,
+}
+
+/// A per-vertex array of a result: `NAME.npy` (float64, rows in the upload's vertex numbering), `NAME.json`, or
+/// `NAME.ply` (the shape with one column as vertex colours, for viewing).
+#[utoipa::path(get, path = "/v1/results/{id}/arrays/{file}", tag = "results",
+    params(("id" = String, Path), ("file" = String, Path, description = "NAME.npy, NAME.json or NAME.ply"), ArrayQuery),
+    responses((status = 200, description = "the array"), (status = 304, description = "not modified"),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn get_array(
+    State(st): State<AppState>,
+    Path((id, file)): Path<(String, String)>,
+    Query(q): Query<ArrayQuery>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let r = st.results.get(&id).ok_or(ApiError::NotFound { what: "result", id: id.clone() })?;
+    let (name, ext) = file.rsplit_once('.').ok_or(ApiError::NotFound { what: "array", id: file.clone() })?;
+    let a = r.arrays.iter().find(|a| a.name == name).ok_or(ApiError::NotFound { what: "array", id: file.clone() })?;
+    let col = q.column.unwrap_or(0);
+    let etag = format!("\"{}-{name}-{ext}-{col}\"", r.etag.trim_matches('"'));
+    if not_modified(&headers, &etag) {
+        return Ok(immutable(StatusCode::NOT_MODIFIED.into_response(), &etag));
+    }
+    let (body, ct): (Vec<u8>, &'static str) = match ext {
+        "npy" => (kac_core::io::npy::encode_f64(a.rows, a.cols, &a.data), "application/octet-stream"),
+        "json" => (
+            serde_json::to_vec(&json!({ "rows": a.rows, "cols": a.cols, "columns": a.columns, "values": a.to_json() }))
+                .unwrap_or_default(),
+            "application/json",
+        ),
+        "ply" => {
+            if col >= a.cols {
+                return Err(ApiError::bad(
+                    "invalid-request",
+                    format!("column {col} does not exist ({} columns)", a.cols),
+                ));
+            }
+            let shape_id = r.summary["shape_id"].as_str().unwrap_or("").to_string();
+            let shape = st.shapes.get(&shape_id).ok_or(ApiError::NotFound { what: "shape", id: shape_id })?;
+            (coloured_ply(&shape, a, col), "application/x-ply")
+        }
+        _ => return Err(ApiError::NotFound { what: "array format", id: file }),
+    };
+    let mut resp = (StatusCode::OK, body).into_response();
+    resp.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(ct));
+    Ok(immutable(resp, &etag))
+}
+
+/// The validated shape as binary PLY with one array column mapped to colours (dark blue → yellow, a
+/// viridis-like ramp over the finite range; NaN grey).
+fn coloured_ply(shape: &StoredShape, a: &analysis::VertexArray, col: usize) -> Vec<u8> {
+    let v = &shape.validated;
+    let n = v.shape.vertex_count();
+    let mut vals = vec![f64::NAN; n];
+    for (input, &m) in v.vertex_map.iter().enumerate() {
+        if m != u32::MAX && vals[m as usize].is_nan() {
+            vals[m as usize] = a.data[input * a.cols + col];
+        }
+    }
+    let (lo, hi) = vals.iter().filter(|x| x.is_finite()).fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    const RAMP: [[f64; 3]; 5] =
+        [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
+    let colors: Vec<[u8; 3]> = vals
+        .iter()
+        .map(|&x| {
+            if !x.is_finite() {
+                return [128, 128, 128];
+            }
+            let t = if hi > lo { (x - lo) / (hi - lo) } else { 0.5 } * 4.0;
+            let i = (t.floor() as usize).min(3);
+            let f = t - i as f64;
+            let c = |k: usize| (RAMP[i][k] * (1.0 - f) + RAMP[i + 1][k] * f).round() as u8;
+            [c(0), c(1), c(2)]
+        })
+        .collect();
+    kac_core::io::write::ply(&v.shape, true, Some(&colors))
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Synchronous form and comparison
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct AnalyzeQuery {
+    /// Seconds to wait for the result (default 10, at most --max-wait-s).
+    pub wait: Option<f64>,
+    /// Format of the shape (as for uploads).
+    pub format: Option<String>,
+    /// The analysis as JSON (`{"analysis":"spectrum","k":10}`), when the body is the raw shape.
+    pub analysis: Option<String>,
+}
+
+/// Upload and analyse in one request: multipart with a `file` part and an `analysis` part (JSON), or the raw
+/// shape as the body and `?analysis=JSON`. Returns the result (200) when it is ready within `wait` seconds, the
+/// job (202) otherwise, or the job's problem if it failed.
+#[utoipa::path(post, path = "/v1/analyze", tag = "jobs", params(AnalyzeQuery),
+    request_body(content = Vec<u8>, description = "multipart/form-data with 'file' and 'analysis' parts, or the raw shape", content_type = "multipart/form-data"),
+    responses((status = 200, description = "the result"),
+              (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
+              (status = 400, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 422, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 503, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn analyze(
+    State(st): State<AppState>,
+    Query(q): Query<AnalyzeQuery>,
+    req: Request,
+) -> Result<Response, ApiError> {
+    let headers = req.headers().clone();
+    let mut up = read_upload(&st, q.format.clone(), req).await?;
+    let text = q
+        .analysis
+        .clone()
+        .or_else(|| up.fields.iter().find(|(n, _)| n == "analysis").map(|(_, v)| v.clone()))
+        .ok_or_else(|| {
+        ApiError::bad("invalid-request", "give the analysis as a multipart part or ?analysis=JSON")
+    })?;
+    let analysis: Analysis =
+        serde_json::from_str(&text).map_err(|e| ApiError::bad("invalid-json", format!("analysis: {e}")))?;
+    up.fields.clear();
+    let (_, shape) = ingest(&st, up).await?;
+    let (job, _) = jobs::submit(&st, shape, analysis)?;
+    let wait = q.wait.unwrap_or(10.0).clamp(0.0, st.config.max_wait_s as f64);
+    let mut rx = job.view.subscribe();
+    let _ = tokio::time::timeout(std::time::Duration::from_secs_f64(wait), async {
+        loop {
+            if rx.borrow_and_update().status.terminal() {
+                break;
+            }
+            if rx.changed().await.is_err() {
+                break;
+            }
+        }
+    })
+    .await;
+    let view = job.snapshot();
+    match view.status {
+        Status::Succeeded => {
+            let r = st.results.get(&view.id).ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
+            Ok(with_location(result_response(&r, &headers, true), &format!("/v1/results/{}", view.id)))
+        }
+        Status::Failed | Status::Canceled => {
+            let p = view.error.clone().ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
+            let status = StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+            Ok(with_location(problem_response(status, &p), &format!("/v1/jobs/{}", view.id)))
+        }
+        _ => Ok(job_response(StatusCode::ACCEPTED, &view)),
+    }
+}
+
+/// Distances between stored shapes by shape-DNA, and each shape's nearest neighbours.
+#[derive(Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CompareRequest {
+    /// Shapes to compare (default: every stored shape, at most 500).
+    pub shape_ids: Option<Vec<String>>,
+    /// Fingerprint length (default 50).
+    #[serde(default = "default_dna_k")]
+    pub k: usize,
+    #[serde(default)]
+    pub normalization: Normalization,
+    #[serde(default)]
+    pub reweighting: Reweighting,
+    #[serde(default)]
+    pub include_zero: bool,
+    #[serde(default)]
+    pub metric: Metric,
+    /// Nearest neighbours listed per shape (default 5).
+    #[serde(default = "default_neighbours")]
+    pub neighbours: usize,
+    #[serde(default)]
+    pub operator: OperatorSpec,
+}
+
+fn default_dna_k() -> usize {
+    50
+}
+fn default_neighbours() -> usize {
+    5
+}
+
+#[utoipa::path(post, path = "/v1/compare", tag = "jobs", request_body = CompareRequest,
+    responses((status = 200, description = "the distance matrix and nearest neighbours"),
+              (status = 400, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 422, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn compare(
+    State(st): State<AppState>,
+    body: Result<Json<CompareRequest>, JsonRejection>,
+) -> Result<Json<Value>, ApiError> {
+    let Json(req) = body.map_err(|e| json_error(&st, e))?;
+    if req.k > st.config.max_k {
+        return Err(ApiError::Limit {
+            code: "k-too-large",
+            detail: format!("k = {} is above --max-k {}", req.k, st.config.max_k),
+        });
+    }
+    let shapes: Vec<Arc<StoredShape>> = match &req.shape_ids {
+        Some(ids) => ids
+            .iter()
+            .map(|id| st.shapes.get(id).ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() }))
+            .collect::<Result<_, _>>()?,
+        None => st.shapes.list(0, 500).0,
+    };
+    if shapes.len() > 500 {
+        return Err(ApiError::bad("invalid-request", "at most 500 shapes per comparison"));
+    }
+    let options = ShapeDnaOptions {
+        k: req.k,
+        include_zero: req.include_zero,
+        normalization: req.normalization,
+        reweighting: req.reweighting,
+    };
+    let analysis =
+        Analysis::ShapeDna { options: options.clone(), operator: req.operator.clone(), solver: SolverSpec::default() };
+    let cache = st.cache.clone();
+    let threads = st.config.solver_threads;
+    let list = shapes.clone();
+    let dnas = tokio::task::spawn_blocking(move || {
+        list.iter()
+            .map(|s| {
+                let out = analysis::run(
+                    &s.validated,
+                    &analysis,
+                    Hooks { cache: Some(&*cache), threads, ..Default::default() },
+                )?;
+                let v: Vec<f64> =
+                    serde_json::from_value(out.summary["shape_dna"]["values"].clone()).unwrap_or_default();
+                Ok::<_, analysis::AnalysisError>(v)
+            })
+            .collect::<Result<Vec<_>, _>>()
+    })
+    .await
+    .map_err(|e| ApiError::Internal { detail: format!("comparison panicked: {e}") })??;
+    let n = shapes.len();
+    let mut d = vec![vec![0.0; n]; n];
+    for i in 0..n {
+        for j in i + 1..n {
+            let x = shape_dna::distance(&dnas[i], &dnas[j], req.metric).map_err(|e| ApiError::Analysis(e.into()))?;
+            d[i][j] = x;
+            d[j][i] = x;
+        }
+    }
+    let ids: Vec<&str> = shapes.iter().map(|s| s.id.as_str()).collect();
+    let nearest: Vec<Value> = (0..n)
+        .map(|i| {
+            let mut o: Vec<usize> = (0..n).filter(|&j| j != i).collect();
+            o.sort_by(|&a, &b| d[i][a].total_cmp(&d[i][b]));
+            json!({ "shape_id": ids[i], "nearest": o.iter().take(req.neighbours).map(|&j| json!({ "shape_id": ids[j], "distance": d[i][j] })).collect::<Vec<_>>() })
+        })
+        .collect();
+    Ok(Json(json!({
+        "descriptor": "shape-dna",
+        "options": options,
+        "metric": req.metric.name(),
+        "operator": req.operator,
+        "shape_ids": ids,
+        "fingerprints": dnas,
+        "distances": d,
+        "nearest": nearest,
+    })))
+}

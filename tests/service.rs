@@ -1,0 +1,378 @@
+//! The service over real HTTP: the `kac serve` binary on a loopback port, driven with a plain HTTP client.
+//! Uploads of every shared mesh, results equal to the library's, idempotency, cancellation, a panicking job,
+//! every class of bad input with its problem code, a full queue, the OpenAPI document, and the README's curl
+//! walkthrough run as written.
+
+mod common;
+
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+struct Server {
+    child: Child,
+    base: String,
+    _dir: tempfile::TempDir,
+}
+
+impl Server {
+    fn start(extra: &[&str]) -> Server {
+        let dir = tempfile::tempdir().unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_kac"))
+            .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
+            .arg(dir.path())
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let v: Value = serde_json::from_str(&line).unwrap_or_else(|_| panic!("first line: {line}"));
+        let base = format!("http://{}", v["listening"].as_str().unwrap());
+        Server { child, base, _dir: dir }
+    }
+    fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.base)
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn agent() -> ureq::Agent {
+    ureq::AgentBuilder::new().timeout(Duration::from_secs(120)).build()
+}
+
+/// (status, headers we look at, body as JSON or Null).
+struct Reply {
+    status: u16,
+    location: Option<String>,
+    content_type: String,
+    etag: Option<String>,
+    retry_after: Option<String>,
+    body: Value,
+    raw: Vec<u8>,
+}
+
+fn reply(r: Result<ureq::Response, ureq::Error>) -> Reply {
+    let resp = match r {
+        Ok(r) => r,
+        Err(ureq::Error::Status(_, r)) => r,
+        Err(e) => panic!("transport error: {e}"),
+    };
+    let status = resp.status();
+    let location = resp.header("location").map(str::to_string);
+    let content_type = resp.header("content-type").unwrap_or("").to_string();
+    let etag = resp.header("etag").map(str::to_string);
+    let retry_after = resp.header("retry-after").map(str::to_string);
+    let mut raw = vec![];
+    std::io::Read::read_to_end(&mut resp.into_reader(), &mut raw).unwrap();
+    let body = serde_json::from_slice(&raw).unwrap_or(Value::Null);
+    Reply { status, location, content_type, etag, retry_after, body, raw }
+}
+
+fn upload(s: &Server, bytes: &[u8], query: &str) -> Reply {
+    reply(agent().post(&s.url(&format!("/v1/shapes{query}"))).send_bytes(bytes))
+}
+
+fn submit(s: &Server, req: Value) -> Reply {
+    reply(agent().post(&s.url("/v1/jobs")).send_json(req))
+}
+
+fn wait_done(s: &Server, job: &str) -> Value {
+    let t = Instant::now();
+    loop {
+        let r = reply(agent().get(&s.url(&format!("/v1/jobs/{job}"))).call());
+        let st = r.body["status"].as_str().unwrap_or("").to_string();
+        if ["succeeded", "failed", "canceled"].contains(&st.as_str()) {
+            return r.body;
+        }
+        assert!(t.elapsed() < Duration::from_secs(120), "job {job} stuck in {st}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn assert_problem(r: &Reply, status: u16, code: &str) {
+    assert_eq!(r.status, status, "{}", String::from_utf8_lossy(&r.raw));
+    assert_eq!(r.content_type, "application/problem+json");
+    assert_eq!(r.body["code"], code, "{}", r.body);
+    assert_eq!(r.body["type"], format!("/problems/{code}"));
+    assert_eq!(r.body["status"], status);
+    assert!(r.body["title"].is_string() && r.body["detail"].is_string());
+}
+
+fn icosphere_off(level: u32) -> Vec<u8> {
+    let m = kac_core::geometry::generate::icosphere(level);
+    kac_core::io::write::off(&m).into_bytes()
+}
+
+#[test]
+fn every_shared_mesh_uploads_and_matches_the_library() {
+    let Some(dir) = common::data_or_skip("every_shared_mesh_uploads_and_matches_the_library") else { return };
+    let s = Server::start(&[]);
+    let mut count = 0;
+    for sub in ["obj", "off", "ply", "stl", "gltf", "tet", "points"] {
+        let Ok(entries) = std::fs::read_dir(dir.join(sub)) else { continue };
+        for e in entries.flatten() {
+            let path = e.path();
+            let bytes = std::fs::read(&path).unwrap();
+            let ext = path.extension().and_then(|x| x.to_str()).unwrap_or("").to_lowercase();
+            let lib = kac_core::load(&path, None, &Default::default(), &Default::default());
+            let Some(fmt) = kac_core::Format::from_name(&ext) else { continue };
+            let r = upload(&s, &bytes, &format!("?format={}", fmt.name()));
+            match lib {
+                Ok((v, _)) => {
+                    assert!(r.status == 201 || r.status == 200, "{}: {} {}", path.display(), r.status, r.body);
+                    assert_eq!(r.body["id"], v.id.hex(), "{}", path.display());
+                    assert_eq!(r.body["summary"]["vertices"], v.shape.vertex_count());
+                    assert_eq!(r.location.as_deref(), Some(format!("/v1/shapes/{}", v.id.hex()).as_str()));
+                    count += 1;
+                }
+                Err(err) => assert_problem(&r, r.status, err.code()),
+            }
+        }
+    }
+    assert!(count >= 20, "only {count} shared meshes uploaded");
+    let list = reply(agent().get(&s.url("/v1/shapes?limit=1000")).call());
+    assert!(list.body["total"].as_u64().unwrap() >= 15);
+}
+
+#[test]
+fn spectrum_shape_dna_and_hks_equal_the_library_and_requests_are_idempotent() {
+    let s = Server::start(&[]);
+    let off = icosphere_off(3);
+    let first = upload(&s, &off, "?format=off");
+    assert_eq!(first.status, 201);
+    let again = upload(&s, &off, "");
+    assert_eq!((again.status, &again.location), (200, &first.location), "idempotent upload (format sniffed)");
+    let id = first.body["id"].as_str().unwrap().to_string();
+
+    // The library on the same shape.
+    let v = kac_core::load_bytes(&off, kac_core::Format::Off, &Default::default(), &Default::default()).unwrap();
+    let op = kac_core::operators::build(&v.shape, &Default::default()).unwrap();
+    let opts = kac_core::spectrum::EigenOptions { k: 12, ..Default::default() };
+    let lib = kac_core::spectrum::eigs(&op.pair, &opts, None, Default::default()).unwrap();
+
+    let j = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 12, "eigenvectors": true }));
+    assert_eq!(j.status, 202);
+    let job = j.body["id"].as_str().unwrap().to_string();
+    assert_eq!(j.location.as_deref(), Some(format!("/v1/jobs/{job}").as_str()));
+    let same = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 12, "eigenvectors": true }));
+    assert_eq!((same.status, same.body["id"].as_str()), (200, Some(job.as_str())), "idempotent job");
+    let done = wait_done(&s, &job);
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let res = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call());
+    let got: Vec<f64> = serde_json::from_value(res.body["eigenvalues"].clone()).unwrap();
+    for (a, b) in got.iter().zip(&lib.values) {
+        assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{a} vs {b}");
+    }
+    // Immutable, with a strong ETag and 304 on If-None-Match.
+    let etag = res.etag.clone().unwrap();
+    assert!(etag.starts_with('"'));
+    let r304 = reply(agent().get(&s.url(&format!("/v1/results/{job}"))).set("If-None-Match", &etag).call());
+    assert_eq!(r304.status, 304);
+    // The eigenvectors as .npy and as a coloured PLY.
+    let npy = reply(agent().get(&s.url(&format!("/v1/results/{job}/arrays/eigenvectors.npy"))).call());
+    assert_eq!(npy.status, 200);
+    assert!(npy.raw.starts_with(b"\x93NUMPY"));
+    let ply = reply(agent().get(&s.url(&format!("/v1/results/{job}/arrays/eigenvectors.ply?column=1"))).call());
+    assert!(ply.raw.starts_with(b"ply\n") && String::from_utf8_lossy(&ply.raw[..400]).contains("property uchar red"));
+
+    // Shape-DNA and HKS after the spectrum: equal to the library's, and no eigensolve needed (k ≤ 12 cached).
+    let basis = kac_core::descriptors::Basis::of(&lib, &op.pair);
+    let m = kac_core::descriptors::shape_dna::Measures::of(&v.summary(), None);
+    let dna_opts = kac_core::descriptors::shape_dna::ShapeDnaOptions {
+        k: 8,
+        normalization: kac_core::descriptors::shape_dna::Normalization::Area,
+        ..Default::default()
+    };
+    let lib_dna = kac_core::descriptors::shape_dna::shape_dna(&lib.values, basis.zero_tol, &m, &dna_opts).unwrap();
+    let j =
+        submit(&s, json!({ "shape_id": id, "analysis": "shape-dna", "options": { "k": 8, "normalization": "area" } }));
+    let done = wait_done(&s, j.body["id"].as_str().unwrap());
+    let res = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call());
+    let got: Vec<f64> = serde_json::from_value(res.body["shape_dna"]["values"].clone()).unwrap();
+    for (a, b) in got.iter().zip(&lib_dna.values) {
+        assert!((a - b).abs() <= 1e-10 * b.abs(), "{a} vs {b}");
+    }
+    let times = [0.1, 1.0];
+    let hks_opts = kac_core::descriptors::signatures::HksOptions { times: Some(times.to_vec()), ..Default::default() };
+    let lib_hks = kac_core::descriptors::signatures::hks(&basis, &hks_opts).unwrap();
+    let j = submit(&s, json!({ "shape_id": id, "analysis": "hks", "k": 12, "options": { "times": times } }));
+    let done = wait_done(&s, j.body["id"].as_str().unwrap());
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let res = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call());
+    let rows = res.body["arrays"]["hks"]["values"].as_array().unwrap();
+    assert_eq!(rows.len(), 642);
+    for (i, row) in rows.iter().enumerate().step_by(37) {
+        for c in 0..2 {
+            let (a, b) = (row[c].as_f64().unwrap(), lib_hks.values[(i, c)]);
+            assert!((a - b).abs() <= 1e-10 * b.abs(), "vertex {i}: {a} vs {b}");
+        }
+    }
+    // The synchronous form: upload + analysis in one request, the result within `wait`.
+    let r = reply(
+        agent()
+            .post(&s.url("/v1/analyze?wait=60&format=off&analysis=%7B%22analysis%22%3A%22trees%22%7D"))
+            .send_bytes(&icosphere_off(1)),
+    );
+    assert_eq!(r.status, 200, "{}", r.body);
+    assert!(r.body["trees"]["log_count"].is_number());
+    // Compare: distances between stored shapes, nearest neighbours.
+    upload(&s, &icosphere_off(2), "?format=off");
+    let c = reply(agent().post(&s.url("/v1/compare")).send_json(json!({ "k": 5, "normalization": "area" })));
+    assert_eq!(c.status, 200, "{}", c.body);
+    assert_eq!(c.body["distances"].as_array().unwrap().len(), 3);
+    // Jobs list with filters.
+    let l = reply(agent().get(&s.url(&format!("/v1/jobs?shape_id={id}&status=succeeded"))).call());
+    assert_eq!(l.body["total"], 3);
+    // Progress as server-sent events ends with the finished job.
+    let ev = reply(agent().get(&s.url(&format!("/v1/jobs/{job}/events"))).call());
+    let text = String::from_utf8_lossy(&ev.raw);
+    assert!(
+        ev.content_type.starts_with("text/event-stream") && text.contains("event: job") && text.contains("succeeded")
+    );
+}
+
+#[test]
+fn cancel_panic_and_full_queue() {
+    let s = Server::start(&[
+        "--workers",
+        "1",
+        "--queue-capacity",
+        "3",
+        "--test-job-delay-ms",
+        "1500",
+        "--test-panic-analysis",
+        "trees",
+    ]);
+    let id = upload(&s, &icosphere_off(2), "?format=off").body["id"].as_str().unwrap().to_string();
+    let a = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 3 }));
+    let b = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 4 }));
+    let c = submit(&s, json!({ "shape_id": id, "analysis": "trees" }));
+    assert_eq!((a.status, b.status, c.status), (202, 202, 202));
+    // A fourth job finds the queue full: 503 with Retry-After.
+    let d = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 5 }));
+    assert_problem(&d, 503, "queue-full");
+    assert!(d.retry_after.as_deref().is_some_and(|v| v.parse::<u64>().is_ok()));
+    // Cancel the second while it waits: it never runs.
+    let b_id = b.body["id"].as_str().unwrap();
+    let cancel = reply(agent().post(&s.url(&format!("/v1/jobs/{b_id}/cancel"))).call());
+    assert_eq!(cancel.status, 202);
+    assert_eq!(wait_done(&s, b_id)["status"], "canceled");
+    // The first finishes; the panicking one fails alone and the server keeps serving.
+    assert_eq!(wait_done(&s, a.body["id"].as_str().unwrap())["status"], "succeeded");
+    let failed = wait_done(&s, c.body["id"].as_str().unwrap());
+    assert_eq!(failed["status"], "failed");
+    assert_eq!(failed["error"]["code"], "job-panicked");
+    assert_eq!(reply(agent().get(&s.url("/livez")).call()).status, 200);
+    let e = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 6 }));
+    assert_eq!(wait_done(&s, e.body["id"].as_str().unwrap())["status"], "succeeded");
+    // A canceled job can be submitted again.
+    let again = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 4 }));
+    assert_eq!(again.status, 202);
+}
+
+#[test]
+fn every_class_of_bad_input_gets_its_problem() {
+    let s = Server::start(&["--max-body-bytes", "20000", "--max-vertices", "100", "--max-k", "50"]);
+    assert_problem(&upload(&s, b"certainly not a mesh", ""), 415, "unknown-format");
+    assert_problem(
+        &upload(&s, b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", "?format=off"),
+        422,
+        "index-out-of-range",
+    );
+    assert_problem(
+        &upload(&s, b"OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n", "?format=off"),
+        422,
+        "non-finite-value",
+    );
+    assert_problem(&upload(&s, b"OFF\n3 1 0\n0 0 0\n1 0 0\n", "?format=off"), 422, "truncated-input");
+    assert_problem(&upload(&s, b"", "?format=off"), 400, "invalid-request");
+    assert_problem(&upload(&s, b"v 0 0 0\n", "?format=nope"), 400, "invalid-request");
+    assert_problem(&upload(&s, &vec![b' '; 30000], "?format=off"), 413, "body-too-large");
+    assert_problem(&upload(&s, &icosphere_off(2), "?format=off"), 413, "limit-exceeded");
+    let id = upload(&s, &icosphere_off(1), "?format=off").body["id"].as_str().unwrap().to_string();
+    assert_problem(&submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 51 })), 413, "k-too-large");
+    assert_problem(&submit(&s, json!({ "shape_id": "0000", "analysis": "spectrum" })), 404, "not-found");
+    assert_problem(&submit(&s, json!({ "shape_id": id, "analysis": "sing" })), 400, "invalid-json");
+    assert_problem(
+        &submit(&s, json!({ "shape_id": id, "analysis": "hks", "options": { "count": "many" } })),
+        400,
+        "invalid-json",
+    );
+    let raw = reply(agent().post(&s.url("/v1/jobs")).set("content-type", "text/plain").send_string("{}"));
+    assert_problem(&raw, 415, "unsupported-media-type");
+    assert_problem(&reply(agent().get(&s.url("/v1/nothing")).call()), 404, "route-not-found");
+    assert_problem(&reply(agent().put(&s.url("/v1/shapes")).call()), 405, "method-not-allowed");
+    assert_problem(&reply(agent().get(&s.url("/v1/jobs/abc")).call()), 404, "not-found");
+    assert_problem(&reply(agent().get(&s.url("/v1/results/abc")).call()), 404, "not-found");
+    // An analysis that cannot apply fails its job with a 4xx-class problem: geodesics of a graph.
+    let g = serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(
+        kac_core::geometry::generate::petersen_graph(),
+    )))
+    .unwrap();
+    let gid = upload(&s, &g, "?format=json").body["id"].as_str().unwrap().to_string();
+    let j = submit(&s, json!({ "shape_id": gid, "analysis": "geodesic", "sources": [0] }));
+    let done = wait_done(&s, j.body["id"].as_str().unwrap());
+    assert_eq!(
+        (done["status"].as_str(), done["error"]["code"].as_str(), done["error"]["status"].as_u64()),
+        (Some("failed"), Some("not-applicable"), Some(422))
+    );
+    // Every problem type is documented.
+    let doc = reply(agent().get(&s.url("/problems/queue-full")).call());
+    assert_eq!(doc.status, 200);
+    assert!(doc.body["description"].is_string());
+}
+
+#[test]
+fn openapi_document_is_served_committed_and_documented() {
+    let s = Server::start(&[]);
+    let served = reply(agent().get(&s.url("/openapi.json")).call());
+    assert_eq!(served.status, 200);
+    let committed: Value = serde_json::from_str(
+        &std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("openapi/openapi.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        served.body, committed,
+        "openapi/openapi.json is stale: run `cargo run -- openapi > openapi/openapi.json`"
+    );
+    for path in ["/v1/shapes", "/v1/jobs", "/v1/jobs/{id}", "/v1/results/{id}", "/v1/analyze", "/v1/compare"] {
+        assert!(committed["paths"][path].is_object(), "{path} is not documented");
+    }
+    let docs = reply(agent().get(&s.url("/docs/")).call());
+    assert_eq!(docs.status, 200);
+    assert!(String::from_utf8_lossy(&docs.raw).to_lowercase().contains("swagger"));
+    // The UI's assets come from the binary, not from a CDN.
+    let html = String::from_utf8_lossy(&docs.raw).to_string();
+    assert!(!html.contains("https://"), "the docs page loads remote assets");
+}
+
+#[test]
+fn readme_curl_walkthrough_runs_as_written() {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let start = readme.find("<!-- walkthrough:start -->").expect("README has a walkthrough");
+    let end = readme.find("<!-- walkthrough:end -->").unwrap();
+    let block = &readme[start..end];
+    let script: String =
+        block.split("```sh").skip(1).map(|b| b.split("```").next().unwrap_or("")).collect::<Vec<_>>().join("\n");
+    let s = Server::start(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new("bash")
+        .args(["-euo", "pipefail", "-c", &script])
+        .current_dir(dir.path())
+        .env("KAC", &s.base)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "walkthrough failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("\"eigenvalues\"") && stdout.contains("\"shape_dna\""), "{stdout}");
+}
