@@ -406,9 +406,11 @@ pub fn eigenpairs(
     solver: &SolverSpec,
     k: usize,
     hooks: Hooks<'_>,
+    reused: &std::cell::Cell<bool>,
 ) -> Result<Arc<Eigen>, AnalysisError> {
     let key = format!("{}:{}", v.id.hex(), spectrum_key(spec, solver));
     if let Some(e) = hooks.cache.and_then(|c| c.get(&key, k)) {
+        reused.set(true);
         return Ok(e);
     }
     let operator = build_operator(v, spec)?;
@@ -506,9 +508,11 @@ pub fn measures(v: &Validated, op: Option<&Operator>) -> Measures {
 /// Runs an analysis on a validated shape.
 pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
     let head = json!({ "shape_id": v.id.hex(), "analysis": analysis.name(), "algorithm_version": ALGORITHM_VERSION });
+    // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
+    let reused = std::cell::Cell::new(false);
     let out = match analysis {
         Analysis::Spectrum { k, eigenvectors, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let mut arrays = vec![];
             if *eigenvectors {
                 let k = (*k).min(e.spectrum.values.len());
@@ -526,7 +530,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             Output { summary, arrays }
         }
         Analysis::Hks { k, options, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let h = signatures::hks(&basis_of(&e, *k), options)?;
             let mut a = to_input_rows(v, &e.operator, h.values.as_ref(), "hks");
             a.columns = Some(h.times.clone());
@@ -534,7 +538,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             Output { summary, arrays: vec![a] }
         }
         Analysis::SiHks { k, options, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let h = signatures::si_hks(&basis_of(&e, *k), options)?;
             let mut a = to_input_rows(v, &e.operator, h.values.as_ref(), "si_hks");
             a.columns = Some(h.frequencies.iter().map(|&f| f as f64).collect());
@@ -542,7 +546,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             Output { summary, arrays: vec![a] }
         }
         Analysis::Wks { k, options, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let w = signatures::wks(&basis_of(&e, *k), options)?;
             let mut a = to_input_rows(v, &e.operator, w.values.as_ref(), "wks");
             a.columns = Some(w.energies.clone());
@@ -550,7 +554,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             Output { summary, arrays: vec![a] }
         }
         Analysis::Gps { k, dimensions, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let g = signatures::gps(&basis_of(&e, *k), *dimensions)?;
             let mut a = to_input_rows(v, &e.operator, g.values.as_ref(), "gps");
             a.columns = Some(g.eigenvalues.clone());
@@ -561,7 +565,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             let op = build_operator(v, operator)?;
             let zeros = if options.include_zero { 0 } else { expected_zero_modes(&op) };
             let want = (options.k + zeros).min(op.pair.n());
-            let e = eigenpairs(v, operator, solver, want, hooks)?;
+            let e = eigenpairs(v, operator, solver, want, hooks, &reused)?;
             let b = basis_of(&e, want);
             let m = measures(v, Some(&e.operator));
             let dna = shape_dna::shape_dna(b.values, b.zero_tol, &m, options)?;
@@ -576,7 +580,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             let src = map_vertices(v, sources, "sources")?;
             match method {
                 HeatMethod::Spectral => {
-                    let e = eigenpairs(v, operator, solver, *k, hooks)?;
+                    let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
                     let b = basis_of(&e, *k);
                     let times = match times {
                         Some(t) => t.clone(),
@@ -673,7 +677,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             let op = build_operator(v, operator)?;
             let zeros = expected_zero_modes(&op);
             let want = (dimensions + zeros).min(op.pair.n());
-            let e = eigenpairs(v, operator, solver, want, hooks)?;
+            let e = eigenpairs(v, operator, solver, want, hooks, &reused)?;
             let b = basis_of(&e, want);
             let (coords, vals) = eigenmap(&b, *dimensions, *scaling == EmbedScaling::Gps)?;
             let f = fiedler(&b, &e.operator.pair, false).ok();
@@ -759,7 +763,11 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             }
         }
     };
-    Ok(Output { summary: merge(head, out.summary), arrays: out.arrays })
+    let mut summary = merge(head, out.summary);
+    if let Some(o) = summary.as_object_mut() {
+        o.insert("eigenpairs_reused".into(), reused.get().into());
+    }
+    Ok(Output { summary, arrays: out.arrays })
 }
 
 /// Validated vertex indices → rows of the (possibly Dirichlet-condensed) operator.

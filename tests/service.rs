@@ -199,6 +199,7 @@ fn spectrum_shape_dna_and_hks_equal_the_library_and_requests_are_idempotent() {
     let done = wait_done(&s, j.body["id"].as_str().unwrap());
     let res = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call());
     let got: Vec<f64> = serde_json::from_value(res.body["shape_dna"]["values"].clone()).unwrap();
+    assert_eq!(res.body["eigenpairs_reused"], true, "shape-DNA after the spectrum solves nothing again");
     for (a, b) in got.iter().zip(&lib_dna.values) {
         assert!((a - b).abs() <= 1e-10 * b.abs(), "{a} vs {b}");
     }
@@ -209,6 +210,7 @@ fn spectrum_shape_dna_and_hks_equal_the_library_and_requests_are_idempotent() {
     let done = wait_done(&s, j.body["id"].as_str().unwrap());
     assert_eq!(done["status"], "succeeded", "{done}");
     let res = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call());
+    assert_eq!(res.body["eigenpairs_reused"], true, "HKS after the spectrum solves nothing again");
     let rows = res.body["arrays"]["hks"]["values"].as_array().unwrap();
     assert_eq!(rows.len(), 642);
     for (i, row) in rows.iter().enumerate().step_by(37) {
