@@ -296,6 +296,24 @@ fn bad(code: &'static str, message: impl Into<String>) -> AnalysisError {
     AnalysisError { code, message: message.into(), client: true }
 }
 
+/// Every name a per-vertex array can have.
+pub const ARRAY_NAMES: &[&str] = &[
+    "eigenvectors",
+    "hks",
+    "si_hks",
+    "wks",
+    "gps",
+    "heat_kernel",
+    "heat",
+    "distance",
+    "embedding",
+    "fiedler",
+    "smoothed",
+    "interpolated",
+    "labels",
+    "scores",
+];
+
 /// A per-vertex array in the input numbering, row-major (rows × cols).
 #[derive(Debug, Clone, PartialEq)]
 pub struct VertexArray {

@@ -19,7 +19,10 @@ struct Server {
 
 impl Server {
     fn start(extra: &[&str]) -> Server {
-        let dir = tempfile::tempdir().unwrap();
+        Self::start_in(tempfile::tempdir().unwrap(), extra).0
+    }
+    /// Starts on a given data directory; also returns the first line the server printed.
+    fn start_in(dir: tempfile::TempDir, extra: &[&str]) -> (Server, Value) {
         let mut child = Command::new(env!("CARGO_BIN_EXE_kac"))
             .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
             .arg(dir.path())
@@ -32,7 +35,18 @@ impl Server {
         BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
         let v: Value = serde_json::from_str(&line).unwrap_or_else(|_| panic!("first line: {line}"));
         let base = format!("http://{}", v["listening"].as_str().unwrap());
-        Server { child, base, _dir: dir }
+        (Server { child, base, _dir: dir }, v)
+    }
+    /// Stops the process (SIGKILL, or SIGTERM with `graceful`) and hands back its data directory.
+    fn stop(mut self, graceful: bool) -> (tempfile::TempDir, std::process::ExitStatus) {
+        if graceful {
+            Command::new("kill").args(["-TERM", &self.child.id().to_string()]).status().unwrap();
+        } else {
+            self.child.kill().unwrap();
+        }
+        let status = self.child.wait().unwrap();
+        let dir = std::mem::replace(&mut self._dir, tempfile::tempdir().unwrap());
+        (dir, status)
     }
     fn url(&self, path: &str) -> String {
         format!("{}{path}", self.base)
@@ -377,4 +391,64 @@ fn readme_curl_walkthrough_runs_as_written() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "walkthrough failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("\"eigenvalues\"") && stdout.contains("\"shape_dna\""), "{stdout}");
+}
+
+#[test]
+fn kill_9_mid_queue_loses_nothing_and_requeues_running_jobs() {
+    let (s, _) = Server::start_in(tempfile::tempdir().unwrap(), &["--workers", "1", "--test-job-delay-ms", "400"]);
+    let shape = upload(&s, &icosphere_off(3), "?format=off").body["id"].as_str().unwrap().to_string();
+    let ids: Vec<String> = (3..8)
+        .map(|k| {
+            let r = submit(&s, json!({ "shape_id": shape, "analysis": "spectrum", "k": k }));
+            assert_eq!(r.status, 202);
+            r.body["id"].as_str().unwrap().to_string()
+        })
+        .collect();
+    let first = wait_done(&s, &ids[0]);
+    assert_eq!(first["status"], "succeeded");
+    let before = reply(agent().get(&s.url(&format!("/v1/results/{}", ids[0]))).call());
+    // The second is running or about to; the rest are queued. SIGKILL now.
+    let (dir, _) = s.stop(false);
+    let (s, hello) = Server::start_in(dir, &[]);
+    assert!(hello["recovered_jobs"].as_u64().unwrap() >= 3, "{hello}");
+    // The finished result is intact: same bytes, same ETag.
+    let after = reply(agent().get(&s.url(&format!("/v1/results/{}", ids[0]))).call());
+    assert_eq!((after.status, &after.raw, &after.etag), (200, &before.raw, &before.etag));
+    // Every accepted job finishes.
+    for id in &ids {
+        let done = wait_done(&s, id);
+        assert_eq!(done["status"], "succeeded", "{done}");
+        let r = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call());
+        assert_eq!(r.body["eigenvalues"].as_array().unwrap().len(), r.body["k"].as_u64().unwrap() as usize);
+    }
+    // The shape is still stored, parsed again from its upload.
+    let g = reply(agent().get(&s.url(&format!("/v1/shapes/{shape}"))).call());
+    assert_eq!((g.status, g.body["summary"]["vertices"].as_u64()), (200, Some(642)));
+    let again = submit(&s, json!({ "shape_id": shape, "analysis": "spectrum", "k": 3 }));
+    assert_eq!(again.status, 200, "the finished job is found again after the restart");
+}
+
+#[test]
+fn sigterm_drains_and_the_next_start_finishes_the_queue() {
+    let (s, _) = Server::start_in(
+        tempfile::tempdir().unwrap(),
+        &["--workers", "1", "--test-job-delay-ms", "700", "--shutdown-grace-s", "5"],
+    );
+    let shape = upload(&s, &icosphere_off(2), "?format=off").body["id"].as_str().unwrap().to_string();
+    let a = submit(&s, json!({ "shape_id": shape, "analysis": "spectrum", "k": 3 })).body["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let b = submit(&s, json!({ "shape_id": shape, "analysis": "spectrum", "k": 4 })).body["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    std::thread::sleep(Duration::from_millis(200)); // a is running, b waits
+    let t = Instant::now();
+    let (dir, status) = s.stop(true);
+    assert!(status.success(), "SIGTERM exits cleanly: {status:?}");
+    assert!(t.elapsed() < Duration::from_secs(5), "the running job finished within the grace period");
+    let (s, _) = Server::start_in(dir, &[]);
+    assert_eq!(wait_done(&s, &a)["status"], "succeeded", "the running job finished before exit");
+    assert_eq!(wait_done(&s, &b)["status"], "succeeded", "the queued job ran after the restart");
 }

@@ -39,6 +39,9 @@ pub struct Config {
     /// Threads each eigensolve uses (jobs run side by side on the workers).
     #[arg(long, env = "KAC_SOLVER_THREADS", default_value_t = 1)]
     pub solver_threads: usize,
+    /// On SIGTERM, seconds to let running jobs finish before exiting (the rest are re-queued at the next start).
+    #[arg(long, env = "KAC_SHUTDOWN_GRACE_S", default_value_t = 10)]
+    pub shutdown_grace_s: u64,
     /// Testing only: jobs of this analysis panic inside the worker (checks that a panic fails one job).
     #[arg(long, hide = true)]
     pub test_panic_analysis: Option<String>,

@@ -15,7 +15,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use tokio::sync::watch;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, utoipa::ToSchema)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Status {
     Enqueued,
@@ -40,7 +40,7 @@ impl Status {
     }
 }
 
-#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct JobProgress {
     /// `queued`, `operator`, `factorization`, `iteration`, `descriptor`, `done`.
     pub phase: String,
@@ -50,7 +50,7 @@ pub struct JobProgress {
 }
 
 /// What clients see of a job.
-#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct JobView {
     pub id: String,
     pub shape_id: String,
@@ -138,6 +138,15 @@ impl Jobs {
     pub fn get(&self, id: &str) -> Option<Arc<Job>> {
         self.jobs.lock().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
     }
+    /// Jobs processing now.
+    pub fn running(&self) -> usize {
+        self.jobs
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .filter(|j| j.snapshot().status == Status::Processing)
+            .count()
+    }
     pub fn list(&self) -> Vec<JobView> {
         let mut v: Vec<JobView> =
             self.jobs.lock().unwrap_or_else(|e| e.into_inner()).values().map(|j| j.snapshot()).collect();
@@ -189,21 +198,94 @@ pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> 
         job
     };
     state.metrics.jobs_submitted.fetch_add(1, Ordering::Relaxed);
-    let st = state.clone();
-    let j = job.clone();
-    jobs.pool.spawn_fifo(move || execute(&st, &j, &shape));
-    // Stop the job when it runs too long.
+    persist(state, &job);
+    start(state, job.clone(), shape);
+    Ok((job, true))
+}
+
+/// Runs a job on the pool, with a timer that stops it when it runs too long.
+fn start(state: &AppState, job: Arc<Job>, shape: Arc<StoredShape>) {
     let (st, j) = (state.clone(), job.clone());
+    state.jobs.pool.spawn_fifo(move || execute(&st, &j, &shape));
     let timeout = std::time::Duration::from_secs(state.config.job_timeout_s);
     tokio::spawn(async move {
         tokio::time::sleep(timeout).await;
-        if !j.snapshot().status.terminal() {
-            j.timed_out.store(true, Ordering::SeqCst);
-            j.stop.store(true, Ordering::SeqCst);
+        if !job.snapshot().status.terminal() {
+            job.timed_out.store(true, Ordering::SeqCst);
+            job.stop.store(true, Ordering::SeqCst);
         }
-        drop(st);
     });
-    Ok((job, true))
+}
+
+/// Writes a job's record to the job store (a failure is logged: the job itself goes on).
+pub fn persist(state: &AppState, job: &Job) {
+    if let Err(e) = state.job_store.save(&job.snapshot()) {
+        tracing::error!(job = %job.snapshot().id, error = %e, "cannot persist the job record");
+    }
+}
+
+/// Cancels a job: an enqueued one at once, a running one at its next stop-flag check.
+pub fn cancel(state: &AppState, job: &Job) {
+    job.stop.store(true, Ordering::SeqCst);
+    let mut changed = false;
+    job.view.send_modify(|v| {
+        if v.status == Status::Enqueued {
+            v.status = Status::Canceled;
+            v.finished_at = Some(now());
+            v.error = Some(canceled());
+            changed = true;
+        }
+    });
+    if changed {
+        persist(state, job);
+    }
+}
+
+/// After a restart: loads every job record; jobs that were enqueued or running are queued again (their shapes
+/// are read back from the store), finished ones are served as they were. Returns the number re-queued.
+pub fn recover(state: &AppState) -> std::io::Result<usize> {
+    let mut requeued = 0;
+    for mut view in state.job_store.load_all()? {
+        let analysis: Option<Analysis> = serde_json::from_value(view.request.clone()).ok();
+        let shape = state.shapes.get(&view.shape_id);
+        let resume = !view.status.terminal();
+        let failure = match (&analysis, &shape) {
+            (None, _) => Some("the stored request no longer parses"),
+            (_, None) => Some("the job's shape is no longer stored"),
+            _ => None,
+        };
+        if resume {
+            match failure {
+                Some(why) => {
+                    let (_, p) = ApiError::Internal { detail: format!("not resumed after a restart: {why}") }.problem();
+                    view.status = Status::Failed;
+                    view.finished_at = Some(now());
+                    view.error = Some(p);
+                }
+                None => {
+                    view.status = Status::Enqueued;
+                    view.started_at = None;
+                    view.progress = JobProgress { phase: "requeued after a restart".into(), converged: 0, wanted: 0 };
+                }
+            }
+        }
+        let job = Arc::new(Job {
+            view: watch::Sender::new(view.clone()),
+            stop: AtomicBool::new(false),
+            timed_out: AtomicBool::new(false),
+            analysis: analysis.unwrap_or(Analysis::Trees {}),
+        });
+        state.jobs.jobs.lock().unwrap_or_else(|e| e.into_inner()).insert(view.id.clone(), job.clone());
+        if resume {
+            persist(state, &job);
+            if let (None, Some(shape)) = (failure, shape) {
+                state.jobs.active.fetch_add(1, Ordering::SeqCst);
+                start(state, job, shape);
+                requeued += 1;
+            }
+        }
+    }
+    Ok(requeued)
 }
 
 fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
@@ -227,7 +309,7 @@ fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
     Ok(())
 }
 
-fn finish(job: &Job, status: Status, error: Option<Problem>, result: Option<String>) {
+fn finish(state: &AppState, job: &Job, status: Status, error: Option<Problem>, result: Option<String>) {
     job.view.send_modify(|v| {
         v.status = status;
         v.finished_at = Some(now());
@@ -237,6 +319,7 @@ fn finish(job: &Job, status: Status, error: Option<Problem>, result: Option<Stri
             v.progress.phase = "done".into();
         }
     });
+    persist(state, job);
 }
 
 fn execute(state: &AppState, job: &Arc<Job>, shape: &StoredShape) {
@@ -247,8 +330,12 @@ fn execute(state: &AppState, job: &Arc<Job>, shape: &StoredShape) {
 }
 
 fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
+    if state.draining.load(Ordering::SeqCst) {
+        // Shutting down: leave it enqueued in the store; the next start runs it.
+        return Status::Enqueued;
+    }
     if job.stop.load(Ordering::SeqCst) {
-        finish(job, Status::Canceled, Some(canceled()), None);
+        finish(state, job, Status::Canceled, Some(canceled()), None);
         return Status::Canceled;
     }
     job.view.send_modify(|v| {
@@ -256,10 +343,11 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
         v.started_at = Some(now());
         v.progress.phase = "operator".into();
     });
+    persist(state, job);
     if state.config.test_job_delay_ms > 0 {
         std::thread::sleep(std::time::Duration::from_millis(state.config.test_job_delay_ms));
         if job.stop.load(Ordering::SeqCst) {
-            finish(job, Status::Canceled, Some(canceled()), None);
+            finish(state, job, Status::Canceled, Some(canceled()), None);
             return Status::Canceled;
         }
     }
@@ -290,7 +378,7 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
             let (_, mut p) = ApiError::Internal { detail: format!("the computation panicked: {msg}") }.problem();
             p.code = "job-panicked".into();
             p.type_ = "/problems/job-panicked".into();
-            finish(job, Status::Failed, Some(p), None);
+            finish(state, job, Status::Failed, Some(p), None);
             Status::Failed
         }
         Ok(Err(e)) if e.code == "canceled" => {
@@ -301,16 +389,16 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
                 .problem();
                 p.code = "job-timeout".into();
                 p.type_ = "/problems/job-timeout".into();
-                finish(job, Status::Failed, Some(p), None);
+                finish(state, job, Status::Failed, Some(p), None);
                 Status::Failed
             } else {
-                finish(job, Status::Canceled, Some(canceled()), None);
+                finish(state, job, Status::Canceled, Some(canceled()), None);
                 Status::Canceled
             }
         }
         Ok(Err(e)) => {
             let (_, p) = ApiError::Analysis(e).problem();
-            finish(job, Status::Failed, Some(p), None);
+            finish(state, job, Status::Failed, Some(p), None);
             Status::Failed
         }
         Ok(Ok(out)) => {
@@ -318,13 +406,13 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
             let id = job.snapshot().id;
             match store_result(&*state.results, &id, out) {
                 Ok(_) => {
-                    finish(job, Status::Succeeded, None, Some(format!("/v1/results/{id}")));
+                    finish(state, job, Status::Succeeded, None, Some(format!("/v1/results/{id}")));
                     Status::Succeeded
                 }
                 Err(e) => {
                     let (_, p) =
                         ApiError::Internal { detail: format!("the result could not be stored: {e}") }.problem();
-                    finish(job, Status::Failed, Some(p), None);
+                    finish(state, job, Status::Failed, Some(p), None);
                     Status::Failed
                 }
             }
@@ -361,6 +449,6 @@ pub fn store_result(results: &dyn ResultStore, id: &str, out: analysis::Output) 
         }
     }
     let body = serde_json::to_vec(&summary).map_err(std::io::Error::other)?;
-    let etag = format!("\"{}\"", Sha256::digest(&body).iter().take(16).map(|b| format!("{b:02x}")).collect::<String>());
+    let etag = super::store::etag_of(&body);
     results.put(StoredResult { id: id.to_string(), summary, arrays: out.arrays, body, etag })
 }

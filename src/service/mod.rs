@@ -13,7 +13,7 @@ use config::Config;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::{Arc, Mutex};
-use store::{EigenCache, FileResults, MemoryShapes, ResultStore, ShapeStore};
+use store::{Database, EigenCache, FileResults, JobStore, ResultStore, ShapeStore};
 
 /// Counters the service keeps about itself.
 #[derive(Default)]
@@ -35,6 +35,7 @@ impl Metrics {
 pub struct Inner {
     pub config: Config,
     pub shapes: Arc<dyn ShapeStore>,
+    pub job_store: Arc<dyn JobStore>,
     pub results: Arc<dyn ResultStore>,
     pub cache: Arc<EigenCache>,
     pub jobs: jobs::Jobs,
@@ -52,8 +53,10 @@ impl Inner {
         } else {
             config.workers
         };
+        let db = Arc::new(Database::open(&config.data_dir, config.max_vertices)?);
         Ok(Arc::new(Inner {
-            shapes: Arc::new(MemoryShapes::default()),
+            shapes: db.clone(),
+            job_store: db,
             results: Arc::new(FileResults::open(&config.data_dir)?),
             cache: Arc::new(EigenCache::new(config.cache_bytes)),
             jobs: jobs::Jobs::new(workers, config.queue_capacity.max(1)),
@@ -76,18 +79,27 @@ pub fn serve(config: Config) -> Result<(), String> {
             .map_err(|e| format!("cannot listen on {}: {e}", config.addr))?;
         let addr = listener.local_addr().map_err(|e| e.to_string())?;
         let state = Inner::new(config).map_err(|e| format!("cannot open the data directory: {e}"))?;
+        let recovered = jobs::recover(&state).map_err(|e| format!("cannot recover jobs: {e}"))?;
         let app = routes::router(state.clone());
-        println!("{}", serde_json::json!({ "listening": addr.to_string() }));
+        println!("{}", serde_json::json!({ "listening": addr.to_string(), "recovered_jobs": recovered }));
         use std::io::Write;
         let _ = std::io::stdout().flush();
         let st = state.clone();
         axum::serve(listener, app)
             .with_graceful_shutdown(async move {
                 shutdown_signal().await;
+                tracing::info!("shutting down: no new connections, no new jobs");
                 st.draining.store(true, std::sync::atomic::Ordering::SeqCst);
             })
             .await
-            .map_err(|e| format!("server error: {e}"))
+            .map_err(|e| format!("server error: {e}"))?;
+        // Let running jobs finish within the grace period; enqueued ones stay in the store for the next start.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(state.config.shutdown_grace_s);
+        while state.jobs.running() > 0 && std::time::Instant::now() < deadline {
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        }
+        tracing::info!(running = state.jobs.running(), "stopped");
+        Ok(())
     })
 }
 

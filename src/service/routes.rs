@@ -3,7 +3,7 @@
 use super::error::{problem_response, ApiError, CODES};
 use super::jobs::{self, JobView, Status};
 use super::openapi::ApiDoc;
-use super::store::{StoredResult, StoredShape};
+use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis, Hooks, OperatorSpec, SolverSpec};
 use axum::body::Bytes;
@@ -100,6 +100,9 @@ async fn readyz(State(st): State<AppState>) -> Result<Json<Value>, ApiError> {
     if st.draining.load(Ordering::SeqCst) {
         return Err(ApiError::NotReady { detail: "the service is shutting down".into() });
     }
+    if !st.shapes.healthy() {
+        return Err(ApiError::NotReady { detail: "the store does not answer".into() });
+    }
     Ok(Json(json!({ "status": "ready", "queue": st.jobs.active.load(Ordering::SeqCst), "capacity": st.jobs.capacity })))
 }
 
@@ -136,7 +139,7 @@ pub struct ShapeResource {
     pub links: Value,
 }
 
-fn shape_resource(s: &StoredShape) -> ShapeResource {
+fn shape_resource(s: &ShapeRecord) -> ShapeResource {
     ShapeResource {
         id: s.id.clone(),
         format: s.format.clone(),
@@ -271,15 +274,17 @@ async fn ingest(st: &AppState, up: Upload) -> Result<(bool, Arc<StoredShape>), A
         }));
     }
     let summary = serde_json::to_value(v.summary()).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
-    let stored = StoredShape {
+    let record = ShapeRecord {
         id: v.id.hex(),
-        validated: v,
-        summary,
         format: format.name().into(),
         created_at: jobs::now(),
         bytes: up.bytes.len(),
+        summary,
     };
-    Ok(st.shapes.insert(stored))
+    let stored = StoredShape { record, validated: v };
+    st.shapes
+        .insert(stored, &up.bytes)
+        .map_err(|e| ApiError::Internal { detail: format!("the shape could not be stored: {e}") })
 }
 
 /// Upload a shape: the file as the raw body (format from `?format=`, the Content-Type, or the content) or as a
@@ -318,7 +323,7 @@ async fn list_shapes(State(st): State<AppState>, Query(p): Query<Page>) -> Json<
     let limit = p.limit.unwrap_or(100).min(1000);
     let offset = p.offset.unwrap_or(0);
     let (items, total) = st.shapes.list(offset, limit);
-    let items: Vec<ShapeResource> = items.iter().map(|s| shape_resource(s)).collect();
+    let items: Vec<ShapeResource> = items.iter().map(shape_resource).collect();
     Json(json!({ "total": total, "offset": offset, "limit": limit, "items": items }))
 }
 
@@ -434,15 +439,7 @@ async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> Resul
     if view.status.terminal() {
         return Ok(job_response(StatusCode::OK, &view));
     }
-    job.stop.store(true, Ordering::SeqCst);
-    if view.status == Status::Enqueued {
-        job.view.send_modify(|v| {
-            if v.status == Status::Enqueued {
-                v.status = Status::Canceled;
-                v.finished_at = Some(jobs::now());
-            }
-        });
-    }
+    jobs::cancel(&st, &job);
     Ok(job_response(StatusCode::ACCEPTED, &job.snapshot()))
 }
 
@@ -738,7 +735,7 @@ async fn compare(
             .iter()
             .map(|id| st.shapes.get(id).ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() }))
             .collect::<Result<_, _>>()?,
-        None => st.shapes.list(0, 500).0,
+        None => st.shapes.list(0, 500).0.iter().filter_map(|r| st.shapes.get(&r.id)).collect(),
     };
     if shapes.len() > 500 {
         return Err(ApiError::bad("invalid-request", "at most 500 shapes per comparison"));

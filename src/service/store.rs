@@ -3,57 +3,182 @@
 //! files in the data directory (written atomically: temporary file, fsync, rename), and a byte-bounded cache of
 //! eigenpairs.
 
+use super::jobs::JobView;
 use crate::analysis::{Eigen, SpectrumCache, VertexArray};
 use kac_core::Validated;
 use serde_json::Value;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-/// A stored shape.
-pub struct StoredShape {
+/// What is known of a stored shape without parsing it again.
+#[derive(Debug, Clone)]
+pub struct ShapeRecord {
     pub id: String,
-    pub validated: Validated,
-    pub summary: Value,
     pub format: String,
     pub created_at: String,
     pub bytes: usize,
+    /// The validation summary (`kac inspect`'s output).
+    pub summary: Value,
+}
+
+/// A stored shape, parsed and validated.
+pub struct StoredShape {
+    pub record: ShapeRecord,
+    pub validated: Validated,
+}
+
+impl std::ops::Deref for StoredShape {
+    type Target = ShapeRecord;
+    fn deref(&self) -> &ShapeRecord {
+        &self.record
+    }
 }
 
 pub trait ShapeStore: Send + Sync {
-    /// Stores the shape unless one with its id exists; true if it was new.
-    fn insert(&self, shape: StoredShape) -> (bool, Arc<StoredShape>);
+    /// Stores the shape (and its original bytes) unless one with its id exists; true if it was new.
+    fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)>;
     fn get(&self, id: &str) -> Option<Arc<StoredShape>>;
-    /// Shapes in id order from `offset`, at most `limit`, and the total.
-    fn list(&self, offset: usize, limit: usize) -> (Vec<Arc<StoredShape>>, usize);
+    /// Records in id order from `offset`, at most `limit`, and the total.
+    fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize);
     fn remove(&self, id: &str) -> bool;
+    /// Whether the storage answers (for readiness).
+    fn healthy(&self) -> bool;
 }
 
-#[derive(Default)]
-pub struct MemoryShapes {
-    shapes: Mutex<BTreeMap<String, Arc<StoredShape>>>,
+/// Job records as clients see them, kept so that a restart loses no accepted job.
+pub trait JobStore: Send + Sync {
+    /// Inserts or replaces a job's record.
+    fn save(&self, job: &JobView) -> std::io::Result<()>;
+    /// Every job, in submission order.
+    fn load_all(&self) -> std::io::Result<Vec<JobView>>;
 }
 
-impl ShapeStore for MemoryShapes {
-    fn insert(&self, shape: StoredShape) -> (bool, Arc<StoredShape>) {
-        let mut m = self.shapes.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(s) = m.get(&shape.id) {
-            return (false, s.clone());
+/// The embedded database: SQLite (bundled build, WAL journal, synchronous FULL) for shape and job records, and
+/// the original uploads as content-addressed files (`DIR/shapes/{id}`), parsed again on first use after a
+/// restart.
+pub struct Database {
+    conn: Mutex<rusqlite::Connection>,
+    shape_dir: PathBuf,
+    parsed: Mutex<HashMap<String, Arc<StoredShape>>>,
+    max_vertices: usize,
+}
+
+fn db_err(e: rusqlite::Error) -> std::io::Error {
+    std::io::Error::other(format!("sqlite: {e}"))
+}
+
+impl Database {
+    pub fn open(data_dir: &Path, max_vertices: usize) -> std::io::Result<Self> {
+        let shape_dir = data_dir.join("shapes");
+        std::fs::create_dir_all(&shape_dir)?;
+        let conn = rusqlite::Connection::open(data_dir.join("kac.sqlite3")).map_err(db_err)?;
+        conn.execute_batch(
+            "PRAGMA journal_mode = WAL;
+             PRAGMA synchronous = FULL;
+             PRAGMA busy_timeout = 5000;
+             CREATE TABLE IF NOT EXISTS shapes (
+                 id TEXT PRIMARY KEY, format TEXT NOT NULL, created_at TEXT NOT NULL,
+                 bytes INTEGER NOT NULL, summary TEXT NOT NULL);
+             CREATE TABLE IF NOT EXISTS jobs (
+                 seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, view TEXT NOT NULL);",
+        )
+        .map_err(db_err)?;
+        Ok(Database { conn: Mutex::new(conn), shape_dir, parsed: Mutex::new(HashMap::new()), max_vertices })
+    }
+    fn conn(&self) -> std::sync::MutexGuard<'_, rusqlite::Connection> {
+        self.conn.lock().unwrap_or_else(|e| e.into_inner())
+    }
+    fn record(&self, id: &str) -> Option<ShapeRecord> {
+        let c = self.conn();
+        c.query_row("SELECT id, format, created_at, bytes, summary FROM shapes WHERE id = ?1", [id], row_record).ok()
+    }
+}
+
+fn row_record(r: &rusqlite::Row<'_>) -> rusqlite::Result<ShapeRecord> {
+    let summary: String = r.get(4)?;
+    Ok(ShapeRecord {
+        id: r.get(0)?,
+        format: r.get(1)?,
+        created_at: r.get(2)?,
+        bytes: r.get::<_, i64>(3)? as usize,
+        summary: serde_json::from_str(&summary).unwrap_or(Value::Null),
+    })
+}
+
+impl ShapeStore for Database {
+    fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)> {
+        if let Some(existing) = self.get(&shape.id) {
+            return Ok((false, existing));
         }
+        // The upload first (atomically), then its record: a crash between leaves an unreferenced file only.
+        write_atomic(&self.shape_dir.join(&shape.id), original)?;
+        let r = &shape.record;
+        let inserted = self
+            .conn()
+            .execute(
+                "INSERT OR IGNORE INTO shapes (id, format, created_at, bytes, summary) VALUES (?1, ?2, ?3, ?4, ?5)",
+                rusqlite::params![r.id, r.format, r.created_at, r.bytes as i64, r.summary.to_string()],
+            )
+            .map_err(db_err)?;
         let s = Arc::new(shape);
-        m.insert(s.id.clone(), s.clone());
-        (true, s)
+        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).insert(s.id.clone(), s.clone());
+        Ok((inserted == 1, s))
     }
     fn get(&self, id: &str) -> Option<Arc<StoredShape>> {
-        self.shapes.lock().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
+        if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
+            return Some(s.clone());
+        }
+        let record = self.record(id)?;
+        let bytes = std::fs::read(self.shape_dir.join(id)).ok()?;
+        let format = kac_core::Format::from_name(&record.format)?;
+        let read = kac_core::ReadOptions { max_vertices: self.max_vertices.max(1), ..Default::default() };
+        let validated = kac_core::load_bytes(&bytes, format, &read, &Default::default()).ok()?;
+        let s = Arc::new(StoredShape { record, validated });
+        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).insert(id.to_string(), s.clone());
+        Some(s)
     }
-    fn list(&self, offset: usize, limit: usize) -> (Vec<Arc<StoredShape>>, usize) {
-        let m = self.shapes.lock().unwrap_or_else(|e| e.into_inner());
-        (m.values().skip(offset).take(limit).cloned().collect(), m.len())
+    fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize) {
+        let c = self.conn();
+        let total: i64 = c.query_row("SELECT COUNT(*) FROM shapes", [], |r| r.get(0)).unwrap_or(0);
+        let mut out = vec![];
+        if let Ok(mut st) =
+            c.prepare("SELECT id, format, created_at, bytes, summary FROM shapes ORDER BY id LIMIT ?1 OFFSET ?2")
+        {
+            if let Ok(rows) = st.query_map([limit as i64, offset as i64], row_record) {
+                out = rows.flatten().collect();
+            }
+        }
+        (out, total as usize)
     }
     fn remove(&self, id: &str) -> bool {
-        self.shapes.lock().unwrap_or_else(|e| e.into_inner()).remove(id).is_some()
+        let n = self.conn().execute("DELETE FROM shapes WHERE id = ?1", [id]).unwrap_or(0);
+        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
+        let _ = std::fs::remove_file(self.shape_dir.join(id));
+        n > 0
+    }
+    fn healthy(&self) -> bool {
+        self.conn().query_row("SELECT 1", [], |r| r.get::<_, i64>(0)).is_ok()
+    }
+}
+
+impl JobStore for Database {
+    fn save(&self, job: &JobView) -> std::io::Result<()> {
+        let view = serde_json::to_string(job).map_err(std::io::Error::other)?;
+        self.conn()
+            .execute(
+                "INSERT INTO jobs (id, view) VALUES (?1, ?2) ON CONFLICT(id) DO UPDATE SET view = excluded.view",
+                rusqlite::params![job.id, view],
+            )
+            .map_err(db_err)?;
+        Ok(())
+    }
+    fn load_all(&self) -> std::io::Result<Vec<JobView>> {
+        let c = self.conn();
+        let mut st = c.prepare("SELECT view FROM jobs ORDER BY seq").map_err(db_err)?;
+        let rows = st.query_map([], |r| r.get::<_, String>(0)).map_err(db_err)?;
+        Ok(rows.flatten().filter_map(|v| serde_json::from_str(&v).ok()).collect())
     }
 }
 
@@ -104,8 +229,42 @@ impl ResultStore for FileResults {
         Ok(r)
     }
     fn get(&self, id: &str) -> Option<Arc<StoredResult>> {
-        self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
+        if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
+            return Some(r.clone());
+        }
+        // After a restart: read the file back (its arrays carry their values).
+        if !id.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return None;
+        }
+        let body = std::fs::read(self.dir.join(format!("{id}.json"))).ok()?;
+        let summary: Value = serde_json::from_slice(&body).ok()?;
+        let mut arrays = vec![];
+        if let Some(map) = summary.get("arrays").and_then(Value::as_object) {
+            for (name, a) in map {
+                let rows = a["rows"].as_u64()? as usize;
+                let cols = a["cols"].as_u64()? as usize;
+                let data: Vec<f64> = a["values"]
+                    .as_array()?
+                    .iter()
+                    .flat_map(|r| r.as_array().cloned().unwrap_or_default())
+                    .map(|v| v.as_f64().unwrap_or(f64::NAN))
+                    .collect();
+                let columns =
+                    a["columns"].as_array().map(|c| c.iter().map(|v| v.as_f64().unwrap_or(f64::NAN)).collect());
+                let Some(name) = crate::analysis::ARRAY_NAMES.iter().copied().find(|n| n == name) else { continue };
+                arrays.push(VertexArray { name, rows, cols, data, columns });
+            }
+        }
+        let r = Arc::new(StoredResult { id: id.to_string(), etag: etag_of(&body), summary, arrays, body });
+        self.results.lock().unwrap_or_else(|e| e.into_inner()).insert(id.to_string(), r.clone());
+        Some(r)
     }
+}
+
+/// The strong ETag of a body: the first 128 bits of its SHA-256, quoted.
+pub fn etag_of(body: &[u8]) -> String {
+    use sha2::Digest;
+    format!("\"{}\"", sha2::Sha256::digest(body).iter().take(16).map(|b| format!("{b:02x}")).collect::<String>())
 }
 
 /// Eigenpairs by (shape, operator, solver) key, bounded by bytes; the least recently used go first. An entry
