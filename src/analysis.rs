@@ -374,6 +374,8 @@ pub struct Hooks<'a> {
     pub cache: Option<&'a dyn SpectrumCache>,
     /// Solver threads (0: rayon's pool).
     pub threads: usize,
+    /// Told about every eigensolve (for metrics).
+    pub on_solve: Option<&'a (dyn Fn(&kac_core::spectrum::Stats) + Sync)>,
 }
 
 /// Maps input vertex indices to validated ones.
@@ -438,6 +440,9 @@ pub fn eigenpairs(
     }
     let opts = EigenOptions { k, tol: solver.tol, threads: hooks.threads, ..Default::default() };
     let spectrum = spectrum::eigs(&operator.pair, &opts, None, hooks.control)?;
+    if let Some(f) = hooks.on_solve {
+        f(&spectrum.stats);
+    }
     let e = Arc::new(Eigen { operator, spectrum });
     if let Some(c) = hooks.cache {
         c.put(&key, e.clone());

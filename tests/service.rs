@@ -27,6 +27,7 @@ impl Server {
             .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
             .arg(dir.path())
             .args(extra)
+            .env("RUST_LOG", "warn")
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
@@ -451,4 +452,57 @@ fn sigterm_drains_and_the_next_start_finishes_the_queue() {
     let (s, _) = Server::start_in(dir, &[]);
     assert_eq!(wait_done(&s, &a)["status"], "succeeded", "the running job finished before exit");
     assert_eq!(wait_done(&s, &b)["status"], "succeeded", "the queued job ran after the restart");
+}
+
+#[test]
+fn metrics_change_as_requests_are_served() {
+    let s = Server::start(&[]);
+    let metric = |name: &str| -> f64 {
+        let r = reply(agent().get(&s.url("/metrics")).call());
+        assert!(r.content_type.starts_with("text/plain"));
+        let text = String::from_utf8_lossy(&r.raw).to_string();
+        text.lines()
+            .filter(|l| l.starts_with(name) && !l.starts_with('#'))
+            .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+            .sum()
+    };
+    let before = metric("kac_http_requests_total{method=\"POST\",route=\"/v1/shapes\",status=\"201\"}");
+    // 2562 vertices: the sparse eigensolver runs (the dense path has no block steps to count).
+    let id = upload(&s, &icosphere_off(4), "?format=off").body["id"].as_str().unwrap().to_string();
+    assert_eq!(metric("kac_http_requests_total{method=\"POST\",route=\"/v1/shapes\",status=\"201\"}"), before + 1.0);
+    let j = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 5 }));
+    wait_done(&s, j.body["id"].as_str().unwrap());
+    let j = submit(&s, json!({ "shape_id": id, "analysis": "hks", "k": 5, "options": { "count": 4 } }));
+    wait_done(&s, j.body["id"].as_str().unwrap());
+    assert_eq!(metric("kac_eigensolves_total"), 1.0);
+    assert!(metric("kac_eigenpair_cache_hits_total") >= 1.0);
+    assert!(metric("kac_eigensolver_solves_total") > 0.0 && metric("kac_eigensolver_block_steps_total") > 0.0);
+    assert_eq!(metric("kac_jobs{status=\"succeeded\"}"), 2.0);
+    assert_eq!(metric("kac_job_duration_seconds_count{analysis=\"hks\",status=\"succeeded\"}"), 1.0);
+    assert!(metric("kac_http_request_duration_seconds_count{route=\"/v1/jobs/{id}\"}") >= 1.0);
+    assert_eq!(metric("kac_queue_depth"), 0.0);
+    // Every response carries a request id; one sent is echoed.
+    let r = agent().get(&s.url("/livez")).set("x-request-id", "abc-123").call().unwrap();
+    assert_eq!(r.header("x-request-id"), Some("abc-123"));
+}
+
+#[test]
+fn api_keys_and_rate_limits() {
+    let s = Server::start(&["--api-keys", "alpha-key,beta-key", "--rate-limit-per-minute", "3"]);
+    // Health, metrics and the API description stay public.
+    for p in ["/livez", "/readyz", "/metrics", "/openapi.json", "/problems/unauthorized"] {
+        assert_eq!(reply(agent().get(&s.url(p)).call()).status, 200, "{p}");
+    }
+    let r = reply(agent().get(&s.url("/v1/shapes")).call());
+    assert_problem(&r, 401, "unauthorized");
+    let r = reply(agent().get(&s.url("/v1/shapes")).set("Authorization", "Bearer gamma-key").call());
+    assert_problem(&r, 403, "forbidden");
+    for _ in 0..3 {
+        assert_eq!(reply(agent().get(&s.url("/v1/shapes")).set("Authorization", "Bearer beta-key").call()).status, 200);
+    }
+    let r = reply(agent().get(&s.url("/v1/shapes")).set("Authorization", "Bearer beta-key").call());
+    assert_problem(&r, 429, "rate-limited");
+    assert!(r.retry_after.as_deref().and_then(|v| v.parse::<u64>().ok()).is_some_and(|v| v >= 1));
+    // Buckets are per key.
+    assert_eq!(reply(agent().get(&s.url("/v1/shapes")).set("Authorization", "Bearer alpha-key").call()).status, 200);
 }

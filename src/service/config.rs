@@ -42,10 +42,38 @@ pub struct Config {
     /// On SIGTERM, seconds to let running jobs finish before exiting (the rest are re-queued at the next start).
     #[arg(long, env = "KAC_SHUTDOWN_GRACE_S", default_value_t = 10)]
     pub shutdown_grace_s: u64,
+    /// API keys (comma-separated); when any is set, every /v1 request needs `Authorization: Bearer KEY`.
+    /// Off by default.
+    #[arg(long, env = "KAC_API_KEYS", value_delimiter = ',', hide_env_values = true)]
+    pub api_keys: Vec<String>,
+    /// A file with one API key per line (added to --api-keys).
+    #[arg(long, env = "KAC_API_KEYS_FILE")]
+    pub api_keys_file: Option<PathBuf>,
+    /// Requests per minute each API key may make (0: unlimited); beyond it, 429 with Retry-After.
+    #[arg(long, env = "KAC_RATE_LIMIT_PER_MINUTE", default_value_t = 0)]
+    pub rate_limit_per_minute: u32,
     /// Testing only: jobs of this analysis panic inside the worker (checks that a panic fails one job).
     #[arg(long, hide = true)]
     pub test_panic_analysis: Option<String>,
     /// Testing only: every job sleeps this many milliseconds before it starts computing (fills the queue).
     #[arg(long, hide = true, default_value_t = 0)]
     pub test_job_delay_ms: u64,
+}
+
+impl Config {
+    /// Every configured key (flag, environment, file), blank lines dropped.
+    pub fn api_keys(&self) -> Vec<String> {
+        let mut keys: Vec<String> = self.api_keys.iter().map(|k| k.trim().to_string()).collect();
+        if let Some(path) = &self.api_keys_file {
+            if let Ok(text) = std::fs::read_to_string(path) {
+                keys.extend(
+                    text.lines().map(|l| l.trim().to_string()).filter(|l| !l.is_empty() && !l.starts_with('#')),
+                );
+            } else {
+                tracing::error!(path = %path.display(), "cannot read the API keys file");
+            }
+        }
+        keys.retain(|k| !k.is_empty());
+        keys
+    }
 }

@@ -37,6 +37,9 @@ pub enum ApiError {
     QueueFull { capacity: usize, retry_after_s: u64 },
     Limit { code: &'static str, detail: String },
     NotReady { detail: String },
+    Unauthorized,
+    Forbidden,
+    RateLimited { retry_after_s: u64, per_minute: u32 },
     Internal { detail: String },
 }
 
@@ -113,6 +116,24 @@ impl ApiError {
             ApiError::NotReady { detail } => {
                 (StatusCode::SERVICE_UNAVAILABLE, "not-ready", "Not ready", detail.clone())
             }
+            ApiError::Unauthorized => (
+                StatusCode::UNAUTHORIZED,
+                "unauthorized",
+                "Unauthorized",
+                "this service needs an API key: send Authorization: Bearer KEY".into(),
+            ),
+            ApiError::Forbidden => {
+                (StatusCode::FORBIDDEN, "forbidden", "Forbidden", "the API key is not valid for this service".into())
+            }
+            ApiError::RateLimited { retry_after_s, per_minute } => {
+                extra.insert("retry_after_s".into(), (*retry_after_s).into());
+                (
+                    StatusCode::TOO_MANY_REQUESTS,
+                    "rate-limited",
+                    "Too many requests",
+                    format!("this key may make {per_minute} requests per minute; retry after {retry_after_s} s"),
+                )
+            }
             ApiError::Internal { detail } => {
                 (StatusCode::INTERNAL_SERVER_ERROR, "internal-error", "Internal error", detail.clone())
             }
@@ -141,7 +162,7 @@ impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let (status, p) = self.problem();
         let mut r = problem_response(status, &p);
-        if let ApiError::QueueFull { retry_after_s, .. } = self {
+        if let ApiError::QueueFull { retry_after_s, .. } | ApiError::RateLimited { retry_after_s, .. } = self {
             r.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(retry_after_s));
         }
         r
@@ -181,6 +202,9 @@ pub const CODES: &[(&str, &str)] = &[
     ("unsupported-media-type", "The Content-Type cannot be used here."),
     ("queue-full", "The job queue is at capacity; retry after Retry-After seconds."),
     ("k-too-large", "k exceeds the configured limit (--max-k)."),
+    ("unauthorized", "The service requires an API key (Authorization: Bearer KEY) and none was sent."),
+    ("forbidden", "The API key sent is not one the service accepts."),
+    ("rate-limited", "The key exceeded its requests per minute; retry after Retry-After seconds."),
     ("not-ready", "The service is not ready (draining or storage unavailable)."),
     ("internal-error", "An unexpected failure; the job or request can be retried."),
     ("job-panicked", "The computation panicked; the job failed and the service kept serving."),

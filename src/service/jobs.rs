@@ -356,7 +356,9 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
             v.progress = JobProgress { phase: p.phase.into(), converged: p.converged, wanted: p.wanted };
         });
     };
+    let on_solve = |s: &kac_core::spectrum::Stats| state.metrics.record_solve(s);
     let hooks = Hooks {
+        on_solve: Some(&on_solve),
         control: Control { progress: Some(&progress), stop: Some(&job.stop) },
         cache: Some(&*state.cache),
         threads: state.config.solver_threads,

@@ -6,31 +6,14 @@ pub mod config;
 pub mod error;
 pub mod jobs;
 pub mod openapi;
+pub mod ops;
 pub mod routes;
 pub mod store;
 
 use config::Config;
-use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, AtomicU64};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use store::{Database, EigenCache, FileResults, JobStore, ResultStore, ShapeStore};
-
-/// Counters the service keeps about itself.
-#[derive(Default)]
-pub struct Metrics {
-    pub jobs_submitted: AtomicU64,
-    /// (analysis, status) → (count, total seconds).
-    pub jobs_finished: Mutex<BTreeMap<(String, String), (u64, f64)>>,
-}
-
-impl Metrics {
-    pub fn record_job(&self, analysis: &str, status: &str, seconds: f64) {
-        let mut m = self.jobs_finished.lock().unwrap_or_else(|e| e.into_inner());
-        let e = m.entry((analysis.to_string(), status.to_string())).or_default();
-        e.0 += 1;
-        e.1 += seconds;
-    }
-}
 
 pub struct Inner {
     pub config: Config,
@@ -39,7 +22,8 @@ pub struct Inner {
     pub results: Arc<dyn ResultStore>,
     pub cache: Arc<EigenCache>,
     pub jobs: jobs::Jobs,
-    pub metrics: Metrics,
+    pub metrics: ops::Metrics,
+    pub access: ops::Access,
     pub draining: AtomicBool,
 }
 
@@ -60,7 +44,8 @@ impl Inner {
             results: Arc::new(FileResults::open(&config.data_dir)?),
             cache: Arc::new(EigenCache::new(config.cache_bytes)),
             jobs: jobs::Jobs::new(workers, config.queue_capacity.max(1)),
-            metrics: Metrics::default(),
+            metrics: ops::Metrics::default(),
+            access: ops::Access::new(&config.api_keys(), config.rate_limit_per_minute),
             draining: AtomicBool::new(false),
             config,
         }))
@@ -69,6 +54,7 @@ impl Inner {
 
 /// Starts the server and runs until SIGINT or SIGTERM; prints `{"listening": "ADDR"}` on stdout first.
 pub fn serve(config: Config) -> Result<(), String> {
+    init_logging();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -122,4 +108,10 @@ async fn shutdown_signal() {
         _ = ctrl_c => {},
         _ = term => {},
     }
+}
+
+/// Structured JSON logs on stderr; `RUST_LOG` filters (default `info`).
+fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    let _ = tracing_subscriber::fmt().json().with_env_filter(filter).with_writer(std::io::stderr).try_init();
 }

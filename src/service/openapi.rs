@@ -15,6 +15,7 @@ problem+json with a stable `type` (`/problems/{code}`).",
     paths(
         super::routes::livez,
         super::routes::readyz,
+        super::routes::metrics,
         super::routes::problem_doc,
         super::routes::upload_shape,
         super::routes::list_shapes,

@@ -41,8 +41,11 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/compare", post(compare))
         .route("/problems/{code}", get(problem_doc))
         .merge(SwaggerUi::new("/docs").url("/openapi.json", ApiDoc::openapi()))
+        .route("/metrics", get(metrics))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
+        .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::authorize))
+        .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::observe))
         .layer(DefaultBodyLimit::max(limit))
         .with_state(state)
 }
@@ -104,6 +107,15 @@ async fn readyz(State(st): State<AppState>) -> Result<Json<Value>, ApiError> {
         return Err(ApiError::NotReady { detail: "the store does not answer".into() });
     }
     Ok(Json(json!({ "status": "ready", "queue": st.jobs.active.load(Ordering::SeqCst), "capacity": st.jobs.capacity })))
+}
+
+/// Prometheus metrics: requests by route and status, latency histograms, queue depth, jobs by status, job
+/// durations by analysis, eigenpair cache hits and misses, eigensolver work.
+#[utoipa::path(get, path = "/metrics", tag = "operations", responses((status = 200, description = "Prometheus text format", content_type = "text/plain")))]
+async fn metrics(State(st): State<AppState>) -> Response {
+    let mut r = super::ops::render(&st).into_response();
+    r.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static("text/plain; version=0.0.4"));
+    r
 }
 
 /// What a problem `type` means.
