@@ -7,5 +7,21 @@ cd "$(dirname "$0")/.."
 # Shared test meshes: one configurable location (tests skip with a message where it is absent).
 export KAC_DATA_DIR="${KAC_DATA_DIR:-$(cd .. && pwd)/shared/data}"
 
+# What the tests need from Debian: curl (the README walkthrough, the contract script) and python3-venv
+# (schemathesis). Installed only where missing and where we may.
+need=()
+command -v curl > /dev/null || need+=(curl)
+python3 -c 'import venv, ensurepip' 2> /dev/null || need+=(python3-venv)
+if [ ${#need[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${need[@]}"
+  else echo "please install: ${need[*]}"; exit 1; fi
+fi
+
 echo "== cargo test (workspace; shared data at $KAC_DATA_DIR)"
 cargo test --workspace --locked
+
+echo "== release build (the command docker/Dockerfile runs)"
+cargo build --release --locked --bin kac
+
+echo "== contract: schemathesis against openapi/openapi.json on the real server"
+bash scripts/contract.sh target/release/kac

@@ -26,6 +26,7 @@ pub const ALGORITHM_VERSION: u32 = 1;
 
 /// Which operator to build (see `kac_core::operators`).
 #[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
 #[serde(default, deny_unknown_fields)]
 pub struct OperatorSpec {
     /// Default: by shape kind.
@@ -66,6 +67,7 @@ pub enum BoundarySpec {
 
 /// Eigensolver parameters shared by every spectral analysis.
 #[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
 #[serde(default, deny_unknown_fields)]
 pub struct SolverSpec {
     /// Relative residual tolerance (default 1e-10).
@@ -826,3 +828,7 @@ fn from_input_rows(v: &Validated, f: &[f64], what: &str) -> Result<Vec<f64>, Ana
     }
     Ok(out)
 }
+
+kac_core::object_only_serde!(OperatorSpec);
+
+kac_core::object_only_serde!(SolverSpec);

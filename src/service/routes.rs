@@ -8,7 +8,7 @@ use super::AppState;
 use crate::analysis::{self, Analysis, Hooks, OperatorSpec, SolverSpec};
 use axum::body::Bytes;
 use axum::extract::rejection::{BytesRejection, JsonRejection};
-use axum::extract::{DefaultBodyLimit, FromRequest, Multipart, Path, Query, Request, State};
+use axum::extract::{DefaultBodyLimit, FromRequest, FromRequestParts, Multipart, Path, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode, Uri};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
@@ -26,13 +26,13 @@ use utoipa_swagger_ui::SwaggerUi;
 
 pub fn router(state: AppState) -> Router {
     let limit = state.config.max_body_bytes;
-    Router::new()
+    let api = Router::new()
         .route("/livez", get(livez))
         .route("/readyz", get(readyz))
         .route("/v1/shapes", post(upload_shape).get(list_shapes))
         .route("/v1/shapes/{id}", get(get_shape).delete(delete_shape))
         .route("/v1/jobs", post(create_job).get(list_jobs))
-        .route("/v1/jobs/{id}", get(get_job).delete(cancel_job))
+        .route("/v1/jobs/{id}", get(get_job).delete(delete_job))
         .route("/v1/jobs/{id}/cancel", post(cancel_job))
         .route("/v1/jobs/{id}/events", get(job_events))
         .route("/v1/results/{id}", get(get_result))
@@ -43,19 +43,16 @@ pub fn router(state: AppState) -> Router {
         .merge(SwaggerUi::new("/docs").url("/openapi.json", ApiDoc::openapi()))
         .route("/metrics", get(metrics))
         .fallback(not_found)
-        .method_not_allowed_fallback(method_not_allowed)
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::authorize))
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::observe))
         .layer(DefaultBodyLimit::max(limit))
-        .with_state(state)
+        .with_state(state);
+    // Outside the method routers, where 405 responses already carry their Allow header.
+    Router::new().fallback_service(api).layer(axum::middleware::map_response(problem_405))
 }
 
 async fn not_found(uri: Uri) -> ApiError {
     ApiError::RouteNotFound { path: uri.path().to_string() }
-}
-
-async fn method_not_allowed() -> ApiError {
-    ApiError::MethodNotAllowed
 }
 
 fn body_error(state: &AppState, e: BytesRejection) -> ApiError {
@@ -77,6 +74,40 @@ fn json_error(state: &AppState, e: JsonRejection) -> ApiError {
         }
         other => ApiError::bad("invalid-json", other.body_text()),
     }
+}
+
+/// Query parameters whose rejection is a problem document (400 `invalid-request`), not axum's plain text.
+pub struct Query<T>(pub T);
+
+impl<T: serde::de::DeserializeOwned, S: Send + Sync> FromRequestParts<S> for Query<T> {
+    type Rejection = ApiError;
+    async fn from_request_parts(parts: &mut axum::http::request::Parts, state: &S) -> Result<Self, ApiError> {
+        axum::extract::Query::<T>::from_request_parts(parts, state)
+            .await
+            .map(|q| Query(q.0))
+            .map_err(|e| ApiError::bad("invalid-request", e.body_text()))
+    }
+}
+
+/// 405 responses keep axum's `Allow` header and get a problem body.
+async fn problem_405(resp: Response) -> Response {
+    if resp.status() != StatusCode::METHOD_NOT_ALLOWED
+        || resp.headers().get(header::CONTENT_TYPE).is_some_and(|c| c == "application/problem+json")
+    {
+        return resp;
+    }
+    // HEAD is implied by GET (RFC 9110); the Allow header lists the documented methods.
+    let allow = resp
+        .headers()
+        .get(header::ALLOW)
+        .and_then(|a| a.to_str().ok())
+        .map(|a| a.split(',').map(str::trim).filter(|m| *m != "HEAD").collect::<Vec<_>>().join(","));
+    let allow = allow.and_then(|a| HeaderValue::from_str(&a).ok());
+    let mut r = ApiError::MethodNotAllowed.into_response();
+    if let Some(a) = allow {
+        r.headers_mut().insert(header::ALLOW, a);
+    }
+    r
 }
 
 fn with_location(mut r: Response, location: &str) -> Response {
@@ -162,10 +193,30 @@ fn shape_resource(s: &ShapeRecord) -> ShapeResource {
     }
 }
 
+/// The formats kac reads (for the OpenAPI document; requests carry the name).
+#[derive(utoipa::ToSchema)]
+#[allow(dead_code)]
+#[schema(rename_all = "lowercase")]
+pub enum FormatName {
+    Obj,
+    Off,
+    Ply,
+    Stl,
+    Gltf,
+    Glb,
+    Medit,
+    Gmsh,
+    Vtk,
+    Xyz,
+    Csv,
+    Json,
+    Mtx,
+}
+
 #[derive(Deserialize, utoipa::IntoParams)]
 pub struct UploadQuery {
-    /// Format name (obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx); default: from the
-    /// Content-Type, the multipart file name, or the content.
+    /// Format name; default: from the Content-Type, the multipart file name, or the content.
+    #[param(value_type = Option<FormatName>)]
     pub format: Option<String>,
 }
 
@@ -455,6 +506,15 @@ async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> Resul
     Ok(job_response(StatusCode::ACCEPTED, &job.snapshot()))
 }
 
+/// Cancel a job (the same as POST `/v1/jobs/{id}/cancel`); the job record stays.
+#[utoipa::path(delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path)),
+    responses((status = 202, description = "cancellation requested", body = JobView),
+              (status = 200, description = "already finished", body = JobView),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn delete_job(state: State<AppState>, id: Path<String>) -> Result<Response, ApiError> {
+    cancel_job(state, id).await
+}
+
 /// Progress as server-sent events: one `job` event with the job object on every change, until it finishes.
 #[utoipa::path(get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path)),
     responses((status = 200, description = "text/event-stream of job objects", content_type = "text/event-stream"),
@@ -633,6 +693,7 @@ pub struct AnalyzeQuery {
     /// Seconds to wait for the result (default 10, at most --max-wait-s).
     pub wait: Option<f64>,
     /// Format of the shape (as for uploads).
+    #[param(value_type = Option<FormatName>)]
     pub format: Option<String>,
     /// The analysis as JSON (`{"analysis":"spectrum","k":10}`), when the body is the raw shape.
     pub analysis: Option<String>,
@@ -646,6 +707,7 @@ pub struct AnalyzeQuery {
     responses((status = 200, description = "the result"),
               (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
               (status = 400, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 409, description = "the job was canceled", body = super::error::Problem, content_type = "application/problem+json"),
               (status = 422, body = super::error::Problem, content_type = "application/problem+json"),
               (status = 503, body = super::error::Problem, content_type = "application/problem+json")))]
 async fn analyze(
@@ -697,6 +759,7 @@ async fn analyze(
 
 /// Distances between stored shapes by shape-DNA, and each shape's nearest neighbours.
 #[derive(Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(remote = "Self")]
 #[serde(deny_unknown_fields)]
 pub struct CompareRequest {
     /// Shapes to compare (default: every stored shape, at most 500).
@@ -807,3 +870,5 @@ async fn compare(
         "nearest": nearest,
     })))
 }
+
+kac_core::object_only_serde!(CompareRequest);

@@ -28,6 +28,26 @@ pub use geometry::validate::{validate, ValidateOptions, Validated, Weld};
 pub use geometry::{Shape, ShapeKind};
 pub use io::{Format, ReadOptions};
 
+/// Serialize/Deserialize for a request type whose derives carry `#[serde(remote = "Self")]`: the same fields, but
+/// only a JSON object is accepted (serde's derive would also take an array of field values, which the published
+/// JSON Schema does not allow).
+#[macro_export]
+macro_rules! object_only_serde {
+    ($t:ty) => {
+        impl serde::Serialize for $t {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                <$t>::serialize(self, s)
+            }
+        }
+        impl<'de> serde::Deserialize<'de> for $t {
+            fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                let m = <serde_json::Map<String, serde_json::Value> as serde::Deserialize>::deserialize(d)?;
+                <$t>::deserialize(serde_json::Value::Object(m)).map_err(serde::de::Error::custom)
+            }
+        }
+    };
+}
+
 /// Reads and validates a file in one step (format from `format`, the extension, or the content).
 pub fn load(
     path: &std::path::Path,

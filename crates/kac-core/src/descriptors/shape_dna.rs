@@ -117,6 +117,7 @@ pub fn weyl_eigenvalue(n: f64, dimension: u8, measure: f64) -> f64 {
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
 #[serde(default)]
 pub struct ShapeDnaOptions {
     /// Values reported (default 50).
@@ -417,3 +418,5 @@ impl Measures {
         Measures { dimension, length: summary.length, area, volume: summary.volume }
     }
 }
+
+crate::object_only_serde!(ShapeDnaOptions);

@@ -9,6 +9,7 @@ use std::f64::consts::LN_10;
 /// Heat kernel signature (Sun, Ovsjanikov & Guibas 2009): HKS(x, t) = k_t(x, x) = Σ_i e^{−λ_i t} φ_i(x)².
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
 #[serde(default)]
 pub struct HksOptions {
     /// Explicit times; when absent, `count` times log-spaced in [4 ln 10 / λ_max, 4 ln 10 / λ₁] (λ₁ the first
@@ -92,6 +93,7 @@ pub fn hks(basis: &Basis<'_>, opts: &HksOptions) -> Result<Hks, DescriptorError>
 /// the discrete Fourier transform over τ removes the shift. The first `frequencies` moduli are the descriptor.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
 #[serde(default)]
 pub struct SiHksOptions {
     /// Base α of the log-time grid (default 2).
@@ -192,6 +194,7 @@ pub fn si_hks(basis: &Basis<'_>, opts: &SiHksOptions) -> Result<SiHks, Descripto
 /// C_e = Σ_i exp(−(e − log λ_i)² / 2σ²). Zero modes are left out (log 0).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
 #[serde(default)]
 pub struct WksOptions {
     /// Number of log-energies, evenly spaced in [log λ₁, log λ_max] (default 100).
@@ -296,3 +299,9 @@ pub fn gps(basis: &Basis<'_>, dimensions: Option<usize>) -> Result<Gps, Descript
     let values = Mat::from_fn(basis.n(), d, |x, j| phi[(x, i1 + j)] / basis.values[i1 + j].sqrt());
     Ok(Gps { eigenvalues: basis.values[i1..i1 + d].to_vec(), values, sign_convention: SIGN_CONVENTION })
 }
+
+crate::object_only_serde!(HksOptions);
+
+crate::object_only_serde!(SiHksOptions);
+
+crate::object_only_serde!(WksOptions);

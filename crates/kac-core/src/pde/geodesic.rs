@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
 #[serde(default)]
 pub struct HeatMethodOptions {
     /// t = time_factor · h² (default 1).
@@ -188,3 +189,5 @@ pub fn heat_method(
         varadhan_time,
     })
 }
+
+crate::object_only_serde!(HeatMethodOptions);
