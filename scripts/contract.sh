@@ -26,9 +26,18 @@ done
 curl -fsS "http://$ADDR/readyz" > /dev/null   # the Dockerfile's health check
 # positive_data_acceptance is left out: a shape file's validity (and the configured limits) cannot be stated in
 # a JSON Schema, so schema-valid bytes are rightly refused with 4xx.
-"$VENV/bin/schemathesis" run openapi/openapi.json --url "http://$ADDR" \
-  --checks all --exclude-checks positive_data_acceptance \
-  --max-examples 50 --workers 2 --seed 20261122 --no-color
+run_schemathesis() {
+  "$VENV/bin/schemathesis" run openapi/openapi.json --url "http://$ADDR" \
+    --checks all --exclude-checks positive_data_acceptance \
+    --max-examples 50 --workers 2 --seed 7 --no-color 2>&1 | tee "$WORK/st.out"
+}
+if ! run_schemathesis; then
+  # Any check failure fails at once. Schemathesis 4.32 occasionally stops with an internal Hypothesis "Runtime
+  # Error" (no check failed); only that case is run once more.
+  if grep -q '^Failures:' "$WORK/st.out" || ! grep -q 'Runtime Error' "$WORK/st.out"; then exit 1; fi
+  echo "schemathesis stopped on an internal error without a failed check; running it once more"
+  run_schemathesis
+fi
 # SIGTERM: a clean, graceful exit.
 kill -TERM $PID
 wait $PID

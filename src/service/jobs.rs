@@ -451,6 +451,5 @@ pub fn store_result(results: &dyn ResultStore, id: &str, out: analysis::Output) 
         }
     }
     let body = serde_json::to_vec(&summary).map_err(std::io::Error::other)?;
-    let etag = super::store::etag_of(&body);
-    results.put(StoredResult { id: id.to_string(), summary, arrays: out.arrays, body, etag })
+    results.put(StoredResult::new(id, summary, out.arrays, body))
 }

@@ -562,21 +562,12 @@ fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
         .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"))
 }
 
-fn result_body(r: &StoredResult, values: bool) -> (Vec<u8>, String) {
+fn result_body(r: &StoredResult, values: bool) -> (Bytes, String) {
     if values {
-        return (r.body.clone(), r.etag.clone());
+        (r.body.clone(), r.etag.clone())
+    } else {
+        (r.summary_body.clone(), format!("\"{}-summary\"", r.etag.trim_matches('"')))
     }
-    let mut s = r.summary.clone();
-    if let Some(arrays) = s.get_mut("arrays").and_then(Value::as_object_mut) {
-        for a in arrays.values_mut() {
-            if let Some(o) = a.as_object_mut() {
-                o.remove("values");
-            }
-        }
-    }
-    let body = serde_json::to_vec(&s).unwrap_or_default();
-    let etag = format!("\"{}-summary\"", r.etag.trim_matches('"'));
-    (body, etag)
 }
 
 fn result_response(r: &StoredResult, headers: &HeaderMap, values: bool) -> Response {

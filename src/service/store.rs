@@ -187,8 +187,26 @@ pub struct StoredResult {
     pub id: String,
     pub summary: Value,
     pub arrays: Vec<VertexArray>,
-    pub body: Vec<u8>,
+    /// The JSON body, shared (not copied) by every response.
+    pub body: axum::body::Bytes,
     pub etag: String,
+    /// The body without per-vertex values (`?values=false`), made once.
+    pub summary_body: axum::body::Bytes,
+}
+
+impl StoredResult {
+    pub fn new(id: &str, summary: Value, arrays: Vec<VertexArray>, body: Vec<u8>) -> Self {
+        let mut light = summary.clone();
+        if let Some(map) = light.get_mut("arrays").and_then(Value::as_object_mut) {
+            for a in map.values_mut() {
+                if let Some(o) = a.as_object_mut() {
+                    o.remove("values");
+                }
+            }
+        }
+        let summary_body = serde_json::to_vec(&light).unwrap_or_default().into();
+        StoredResult { id: id.to_string(), etag: etag_of(&body), summary, arrays, body: body.into(), summary_body }
+    }
 }
 
 pub trait ResultStore: Send + Sync {
@@ -255,7 +273,7 @@ impl ResultStore for FileResults {
                 arrays.push(VertexArray { name, rows, cols, data, columns });
             }
         }
-        let r = Arc::new(StoredResult { id: id.to_string(), etag: etag_of(&body), summary, arrays, body });
+        let r = Arc::new(StoredResult::new(id, summary, arrays, body));
         self.results.lock().unwrap_or_else(|e| e.into_inner()).insert(id.to_string(), r.clone());
         Some(r)
     }
