@@ -326,7 +326,9 @@ fn execute(state: &AppState, job: &Arc<Job>, shape: &StoredShape) {
     let started = std::time::Instant::now();
     let outcome = run_job(state, job, shape);
     state.jobs.active.fetch_sub(1, Ordering::SeqCst);
-    state.metrics.record_job(job.analysis.name(), outcome.name(), started.elapsed().as_secs_f64());
+    if outcome.terminal() {
+        state.metrics.record_job(job.analysis.name(), outcome.name(), started.elapsed().as_secs_f64());
+    }
 }
 
 fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
