@@ -506,3 +506,42 @@ fn api_keys_and_rate_limits() {
     // Buckets are per key.
     assert_eq!(reply(agent().get(&s.url("/v1/shapes")).set("Authorization", "Bearer alpha-key").call()).status, 200);
 }
+
+#[test]
+fn a_job_past_its_time_limit_fails_with_job_timeout() {
+    let s = Server::start(&["--job-timeout-s", "1", "--test-job-delay-ms", "2500"]);
+    let id = upload(&s, &icosphere_off(1), "?format=off").body["id"].as_str().unwrap().to_string();
+    let j = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 3 }));
+    let done = wait_done(&s, j.body["id"].as_str().unwrap());
+    assert_eq!(
+        (done["status"].as_str(), done["error"]["code"].as_str()),
+        (Some("failed"), Some("job-timeout")),
+        "{done}"
+    );
+    // A wait longer than --max-wait-s is cut to it: the synchronous form answers 202 within the bound.
+    let s = Server::start(&["--max-wait-s", "1", "--test-job-delay-ms", "3000"]);
+    let t = Instant::now();
+    let r = reply(
+        agent()
+            .post(&s.url("/v1/analyze?wait=30&format=off&analysis=%7B%22analysis%22%3A%22trees%22%7D"))
+            .send_bytes(&icosphere_off(1)),
+    );
+    assert_eq!(r.status, 202, "{}", r.body);
+    assert!(t.elapsed() < Duration::from_secs(3));
+}
+
+#[test]
+fn results_and_shapes_outlive_the_memory_caches() {
+    // One byte of memory cache: every result and shape is read back from the store.
+    let s = Server::start(&["--store-cache-bytes", "1"]);
+    let id = upload(&s, &icosphere_off(2), "?format=off").body["id"].as_str().unwrap().to_string();
+    let j = submit(&s, json!({ "shape_id": id, "analysis": "hks", "k": 8, "options": { "count": 3 } }));
+    let done = wait_done(&s, j.body["id"].as_str().unwrap());
+    let a = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call());
+    let b = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call());
+    assert_eq!((a.status, &a.etag, &a.raw), (200, &b.etag, &b.raw));
+    let npy = reply(agent().get(&s.url(&format!("{}/arrays/hks.npy", done["result"].as_str().unwrap()))).call());
+    assert_eq!(npy.status, 200);
+    let g = reply(agent().get(&s.url(&format!("/v1/shapes/{id}"))).call());
+    assert_eq!(g.body["summary"]["vertices"], 162);
+}

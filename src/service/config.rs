@@ -36,6 +36,9 @@ pub struct Config {
     /// Bytes of eigenpairs kept in memory for reuse across analyses.
     #[arg(long, env = "KAC_CACHE_BYTES", default_value_t = 1024 * 1024 * 1024)]
     pub cache_bytes: usize,
+    /// Bytes of parsed shapes, and separately of results, kept in memory in front of the store.
+    #[arg(long, env = "KAC_STORE_CACHE_BYTES", default_value_t = 512 * 1024 * 1024)]
+    pub store_cache_bytes: usize,
     /// Threads each eigensolve uses (jobs run side by side on the workers).
     #[arg(long, env = "KAC_SOLVER_THREADS", default_value_t = 1)]
     pub solver_threads: usize,

@@ -337,8 +337,7 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
         return Status::Enqueued;
     }
     if job.stop.load(Ordering::SeqCst) {
-        finish(state, job, Status::Canceled, Some(canceled()), None);
-        return Status::Canceled;
+        return stopped(state, job);
     }
     job.view.send_modify(|v| {
         v.status = Status::Processing;
@@ -349,8 +348,7 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
     if state.config.test_job_delay_ms > 0 {
         std::thread::sleep(std::time::Duration::from_millis(state.config.test_job_delay_ms));
         if job.stop.load(Ordering::SeqCst) {
-            finish(state, job, Status::Canceled, Some(canceled()), None);
-            return Status::Canceled;
+            return stopped(state, job);
         }
     }
     let progress = |p: Progress| {
@@ -385,21 +383,7 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
             finish(state, job, Status::Failed, Some(p), None);
             Status::Failed
         }
-        Ok(Err(e)) if e.code == "canceled" => {
-            if job.timed_out.load(Ordering::SeqCst) {
-                let (_, mut p) = ApiError::Internal {
-                    detail: format!("the job ran longer than {} s (--job-timeout-s)", state.config.job_timeout_s),
-                }
-                .problem();
-                p.code = "job-timeout".into();
-                p.type_ = "/problems/job-timeout".into();
-                finish(state, job, Status::Failed, Some(p), None);
-                Status::Failed
-            } else {
-                finish(state, job, Status::Canceled, Some(canceled()), None);
-                Status::Canceled
-            }
-        }
+        Ok(Err(e)) if e.code == "canceled" => stopped(state, job),
         Ok(Err(e)) => {
             let (_, p) = ApiError::Analysis(e).problem();
             finish(state, job, Status::Failed, Some(p), None);
@@ -421,6 +405,23 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
                 }
             }
         }
+    }
+}
+
+/// A job that stopped on its flag: failed with `job-timeout` when the timer set it, canceled otherwise.
+fn stopped(state: &AppState, job: &Job) -> Status {
+    if job.timed_out.load(Ordering::SeqCst) {
+        let (_, mut p) = ApiError::Internal {
+            detail: format!("the job ran longer than {} s (--job-timeout-s)", state.config.job_timeout_s),
+        }
+        .problem();
+        p.code = "job-timeout".into();
+        p.type_ = "/problems/job-timeout".into();
+        finish(state, job, Status::Failed, Some(p), None);
+        Status::Failed
+    } else {
+        finish(state, job, Status::Canceled, Some(canceled()), None);
+        Status::Canceled
     }
 }
 

@@ -37,11 +37,11 @@ impl Inner {
         } else {
             config.workers
         };
-        let db = Arc::new(Database::open(&config.data_dir, config.max_vertices)?);
+        let db = Arc::new(Database::open(&config.data_dir, config.max_vertices, config.store_cache_bytes)?);
         Ok(Arc::new(Inner {
             shapes: db.clone(),
             job_store: db,
-            results: Arc::new(FileResults::open(&config.data_dir)?),
+            results: Arc::new(FileResults::open(&config.data_dir, config.store_cache_bytes)?),
             cache: Arc::new(EigenCache::new(config.cache_bytes)),
             jobs: jobs::Jobs::new(workers, config.queue_capacity.max(1)),
             metrics: ops::Metrics::default(),

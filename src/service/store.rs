@@ -12,6 +12,49 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+/// A map bounded by bytes: the least recently used entries go first. Values are shared (`Arc`).
+pub struct ByteLru<V> {
+    limit: usize,
+    map: HashMap<String, (Arc<V>, usize, u64)>,
+    bytes: usize,
+    clock: u64,
+}
+
+impl<V> ByteLru<V> {
+    pub fn new(limit: usize) -> Self {
+        ByteLru { limit, map: HashMap::new(), bytes: 0, clock: 0 }
+    }
+    pub fn get(&mut self, key: &str) -> Option<Arc<V>> {
+        self.clock += 1;
+        let clock = self.clock;
+        self.map.get_mut(key).map(|(v, _, used)| {
+            *used = clock;
+            v.clone()
+        })
+    }
+    /// Keeps the value unless it alone is larger than the limit.
+    pub fn put(&mut self, key: &str, value: Arc<V>, size: usize) {
+        self.remove(key);
+        if size > self.limit {
+            return;
+        }
+        self.clock += 1;
+        self.map.insert(key.to_string(), (value, size, self.clock));
+        self.bytes += size;
+        while self.bytes > self.limit {
+            let Some(victim) = self.map.iter().min_by_key(|(_, (_, _, used))| *used).map(|(k, _)| k.clone()) else {
+                break;
+            };
+            self.remove(&victim);
+        }
+    }
+    pub fn remove(&mut self, key: &str) {
+        if let Some((_, size, _)) = self.map.remove(key) {
+            self.bytes -= size;
+        }
+    }
+}
+
 /// What is known of a stored shape without parsing it again.
 #[derive(Debug, Clone)]
 pub struct ShapeRecord {
@@ -61,8 +104,14 @@ pub trait JobStore: Send + Sync {
 pub struct Database {
     conn: Mutex<rusqlite::Connection>,
     shape_dir: PathBuf,
-    parsed: Mutex<HashMap<String, Arc<StoredShape>>>,
+    /// Parsed shapes in memory, bounded by (about) their size.
+    parsed: Mutex<ByteLru<StoredShape>>,
     max_vertices: usize,
+}
+
+/// Bytes a parsed shape holds, about: its upload counts twice (geometry plus topology and the report).
+fn shape_size(s: &StoredShape) -> usize {
+    2 * s.bytes + 48 * s.validated.shape.vertex_count()
 }
 
 fn db_err(e: rusqlite::Error) -> std::io::Error {
@@ -70,7 +119,7 @@ fn db_err(e: rusqlite::Error) -> std::io::Error {
 }
 
 impl Database {
-    pub fn open(data_dir: &Path, max_vertices: usize) -> std::io::Result<Self> {
+    pub fn open(data_dir: &Path, max_vertices: usize, cache_bytes: usize) -> std::io::Result<Self> {
         let shape_dir = data_dir.join("shapes");
         std::fs::create_dir_all(&shape_dir)?;
         let conn = rusqlite::Connection::open(data_dir.join("kac.sqlite3")).map_err(db_err)?;
@@ -85,7 +134,7 @@ impl Database {
                  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, view TEXT NOT NULL);",
         )
         .map_err(db_err)?;
-        Ok(Database { conn: Mutex::new(conn), shape_dir, parsed: Mutex::new(HashMap::new()), max_vertices })
+        Ok(Database { conn: Mutex::new(conn), shape_dir, parsed: Mutex::new(ByteLru::new(cache_bytes)), max_vertices })
     }
     fn conn(&self) -> std::sync::MutexGuard<'_, rusqlite::Connection> {
         self.conn.lock().unwrap_or_else(|e| e.into_inner())
@@ -123,12 +172,12 @@ impl ShapeStore for Database {
             )
             .map_err(db_err)?;
         let s = Arc::new(shape);
-        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).insert(s.id.clone(), s.clone());
+        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(&s.id, s.clone(), shape_size(&s));
         Ok((inserted == 1, s))
     }
     fn get(&self, id: &str) -> Option<Arc<StoredShape>> {
         if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
-            return Some(s.clone());
+            return Some(s);
         }
         let record = self.record(id)?;
         let bytes = std::fs::read(self.shape_dir.join(id)).ok()?;
@@ -136,7 +185,7 @@ impl ShapeStore for Database {
         let read = kac_core::ReadOptions { max_vertices: self.max_vertices.max(1), ..Default::default() };
         let validated = kac_core::load_bytes(&bytes, format, &read, &Default::default()).ok()?;
         let s = Arc::new(StoredShape { record, validated });
-        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).insert(id.to_string(), s.clone());
+        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(id, s.clone(), shape_size(&s));
         Some(s)
     }
     fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize) {
@@ -214,18 +263,22 @@ pub trait ResultStore: Send + Sync {
     fn get(&self, id: &str) -> Option<Arc<StoredResult>>;
 }
 
-/// Results in memory, each also written to `DIR/results/{id}.json`.
+/// Results as files (`DIR/results/{id}.json`), the recently used ones also in memory (bounded by bytes).
 pub struct FileResults {
     dir: PathBuf,
-    results: Mutex<HashMap<String, Arc<StoredResult>>>,
+    results: Mutex<ByteLru<StoredResult>>,
 }
 
 impl FileResults {
-    pub fn open(data_dir: &Path) -> std::io::Result<Self> {
+    pub fn open(data_dir: &Path, cache_bytes: usize) -> std::io::Result<Self> {
         let dir = data_dir.join("results");
         std::fs::create_dir_all(&dir)?;
-        Ok(FileResults { dir, results: Mutex::new(HashMap::new()) })
+        Ok(FileResults { dir, results: Mutex::new(ByteLru::new(cache_bytes)) })
     }
+}
+
+fn result_size(r: &StoredResult) -> usize {
+    r.body.len() + r.summary_body.len() + r.arrays.iter().map(|a| 8 * a.data.len()).sum::<usize>()
 }
 
 /// Writes a file atomically: a temporary file beside it, fsync, rename.
@@ -243,12 +296,12 @@ impl ResultStore for FileResults {
     fn put(&self, result: StoredResult) -> std::io::Result<Arc<StoredResult>> {
         write_atomic(&self.dir.join(format!("{}.json", result.id)), &result.body)?;
         let r = Arc::new(result);
-        self.results.lock().unwrap_or_else(|e| e.into_inner()).insert(r.id.clone(), r.clone());
+        self.results.lock().unwrap_or_else(|e| e.into_inner()).put(&r.id, r.clone(), result_size(&r));
         Ok(r)
     }
     fn get(&self, id: &str) -> Option<Arc<StoredResult>> {
         if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
-            return Some(r.clone());
+            return Some(r);
         }
         // After a restart: read the file back (its arrays carry their values).
         if !id.bytes().all(|b| b.is_ascii_hexdigit()) {
@@ -274,7 +327,7 @@ impl ResultStore for FileResults {
             }
         }
         let r = Arc::new(StoredResult::new(id, summary, arrays, body));
-        self.results.lock().unwrap_or_else(|e| e.into_inner()).insert(id.to_string(), r.clone());
+        self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
         Some(r)
     }
 }
@@ -360,5 +413,26 @@ impl SpectrumCache for EigenCache {
                 g.bytes -= s;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ByteLru;
+    use std::sync::Arc;
+
+    #[test]
+    fn byte_lru_evicts_the_least_recently_used_and_skips_oversized_values() {
+        let mut c = ByteLru::new(10);
+        c.put("a", Arc::new(1), 4);
+        c.put("b", Arc::new(2), 4);
+        assert_eq!(c.get("a").as_deref(), Some(&1)); // a is now the most recent
+        c.put("c", Arc::new(3), 4); // 12 > 10: b goes
+        assert!(c.get("b").is_none());
+        assert_eq!((c.get("a").as_deref(), c.get("c").as_deref()), (Some(&1), Some(&3)));
+        c.put("huge", Arc::new(4), 11);
+        assert!(c.get("huge").is_none());
+        c.put("a", Arc::new(5), 2); // replacing frees the old size
+        assert_eq!(c.bytes, 6);
     }
 }
