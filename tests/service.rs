@@ -362,6 +362,23 @@ fn openapi_document_is_served_committed_and_documented() {
         served.body, committed,
         "openapi/openapi.json is stale: run `cargo run -- openapi > openapi/openapi.json`"
     );
+    // Every $ref points at a schema the document defines.
+    fn refs(v: &Value, out: &mut Vec<String>) {
+        match v {
+            Value::Object(m) => m.iter().for_each(|(k, x)| match (k.as_str(), x) {
+                ("$ref", Value::String(r)) => out.push(r.clone()),
+                _ => refs(x, out),
+            }),
+            Value::Array(a) => a.iter().for_each(|x| refs(x, out)),
+            _ => {}
+        }
+    }
+    let mut all = vec![];
+    refs(&committed, &mut all);
+    for r in &all {
+        let name = r.trim_start_matches("#/components/schemas/");
+        assert!(committed["components"]["schemas"][name].is_object(), "dangling reference {r}");
+    }
     for path in ["/v1/shapes", "/v1/jobs", "/v1/jobs/{id}", "/v1/results/{id}", "/v1/analyze", "/v1/compare"] {
         assert!(committed["paths"][path].is_object(), "{path} is not documented");
     }

@@ -41,6 +41,7 @@ problem+json with a stable `type` (`/problems/{code}`).",
         super::jobs::Status,
         super::jobs::JobProgress,
         crate::analysis::Analysis,
+        kac_core::io::Format,
     )),
     modifiers(&CommonResponses),
     tags(

@@ -193,30 +193,10 @@ fn shape_resource(s: &ShapeRecord) -> ShapeResource {
     }
 }
 
-/// The formats kac reads (for the OpenAPI document; requests carry the name).
-#[derive(utoipa::ToSchema)]
-#[allow(dead_code)]
-#[schema(rename_all = "lowercase")]
-pub enum FormatName {
-    Obj,
-    Off,
-    Ply,
-    Stl,
-    Gltf,
-    Glb,
-    Medit,
-    Gmsh,
-    Vtk,
-    Xyz,
-    Csv,
-    Json,
-    Mtx,
-}
-
 #[derive(Deserialize, utoipa::IntoParams)]
 pub struct UploadQuery {
     /// Format name; default: from the Content-Type, the multipart file name, or the content.
-    #[param(value_type = Option<FormatName>)]
+    #[param(value_type = Option<kac_core::io::Format>)]
     pub format: Option<String>,
 }
 
@@ -684,7 +664,7 @@ pub struct AnalyzeQuery {
     /// Seconds to wait for the result (default 10, at most --max-wait-s).
     pub wait: Option<f64>,
     /// Format of the shape (as for uploads).
-    #[param(value_type = Option<FormatName>)]
+    #[param(value_type = Option<kac_core::io::Format>)]
     pub format: Option<String>,
     /// The analysis as JSON (`{"analysis":"spectrum","k":10}`), when the body is the raw shape.
     pub analysis: Option<String>,

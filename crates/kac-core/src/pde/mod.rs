@@ -270,15 +270,7 @@ pub fn poisson(pair: &SparsePair, g: &[f64], dirichlet: Option<&[(usize, f64)]>)
             (mask, vals, "dirichlet")
         }
         None => {
-            // M-mean of g per component, using the row sums of M (the integral of each hat function).
-            let mut rows = vec![0.0; n];
-            matvec(&pair.pattern, &pair.mass, &vec![1.0; n], &mut rows);
-            let (mut s, mut w) = (vec![0.0; count], vec![0.0; count]);
-            for i in 0..n {
-                s[labels[i] as usize] += rows[i] * g[i];
-                w[labels[i] as usize] += rows[i];
-            }
-            removed = (0..count).map(|c| s[c] / w[c]).collect();
+            removed = component_means(pair, &labels, count, &g);
             g.iter_mut().enumerate().for_each(|(i, v)| *v -= removed[labels[i] as usize]);
             // Pin the first vertex of each component; shifted to mean zero below.
             let mut mask = vec![false; n];
@@ -299,16 +291,24 @@ pub fn poisson(pair: &SparsePair, g: &[f64], dirichlet: Option<&[(usize, f64)]>)
     let x = solve_spd(&pair.pattern, &pair.stiffness, rhs.as_ref(), Some((&mask, fm.as_ref())))?;
     let mut f: Vec<f64> = x.col(0).iter().copied().collect();
     if dirichlet.is_none() {
-        let mut rows = vec![0.0; n];
-        matvec(&pair.pattern, &pair.mass, &vec![1.0; n], &mut rows);
-        let (mut s, mut w) = (vec![0.0; count], vec![0.0; count]);
-        for i in 0..n {
-            s[labels[i] as usize] += rows[i] * f[i];
-            w[labels[i] as usize] += rows[i];
-        }
-        f.iter_mut().enumerate().for_each(|(i, v)| *v -= s[labels[i] as usize] / w[labels[i] as usize]);
+        let means = component_means(pair, &labels, count, &f);
+        f.iter_mut().enumerate().for_each(|(i, v)| *v -= means[labels[i] as usize]);
     }
     Ok(Poisson { values: f, boundary, removed_mean: removed })
+}
+
+/// The M-weighted mean of `u` on each component: Σ (M1)_i u_i / Σ (M1)_i, M1 the row sums of M (the integral of
+/// each hat function).
+fn component_means(pair: &SparsePair, labels: &[u32], count: usize, u: &[f64]) -> Vec<f64> {
+    let n = pair.n();
+    let mut rows = vec![0.0; n];
+    matvec(&pair.pattern, &pair.mass, &vec![1.0; n], &mut rows);
+    let (mut s, mut w) = (vec![0.0; count], vec![0.0; count]);
+    for i in 0..n {
+        s[labels[i] as usize] += rows[i] * u[i];
+        w[labels[i] as usize] += rows[i];
+    }
+    (0..count).map(|c| s[c] / w[c]).collect()
 }
 
 /// The wave equation ∂²u/∂t² = Δu from u₀ with velocity v₀, by modal superposition over the computed
