@@ -41,9 +41,9 @@ pub struct EigenOptions {
     /// Relative residual tolerance of the shift-inverted problem (default 1e-10).
     pub tol: f64,
     pub sigma: Option<f64>,
-    /// Block size b (default: 8 for k ≤ 16, else 16).
+    /// Block size b (default 8).
     pub block: Option<usize>,
-    /// Subspace size (default: max(2w, w + 6b) columns for w = k + guard wanted pairs, at most n).
+    /// Subspace size (default: max(2w, w + 6b, min(3w, w + 100)) columns for w = k + guard wanted pairs, at most n).
     pub subspace: Option<usize>,
     /// Limit on block expansions.
     pub max_steps: usize,
