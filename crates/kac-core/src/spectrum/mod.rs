@@ -177,6 +177,10 @@ pub fn eigs(
     if !(options.tol > 0.0 && options.tol < 1.0) {
         return Err(EigenError::InvalidOption { name: "tol", message: format!("{} is not in (0, 1)", options.tol) });
     }
+    // The dense path runs in one call to faer; a stop requested before it starts is honoured here.
+    if control.stopped() {
+        return Err(EigenError::Canceled);
+    }
     let mut s = if dense {
         dense::eigs_dense(pair, k)?
     } else {
