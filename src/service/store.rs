@@ -338,30 +338,17 @@ pub fn etag_of(body: &[u8]) -> String {
     format!("\"{}\"", sha2::Sha256::digest(body).iter().take(16).map(|b| format!("{b:02x}")).collect::<String>())
 }
 
-/// Eigenpairs by (shape, operator, solver) key, bounded by bytes; the least recently used go first. An entry
-/// with k pairs serves any request for at most k.
+/// Eigenpairs by (shape, operator, solver) key, bounded by bytes (least recently used first). An entry with k
+/// pairs serves any request for at most k.
 pub struct EigenCache {
-    limit: usize,
-    inner: Mutex<CacheInner>,
+    inner: Mutex<ByteLru<Eigen>>,
     pub hits: std::sync::atomic::AtomicU64,
     pub misses: std::sync::atomic::AtomicU64,
 }
 
-#[derive(Default)]
-struct CacheInner {
-    entries: HashMap<String, (Arc<Eigen>, usize, u64)>,
-    bytes: usize,
-    clock: u64,
-}
-
 impl EigenCache {
     pub fn new(limit: usize) -> Self {
-        EigenCache {
-            limit,
-            inner: Mutex::new(CacheInner::default()),
-            hits: Default::default(),
-            misses: Default::default(),
-        }
+        EigenCache { inner: Mutex::new(ByteLru::new(limit)), hits: Default::default(), misses: Default::default() }
     }
     fn size(e: &Eigen) -> usize {
         let s = &e.spectrum;
@@ -373,46 +360,19 @@ impl EigenCache {
 impl SpectrumCache for EigenCache {
     fn get(&self, key: &str, k: usize) -> Option<Arc<Eigen>> {
         use std::sync::atomic::Ordering::Relaxed;
-        let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());
-        g.clock += 1;
-        let clock = g.clock;
-        match g.entries.get_mut(key) {
-            Some((e, _, used)) if e.spectrum.values.len() >= k => {
-                *used = clock;
-                self.hits.fetch_add(1, Relaxed);
-                Some(e.clone())
-            }
-            _ => {
-                self.misses.fetch_add(1, Relaxed);
-                None
-            }
-        }
+        let found =
+            self.inner.lock().unwrap_or_else(|e| e.into_inner()).get(key).filter(|e| e.spectrum.values.len() >= k);
+        if found.is_some() { &self.hits } else { &self.misses }.fetch_add(1, Relaxed);
+        found
     }
     fn put(&self, key: &str, eigen: Arc<Eigen>) {
-        let size = Self::size(&eigen);
-        if size > self.limit {
+        let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        // Keep whichever entry holds more pairs.
+        if g.get(key).is_some_and(|old| old.spectrum.values.len() >= eigen.spectrum.values.len()) {
             return;
         }
-        let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());
-        g.clock += 1;
-        let clock = g.clock;
-        if let Some((old, s, _)) = g.entries.get(key) {
-            if old.spectrum.values.len() >= eigen.spectrum.values.len() {
-                return;
-            }
-            let s = *s;
-            g.bytes -= s;
-        }
-        g.entries.insert(key.to_string(), (eigen, size, clock));
-        g.bytes += size;
-        while g.bytes > self.limit {
-            let Some(victim) = g.entries.iter().min_by_key(|(_, (_, _, used))| *used).map(|(k, _)| k.clone()) else {
-                break;
-            };
-            if let Some((_, s, _)) = g.entries.remove(&victim) {
-                g.bytes -= s;
-            }
-        }
+        let size = Self::size(&eigen);
+        g.put(key, eigen, size);
     }
 }
 
