@@ -8,7 +8,7 @@
 //! input vertices share their value; vertices validation dropped get NaN).
 
 use kac_core::descriptors::graph::{components, eigenmap, fiedler, spanning_trees};
-use kac_core::descriptors::heat::{diffuse_spectral, heat_kernel_rows, heat_trace, heat_trace_tail_bound};
+use kac_core::descriptors::heat::{diffuse_spectral, heat_kernel_row, heat_trace, heat_trace_tail_bound};
 use kac_core::descriptors::shape_dna::{self, Measures, ShapeDnaOptions};
 use kac_core::descriptors::signatures::{self, HksOptions, SiHksOptions, WksOptions};
 use kac_core::descriptors::weyl::weyl_estimate;
@@ -619,11 +619,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                     let mut rows_json = vec![];
                     for (s_in, &s) in sources.iter().zip(&src_op) {
                         // k_t(s, ·) for every t, and what truncation can miss of the flow of the hat function at s.
-                        let mut kt = faer::Mat::<f64>::zeros(b.n(), times.len());
-                        for (j, &t) in times.iter().enumerate() {
-                            let row = heat_kernel_rows(&b, &[s], t)?;
-                            kt.col_mut(j).copy_from(row.col(0));
-                        }
+                        let kt = heat_kernel_row(&b, s, &times)?;
                         let mut u0 = vec![0.0; b.n()];
                         u0[s] = 1.0;
                         let d = diffuse_spectral(&b, &e.operator.pair, &u0, &times)?;

@@ -6,7 +6,7 @@
 //! not computed is at least λ_k (the largest computed), so the part of e^{−tL}u₀ the sum leaves out has M-norm at
 //! most e^{−λ_k t} ‖r‖_M. That bound is returned with every diffusion.
 
-use super::{check_times, Basis, DescriptorError};
+use super::{check_times, m_project, Basis, DescriptorError};
 use crate::operators::sparse::{matvec, SparsePair};
 use faer::Mat;
 use serde::Serialize;
@@ -29,14 +29,28 @@ pub fn heat_trace_tail_bound(values: &[f64], n: usize, t: f64) -> f64 {
 /// area: Σ_y M-integral of a row is 1 up to truncation on a closed surface).
 pub fn heat_kernel_rows(basis: &Basis<'_>, sources: &[usize], t: f64) -> Result<Mat<f64>, DescriptorError> {
     check_times("t", &[t])?;
-    let n = basis.n();
-    if let Some(s) = sources.iter().find(|&&s| s >= n) {
-        return Err(DescriptorError::param("sources", format!("vertex {s} does not exist ({n} vertices)")));
-    }
+    check_source(basis, sources)?;
     let phi = basis.vectors;
     // W[i, j] = e^{−λ_i t} φ_i(s_j): then rows = Φ W.
     let w = Mat::from_fn(basis.k(), sources.len(), |i, j| (-basis.values[i] * t).exp() * phi[(sources[j], i)]);
     Ok(phi * w.as_ref())
+}
+
+/// One row of the heat kernel at several times: column j is k_{t_j}(source, ·).
+pub fn heat_kernel_row(basis: &Basis<'_>, source: usize, times: &[f64]) -> Result<Mat<f64>, DescriptorError> {
+    check_times("times", times)?;
+    check_source(basis, &[source])?;
+    let phi = basis.vectors;
+    let w = Mat::from_fn(basis.k(), times.len(), |i, j| (-basis.values[i] * times[j]).exp() * phi[(source, i)]);
+    Ok(phi * w.as_ref())
+}
+
+fn check_source(basis: &Basis<'_>, sources: &[usize]) -> Result<(), DescriptorError> {
+    let n = basis.n();
+    match sources.iter().find(|&&s| s >= n) {
+        Some(s) => Err(DescriptorError::param("sources", format!("vertex {s} does not exist ({n} vertices)"))),
+        None => Ok(()),
+    }
 }
 
 /// Heat diffusion of u₀ by the spectrum.
@@ -67,13 +81,9 @@ pub fn diffuse_spectral(
     if u0.len() != n || pair.n() != n {
         return Err(DescriptorError::param("u0", format!("{} values for {n} vertices", u0.len())));
     }
-    let mut mu = vec![0.0; n];
-    matvec(&pair.pattern, &pair.mass, u0, &mut mu);
+    let (c, residual) = m_project(basis, pair, u0);
+    let norm2 = residual * residual + c.iter().map(|c| c * c).sum::<f64>();
     let phi = basis.vectors;
-    let c: Vec<f64> = (0..basis.k()).map(|i| (0..n).map(|x| phi[(x, i)] * mu[x]).sum()).collect();
-    let norm2: f64 = u0.iter().zip(&mu).map(|(a, b)| a * b).sum();
-    let captured: f64 = c.iter().map(|c| c * c).sum();
-    let residual = (norm2 - captured).max(0.0).sqrt();
     let w = Mat::from_fn(basis.k(), times.len(), |i, j| (-basis.values[i] * times[j]).exp() * c[i]);
     let lk = basis.max_value();
     Ok(SpectralDiffusion {
@@ -99,17 +109,19 @@ pub struct HeatContent {
 }
 
 pub fn heat_content(basis: &Basis<'_>, pair: &SparsePair, times: &[f64]) -> Result<HeatContent, DescriptorError> {
+    check_times("times", times)?;
+    if pair.n() != basis.n() {
+        return Err(DescriptorError::param("pair", "the operator does not match the basis"));
+    }
     let ones = vec![1.0; basis.n()];
-    let d = diffuse_spectral(basis, pair, &ones, times)?;
+    let (c, residual) = m_project(basis, pair, &ones);
     let mut m1 = vec![0.0; basis.n()];
     matvec(&pair.pattern, &pair.mass, &ones, &mut m1);
-    let phi = basis.vectors;
-    let c: Vec<f64> = (0..basis.k()).map(|i| (0..basis.n()).map(|x| phi[(x, i)] * m1[x]).sum()).collect();
     let lk = basis.max_value();
     Ok(HeatContent {
         times: times.to_vec(),
         content: times.iter().map(|&t| c.iter().zip(basis.values).map(|(c, l)| (-l * t).exp() * c * c).sum()).collect(),
         total_mass: m1.iter().sum(),
-        truncation_bound: times.iter().map(|t| (-lk * t).exp() * d.residual_norm * d.residual_norm).collect(),
+        truncation_bound: times.iter().map(|t| (-lk * t).exp() * residual * residual).collect(),
     })
 }

@@ -115,6 +115,19 @@ impl DescriptorError {
     }
 }
 
+/// Coordinates of `u` in the basis, c_i = ⟨u, φ_i⟩_M, and the M-norm of the part of `u` outside it
+/// (√(‖u‖²_M − Σc²), exact because the φ_i are M-orthonormal). `u` has one value per basis row.
+pub fn m_project(basis: &Basis<'_>, pair: &SparsePair, u: &[f64]) -> (Vec<f64>, f64) {
+    let n = basis.n();
+    let mut mu = vec![0.0; n];
+    crate::operators::sparse::matvec(&pair.pattern, &pair.mass, u, &mut mu);
+    let phi = basis.vectors;
+    let c: Vec<f64> = (0..basis.k()).map(|i| (0..n).map(|x| phi[(x, i)] * mu[x]).sum()).collect();
+    let norm2: f64 = u.iter().zip(&mu).map(|(a, b)| a * b).sum();
+    let captured: f64 = c.iter().map(|c| c * c).sum();
+    (c, (norm2 - captured).max(0.0).sqrt())
+}
+
 /// `count` points log-spaced from `a` to `b` inclusive (natural log spacing; one point gives `a`).
 pub fn log_space(a: f64, b: f64, count: usize) -> Vec<f64> {
     if count == 1 {

@@ -16,7 +16,7 @@
 
 pub mod geodesic;
 
-use crate::descriptors::{graph::components, Basis, DescriptorError};
+use crate::descriptors::{graph::components, m_project, Basis, DescriptorError};
 use crate::operators::sparse::{matvec, submatrix, Pattern, SparsePair};
 use crate::spectrum::factor::{Cholesky, Symbolic};
 use faer::{Mat, MatRef, Par};
@@ -331,16 +331,8 @@ pub fn wave(
         return Err(DescriptorError::param("times", "times must be finite"));
     }
     let phi = basis.vectors;
-    let project = |u: &[f64]| -> (Vec<f64>, f64) {
-        let mut mu = vec![0.0; n];
-        matvec(&pair.pattern, &pair.mass, u, &mut mu);
-        let c: Vec<f64> = (0..basis.k()).map(|i| (0..n).map(|x| phi[(x, i)] * mu[x]).sum()).collect();
-        let norm2: f64 = u.iter().zip(&mu).map(|(a, b)| a * b).sum();
-        let cap: f64 = c.iter().map(|c| c * c).sum();
-        (c, (norm2 - cap).max(0.0).sqrt())
-    };
-    let (a, dropped) = project(u0);
-    let b = v0.map(|v| project(v).0).unwrap_or_else(|| vec![0.0; basis.k()]);
+    let (a, dropped) = m_project(basis, pair, u0);
+    let b = v0.map(|v| m_project(basis, pair, v).0).unwrap_or_else(|| vec![0.0; basis.k()]);
     let w = Mat::from_fn(basis.k(), times.len(), |i, j| {
         let t = times[j];
         if basis.is_zero(i) {
