@@ -557,34 +557,27 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
         Analysis::Hks { k, options, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let h = signatures::hks(&basis_of(&e, *k), options)?;
-            let mut a = to_input_rows(v, &e.operator, h.values.as_ref(), "hks");
-            a.columns = Some(h.times.clone());
-            let summary = merge(json!({ "k": k, "hks": h, "options": options }), operator_json(&e.operator));
-            Output { summary, arrays: vec![a] }
+            let summary = json!({ "k": k, "hks": h, "options": options });
+            signature(v, &e, h.values.as_ref(), "hks", h.times.clone(), summary)
         }
         Analysis::SiHks { k, options, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let h = signatures::si_hks(&basis_of(&e, *k), options)?;
-            let mut a = to_input_rows(v, &e.operator, h.values.as_ref(), "si_hks");
-            a.columns = Some(h.frequencies.iter().map(|&f| f as f64).collect());
-            let summary = merge(json!({ "k": k, "si_hks": h, "options": options }), operator_json(&e.operator));
-            Output { summary, arrays: vec![a] }
+            let columns = h.frequencies.iter().map(|&f| f as f64).collect();
+            let summary = json!({ "k": k, "si_hks": h, "options": options });
+            signature(v, &e, h.values.as_ref(), "si_hks", columns, summary)
         }
         Analysis::Wks { k, options, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let w = signatures::wks(&basis_of(&e, *k), options)?;
-            let mut a = to_input_rows(v, &e.operator, w.values.as_ref(), "wks");
-            a.columns = Some(w.energies.clone());
-            let summary = merge(json!({ "k": k, "wks": w, "options": options }), operator_json(&e.operator));
-            Output { summary, arrays: vec![a] }
+            let summary = json!({ "k": k, "wks": w, "options": options });
+            signature(v, &e, w.values.as_ref(), "wks", w.energies.clone(), summary)
         }
         Analysis::Gps { k, dimensions, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             let g = signatures::gps(&basis_of(&e, *k), *dimensions)?;
-            let mut a = to_input_rows(v, &e.operator, g.values.as_ref(), "gps");
-            a.columns = Some(g.eigenvalues.clone());
-            let summary = merge(json!({ "k": k, "gps": g }), operator_json(&e.operator));
-            Output { summary, arrays: vec![a] }
+            let summary = json!({ "k": k, "gps": g });
+            signature(v, &e, g.values.as_ref(), "gps", g.eigenvalues.clone(), summary)
         }
         Analysis::ShapeDna { options, operator, solver } => {
             let op = build_operator(v, operator)?;
@@ -789,6 +782,20 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
         o.insert("eigenpairs_reused".into(), reused.get().into());
     }
     Ok(Output { summary, arrays: out.arrays })
+}
+
+/// The output of a per-vertex signature: its summary with the operator's, and its values as one array.
+fn signature(
+    v: &Validated,
+    e: &Eigen,
+    values: faer::MatRef<'_, f64>,
+    name: &'static str,
+    columns: Vec<f64>,
+    summary: Value,
+) -> Output {
+    let mut a = to_input_rows(v, &e.operator, values, name);
+    a.columns = Some(columns);
+    Output { summary: merge(summary, operator_json(&e.operator)), arrays: vec![a] }
 }
 
 /// Validated vertex indices → rows of the (possibly Dirichlet-condensed) operator.
