@@ -36,6 +36,12 @@ pub struct SpectrumCmd {
     /// Band mode: every eigenpair with λ in [A, B] (then -k is ignored), e.g. `--band 0,100`.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub band: Option<Vec<f64>>,
+    /// Tuning of the sparse solver: right-hand sides per block solve (default 8).
+    #[arg(long)]
+    pub block: Option<usize>,
+    /// Tuning of the sparse solver: Krylov subspace columns kept between restarts (default: see the README).
+    #[arg(long)]
+    pub subspace: Option<usize>,
 }
 
 pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
@@ -53,7 +59,16 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
         "sparse" => Method::Sparse,
         _ => Method::Auto,
     };
-    let opts = EigenOptions { k: a.k, tol: a.tol, threads: a.threads, method, sigma: a.sigma, ..Default::default() };
+    let opts = EigenOptions {
+        k: a.k,
+        tol: a.tol,
+        threads: a.threads,
+        method,
+        sigma: a.sigma,
+        block: a.block,
+        subspace: a.subspace,
+        ..Default::default()
+    };
     let result = match &a.band {
         Some(band) if band.len() != 2 => {
             return Err(Failure { code: 2, message: format!("--band takes two numbers A,B; {} given", band.len()) })
@@ -102,7 +117,9 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
         },
         "timings": {
             "read_s": read_s, "assembly_s": assembly_s, "symbolic_s": st.timings.symbolic_s, "factorization_s": st.timings.numeric_s,
-            "iteration_s": st.timings.iteration_s, "total_s": t0.elapsed().as_secs_f64(),
+            "iteration_s": st.timings.iteration_s, "solve_s": st.timings.solve_s,
+            "orthogonalize_s": st.timings.orthogonalize_s, "rayleigh_ritz_s": st.timings.rayleigh_ritz_s,
+            "restart_s": st.timings.restart_s, "total_s": t0.elapsed().as_secs_f64(),
         },
     }))
 }

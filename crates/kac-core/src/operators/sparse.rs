@@ -208,21 +208,31 @@ pub fn submatrix(p: &Pattern, values: &[&[f64]], keep: &[usize]) -> (Pattern, Ve
 }
 
 /// Y = A·X for a symmetric A on `p` and a block X (n × b, column-major): X is copied to row-major so each entry
-/// of A meets b contiguous values; rows of Y are computed in parallel.
-pub fn spmm(p: &Pattern, values: &[f64], x: faer::MatRef<'_, f64>, mut y: faer::MatMut<'_, f64>) {
+/// of A meets b contiguous values; rows of Y are computed in parallel. `scratch` holds both row-major copies; it grows once and is reused.
+pub fn spmm(
+    p: &Pattern,
+    values: &[f64],
+    x: faer::MatRef<'_, f64>,
+    mut y: faer::MatMut<'_, f64>,
+    scratch: &mut Vec<f64>,
+) {
     let (n, b) = (x.nrows(), x.ncols());
-    let mut xr = vec![0.0; n * b];
+    if scratch.len() < 2 * n * b {
+        scratch.resize(2 * n * b, 0.0);
+    }
+    let (xr, yr) = scratch[..2 * n * b].split_at_mut(n * b);
     for c in 0..b {
         let col = x.col(c);
         for i in 0..n {
             xr[i * b + c] = col[i];
         }
     }
-    let mut yr = vec![0.0; n * b];
+    let xr = &*xr;
     yr.par_chunks_mut(b * 1024).enumerate().for_each(|(chunk, out)| {
         let j0 = chunk * 1024;
         for (k, row) in out.chunks_mut(b).enumerate() {
             let j = j0 + k;
+            row.fill(0.0);
             for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
                 let a = values[pos];
                 let xi = &xr[p.row_idx[pos] * b..p.row_idx[pos] * b + b];

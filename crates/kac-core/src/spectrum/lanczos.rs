@@ -42,15 +42,38 @@ impl Rng {
     }
 }
 
+/// Seconds spent inside the iteration, by kind of work (reported in [`Timings`]).
+#[derive(Default)]
+struct Clock {
+    solve: f64,
+    orthogonalize: f64,
+    rayleigh_ritz: f64,
+    restart: f64,
+}
+
+fn lap(t: &mut Instant) -> f64 {
+    let now = Instant::now();
+    let d = now.duration_since(*t).as_secs_f64();
+    *t = now;
+    d
+}
+
+/// Column-wise inner products ⟨x_c, y_c⟩.
+fn col_dots(x: MatRef<'_, f64>, y: MatRef<'_, f64>) -> Vec<f64> {
+    (0..x.ncols()).map(|c| x.col(c).iter().zip(y.col(c).iter()).map(|(a, b)| a * b).sum()).collect()
+}
+
 struct Ctx<'a> {
     pair: &'a SparsePair,
     mdiag: Option<Vec<f64>>,
     mean_mass: f64,
+    /// Scratch of the sparse block product (grows once).
+    scratch: Vec<f64>,
 }
 
 impl Ctx<'_> {
     /// out = M x
-    fn apply_m(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) {
+    fn apply_m(&mut self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) {
         match &self.mdiag {
             Some(d) => {
                 for c in 0..x.ncols() {
@@ -59,105 +82,101 @@ impl Ctx<'_> {
                     }
                 }
             }
-            None => crate::operators::sparse::spmm(&self.pair.pattern, &self.pair.mass, x, out),
+            None => crate::operators::sparse::spmm(&self.pair.pattern, &self.pair.mass, x, out, &mut self.scratch),
         }
     }
 
-    /// M-orthogonalizes `w` against `v` twice (classical Gram–Schmidt, DGKS); returns Vᵀ M (T-image) coefficients.
-    fn orthogonalize(&self, v: MatRef<'_, f64>, mut w: MatMut<'_, f64>) -> Mat<f64> {
-        let (n, b, m) = (w.nrows(), w.ncols(), v.ncols());
-        let mut coef = Mat::<f64>::zeros(m, b);
+    /// Classical Gram–Schmidt of `w` against the M-orthonormal columns of `v`, with a second pass only where the
+    /// first removed more than half of some column's M-norm² (DGKS). `mw` holds M w on entry and on exit; the
+    /// coefficients Vᵀ M w are added to `coef` (rows of `v`).
+    fn project_out(
+        &mut self,
+        v: MatRef<'_, f64>,
+        mut w: MatMut<'_, f64>,
+        mut mw: MatMut<'_, f64>,
+        mut coef: MatMut<'_, f64>,
+    ) {
+        let (m, b) = (v.ncols(), w.ncols());
         if m == 0 {
-            return coef;
+            return;
         }
-        let mut mw = Mat::<f64>::zeros(n, b);
         let mut c = Mat::<f64>::zeros(m, b);
-        let mut self_norms = vec![0.0; b];
-        for pass in 0..2 {
-            self.apply_m(w.rb(), mw.as_mut());
-            if pass == 0 {
-                for (col, sn) in self_norms.iter_mut().enumerate() {
-                    *sn = (0..n).map(|i| w[(i, col)] * mw[(i, col)]).sum();
+        for pass in 0..3 {
+            let before = col_dots(w.rb(), mw.rb());
+            matmul(c.as_mut(), Accum::Replace, v.transpose(), mw.rb(), 1.0, Par::Seq);
+            matmul(w.rb_mut(), Accum::Add, v, c.as_ref(), -1.0, Par::Seq);
+            for col in 0..b {
+                for r in 0..m {
+                    coef[(r, col)] += c[(r, col)];
                 }
             }
-            matmul(c.as_mut(), Accum::Replace, v.transpose(), mw.as_ref(), 1.0, Par::Seq);
-            matmul(w.rb_mut(), Accum::Add, v, c.as_ref(), -1.0, Par::Seq);
-            coef += &c;
-            if pass == 0 {
-                // DGKS: a second pass only if some column lost more than half its M-norm² to the projection
-                // (‖w − Vc‖²_M = ‖w‖²_M − ‖c‖², V being M-orthonormal).
-                let lost = (0..b).any(|col| {
-                    let c2: f64 = (0..m).map(|r| c[(r, col)] * c[(r, col)]).sum();
-                    c2 > 0.5 * self_norms[col]
-                });
-                if !lost {
-                    break;
-                }
+            self.apply_m(w.rb(), mw.rb_mut());
+            // ‖w − Vc‖²_M = ‖w‖²_M − ‖c‖² for M-orthonormal V.
+            let lost = (0..b).any(|col| {
+                let c2: f64 = (0..m).map(|r| c[(r, col)] * c[(r, col)]).sum();
+                c2 > 0.5 * before[col]
+            });
+            if !lost || pass == 2 {
+                break;
             }
         }
-        coef
     }
 
-    /// M-orthonormalizes the columns of `w` in place (after orthogonalization against `v`): W = Q B.
-    /// Directions that vanished (rank deficiency) are replaced by random vectors orthogonal to `v` and the rest;
-    /// their rows of B are zero. Returns B.
-    fn normalize(&self, v: MatRef<'_, f64>, mut w: MatMut<'_, f64>, rng: &mut Rng, scale: &[f64]) -> Mat<f64> {
+    /// M-orthonormalizes the block `w` (already M-orthogonal to `v[:, ..lead]`), W = Q B, writing Q into
+    /// `v[:, lead..lead + b]` and M Q into `mq`; `mw` holds M w. Directions that vanished (rank deficiency: an
+    /// invariant subspace was found) are replaced by random vectors orthogonal to everything before them; their
+    /// rows of B are zero. `scale` holds each column's norm² before orthogonalization (the rank test's reference).
+    #[allow(clippy::too_many_arguments)]
+    fn normalize(
+        &mut self,
+        mut v: MatMut<'_, f64>,
+        lead: usize,
+        w: MatRef<'_, f64>,
+        mw: MatRef<'_, f64>,
+        mut mq: MatMut<'_, f64>,
+        rng: &mut Rng,
+        scale: &[f64],
+    ) -> Mat<f64> {
         let (n, b) = (w.nrows(), w.ncols());
-        let mut mw = Mat::<f64>::zeros(n, b);
-        self.apply_m(w.rb(), mw.as_mut());
         let mut g = Mat::<f64>::zeros(b, b);
-        matmul(g.as_mut(), Accum::Replace, w.rb().transpose(), mw.as_ref(), 1.0, Par::Seq);
+        matmul(g.as_mut(), Accum::Replace, w.transpose(), mw, 1.0, Par::Seq);
         let g = Mat::from_fn(b, b, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
         let evd = g.self_adjoint_eigen(Side::Lower).expect("symmetric eigen of a small Gram matrix");
         let (s, u) = (evd.S(), evd.U());
         let ref_scale = scale.iter().cloned().fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-        let mut q = Mat::<f64>::zeros(n, b);
+        // Largest directions first: Q = W U_kept R⁻¹, B = R U_keptᵀ.
+        let kept_idx: Vec<usize> = (0..b).rev().filter(|&idx| s[idx] > 1e-24 * ref_scale).collect();
+        let kept = kept_idx.len();
+        let mut transform = Mat::<f64>::zeros(b, kept);
         let mut bmat = Mat::<f64>::zeros(b, b);
-        let mut kept = 0;
-        // Largest directions first.
-        for idx in (0..b).rev() {
-            let sv = s[idx];
-            if sv > 1e-24 * ref_scale {
-                let r = sv.sqrt();
-                let col = u.col(idx);
-                let mut qc = q.col_mut(kept);
-                for i in 0..n {
-                    let mut acc = 0.0;
-                    for c in 0..b {
-                        acc += w[(i, c)] * col[c];
-                    }
-                    qc[i] = acc / r;
-                }
-                for c in 0..b {
-                    bmat[(kept, c)] = r * col[c];
-                }
-                kept += 1;
+        for (j, &idx) in kept_idx.iter().enumerate() {
+            let r = s[idx].sqrt();
+            for c in 0..b {
+                transform[(c, j)] = u[(c, idx)] / r;
+                bmat[(j, c)] = r * u[(c, idx)];
             }
         }
+        matmul(v.rb_mut().subcols_mut(lead, kept), Accum::Replace, w, transform.as_ref(), 1.0, Par::Seq);
+        matmul(mq.rb_mut().subcols_mut(0, kept), Accum::Replace, mw, transform.as_ref(), 1.0, Par::Seq);
         // Refill vanished directions with random vectors.
         for j in kept..b {
+            let mut x = Mat::<f64>::from_fn(n, 1, |_, _| rng.next());
+            let mut mx = Mat::<f64>::zeros(n, 1);
             for _attempt in 0..3 {
-                let mut x = Mat::<f64>::from_fn(n, 1, |_, _| rng.next());
-                let vv = if v.ncols() > 0 { Some(v) } else { None };
-                // `orthogonalize` already reorthogonalizes as needed (DGKS); Q ⊥ V, so one call against each.
-                if let Some(vv) = vv {
-                    self.orthogonalize(vv, x.as_mut());
-                }
-                if j > 0 {
-                    self.orthogonalize(q.as_ref().subcols(0, j), x.as_mut());
-                }
-                let mut mx = Mat::<f64>::zeros(n, 1);
                 self.apply_m(x.as_ref(), mx.as_mut());
-                let nrm = (0..n).map(|i| x[(i, 0)] * mx[(i, 0)]).sum::<f64>().sqrt();
+                let mut sink = Mat::<f64>::zeros(lead + j, 1);
+                self.project_out(v.rb().subcols(0, lead + j), x.as_mut(), mx.as_mut(), sink.as_mut());
+                let nrm = col_dots(x.as_ref(), mx.as_ref())[0].sqrt();
                 if nrm > 1e-8 {
                     for i in 0..n {
-                        q[(i, j)] = x[(i, 0)] / nrm;
+                        v[(i, lead + j)] = x[(i, 0)] / nrm;
+                        mq[(i, j)] = mx[(i, 0)] / nrm;
                     }
                     break;
                 }
+                x = Mat::<f64>::from_fn(n, 1, |_, _| rng.next());
             }
         }
-        w.copy_from(q.as_ref());
         bmat
     }
 }
@@ -213,23 +232,28 @@ pub fn eigs_block_lanczos(
     };
     let numeric_s = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();
+    let mut clock = Clock::default();
     let mdiag = pair.mass_diagonal();
     let mean_mass = mdiag.iter().sum::<f64>() / n as f64;
-    let ctx = Ctx { pair, mdiag: pair.mass_is_diagonal.then_some(mdiag), mean_mass };
+    let mut ctx = Ctx { pair, mdiag: pair.mass_is_diagonal.then_some(mdiag), mean_mass, scratch: Vec::new() };
     let mut rng = Rng(o.seed);
 
+    // V: the basis (expanded columns, then the waiting block Q); MQ = M Q; H = Vᵀ M T V on the expanded part;
+    // E: Q's coupling, T V_exp = V_exp H + Q E, nonzero from column `e_lo` on.
     let mut v = Mat::<f64>::zeros(n, msize);
+    let mut mq = Mat::<f64>::zeros(n, b);
     let mut h = Mat::<f64>::zeros(msize, msize);
-    // Start block.
+    let mut w = Mat::<f64>::zeros(n, b);
+    let mut mw = Mat::<f64>::zeros(n, b);
     {
-        let mut q0 = Mat::<f64>::from_fn(n, b, |_, _| rng.next());
-        let empty = Mat::<f64>::zeros(n, 0);
-        ctx.normalize(empty.as_ref(), q0.as_mut(), &mut rng, &[1.0]);
-        v.as_mut().subcols_mut(0, b).copy_from(q0.as_ref());
+        let q0 = Mat::<f64>::from_fn(n, b, |_, _| rng.next());
+        ctx.apply_m(q0.as_ref(), mw.as_mut());
+        ctx.normalize(v.as_mut(), 0, q0.as_ref(), mw.as_ref(), mq.as_mut(), &mut rng, &[1.0]);
     }
     let mut m = 0usize; // expanded columns
     let mut locked = 0usize;
     let mut e = Mat::<f64>::zeros(b, 0);
+    let mut e_lo = 0usize;
     let (mut steps, mut restarts, mut solves) = (0usize, 0usize, 0usize);
     let mut best_converged = 0;
     control.report("iterating", 0, k);
@@ -237,33 +261,51 @@ pub fn eigs_block_lanczos(
         if control.stopped() {
             return Err(EigenError::Canceled);
         }
+        let mut t = Instant::now();
         // Expand the waiting block while it fits.
         if m + 2 * b <= msize {
-            let mut w = Mat::<f64>::zeros(n, b);
-            ctx.apply_m(v.as_ref().subcols(m, b), w.as_mut());
+            w.copy_from(mq.as_ref());
             chol.solve_in_place(w.as_mut(), par);
+            clock.solve += lap(&mut t);
             solves += b;
             steps += 1;
             // Scale for the rank test: Euclidean norms² times the mean mass (no extra M-product).
-            let mscale = ctx.mean_mass;
-            let gram: Vec<f64> = (0..b).map(|c| mscale * (0..n).map(|i| w[(i, c)] * w[(i, c)]).sum::<f64>()).collect();
-            let coef = ctx.orthogonalize(v.as_ref().subcols(0, m + b), w.as_mut());
-            for r in 0..m + b {
+            let gram: Vec<f64> = col_dots(w.as_ref(), w.as_ref()).iter().map(|g| g * ctx.mean_mass).collect();
+            let mut coef = Mat::<f64>::zeros(m + b, b);
+            {
+                let (basis, _) = v.as_ref().split_at_col(m + b);
+                // The recurrence: Vᵀ M T Q = Eᵀ on the expanded part (exact arithmetic), Qᵀ M T Q = A.
+                if e_lo < m {
+                    let et = e.as_ref().subcols(e_lo, m - e_lo).transpose();
+                    matmul(w.as_mut(), Accum::Add, basis.subcols(e_lo, m - e_lo), et, -1.0, Par::Seq);
+                    coef.as_mut().subrows_mut(e_lo, m - e_lo).copy_from(et);
+                }
+                let mut a = Mat::<f64>::zeros(b, b);
+                matmul(a.as_mut(), Accum::Replace, mq.as_ref().transpose(), w.as_ref(), 1.0, Par::Seq);
+                matmul(w.as_mut(), Accum::Add, basis.subcols(m, b), a.as_ref(), -1.0, Par::Seq);
+                coef.as_mut().subrows_mut(m, b).copy_from(a.as_ref());
+                // Full reorthogonalization against the whole basis (locked vectors included).
+                ctx.apply_m(w.as_ref(), mw.as_mut());
+                ctx.project_out(basis, w.as_mut(), mw.as_mut(), coef.as_mut());
+            }
+            for r in locked..m + b {
                 for c in 0..b {
-                    let val = if r < locked { 0.0 } else { coef[(r, c)] };
-                    h[(r, m + c)] = val;
-                    h[(m + c, r)] = val;
+                    h[(r, m + c)] = coef[(r, c)];
+                    h[(m + c, r)] = coef[(r, c)];
                 }
             }
-            let bm = ctx.normalize(v.as_ref().subcols(0, m + b), w.as_mut(), &mut rng, &gram);
-            v.as_mut().subcols_mut(m + b, b).copy_from(w.as_ref());
+            for r in 0..locked {
+                for c in 0..b {
+                    h[(r, m + c)] = 0.0;
+                    h[(m + c, r)] = 0.0;
+                }
+            }
+            let bm = ctx.normalize(v.as_mut(), m + b, w.as_ref(), mw.as_ref(), mq.as_mut(), &mut rng, &gram);
             m += b;
             e = Mat::<f64>::zeros(b, m);
-            for r in 0..b {
-                for c in 0..b {
-                    e[(r, m - b + c)] = bm[(r, c)];
-                }
-            }
+            e.as_mut().subcols_mut(m - b, b).copy_from(bm.as_ref());
+            e_lo = m - b;
+            clock.orthogonalize += lap(&mut t);
             if m < want || (m + 2 * b <= msize && steps % 2 == 1) {
                 continue;
             }
@@ -282,6 +324,7 @@ pub fn eigs_block_lanczos(
             order.iter().map(|&c| (0..b).map(|r| es[(r, c)] * es[(r, c)]).sum::<f64>().sqrt()).collect();
         let conv: Vec<bool> = order.iter().zip(&resid).map(|(&c, &r)| r <= o.tol * theta[c].abs()).collect();
         let leading = conv.iter().take_while(|&&x| x).count();
+        clock.rayleigh_ritz += lap(&mut t);
         if leading.min(k) > best_converged {
             best_converged = leading.min(k);
             control.report("iterating", best_converged, k);
@@ -307,6 +350,7 @@ pub fn eigs_block_lanczos(
             idx.sort_by(|&a, &b2| values[a].total_cmp(&values[b2]));
             let vectors = Mat::from_fn(n, k, |i, j| x[(i, idx[j])]);
             let values = idx.iter().map(|&j| values[j]).collect();
+            clock.restart += lap(&mut t);
             control.report("done", k, k);
             let iteration_s = t2.elapsed().as_secs_f64();
             return Ok(Spectrum {
@@ -323,11 +367,21 @@ pub fn eigs_block_lanczos(
                     solves,
                     factor_nnz: chol.factor_nnz(),
                     symbolic_reused: reused,
-                    timings: Timings { symbolic_s, numeric_s, iteration_s, total_s: t_start.elapsed().as_secs_f64() },
+                    timings: Timings {
+                        symbolic_s,
+                        numeric_s,
+                        iteration_s,
+                        solve_s: clock.solve,
+                        orthogonalize_s: clock.orthogonalize,
+                        rayleigh_ritz_s: clock.rayleigh_ritz,
+                        restart_s: clock.restart,
+                        total_s: t_start.elapsed().as_secs_f64(),
+                    },
                 },
             });
         }
-        // Thick restart: [Ritz vectors | Q], H = diag(θ), E ← E S; converged leading pairs are locked (E column 0).
+        // Thick restart: [Ritz vectors | Q], H = diag(θ), E ← E S; converged leading pairs are locked (their E
+        // columns are zero: deflated). Q and M Q stay as they are.
         restarts += 1;
         let q = v.as_ref().subcols(m, b).to_owned();
         v.as_mut().subcols_mut(0, keep).copy_from(x.as_ref());
@@ -343,14 +397,9 @@ pub fn eigs_block_lanczos(
                 }
             }
         }
-        // The waiting block's coupling to the kept vectors lives in H's border as well.
-        for j in 0..keep {
-            for r in 0..b {
-                h[(keep + r, j)] = e_new[(r, j)];
-                h[(j, keep + r)] = e_new[(r, j)];
-            }
-        }
         e = e_new;
+        e_lo = locked;
         m = keep;
+        clock.restart += lap(&mut t);
     }
 }

@@ -101,6 +101,14 @@ pub struct Timings {
     pub symbolic_s: f64,
     pub numeric_s: f64,
     pub iteration_s: f64,
+    /// Inside the iteration: block solves with the factor.
+    pub solve_s: f64,
+    /// Inside the iteration: the recurrence, full M-reorthogonalization and M-normalization of new blocks.
+    pub orthogonalize_s: f64,
+    /// Inside the iteration: the projected eigenproblems and convergence tests.
+    pub rayleigh_ritz_s: f64,
+    /// Inside the iteration: Ritz vectors at thick restarts and at the end.
+    pub restart_s: f64,
     pub total_s: f64,
 }
 
