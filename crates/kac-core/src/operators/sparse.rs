@@ -207,6 +207,40 @@ pub fn submatrix(p: &Pattern, values: &[&[f64]], keep: &[usize]) -> (Pattern, Ve
     (Pattern { n: keep.len(), col_ptr, row_idx }, out)
 }
 
+/// Rows `j0..` of Y = A·X for B right-hand sides stored row-major (`xr`), compiled for AVX2 + FMA when the CPU
+/// has them (checked at run time).
+fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
+    #[inline(always)]
+    fn rows<const B: usize, const FMA: bool>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
+        for (k, row) in out.chunks_exact_mut(B).enumerate() {
+            let j = j0 + k;
+            let mut acc = [0.0f64; B];
+            for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+                let a = values[pos];
+                let r = p.row_idx[pos] * B;
+                let xi: &[f64; B] = xr[r..r + B].try_into().expect("a row of B values");
+                for t in 0..B {
+                    acc[t] = if FMA { a.mul_add(xi[t], acc[t]) } else { acc[t] + a * xi[t] };
+                }
+            }
+            row.copy_from_slice(&acc);
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
+            rows::<B, true>(p, values, xr, out, j0)
+        }
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports the features `avx2` was compiled for (checked just above).
+            unsafe { avx2::<B>(p, values, xr, out, j0) };
+            return;
+        }
+    }
+    rows::<B, false>(p, values, xr, out, j0)
+}
+
 /// Y = A·X for a symmetric A on `p` and a block X (n × b, column-major): X is copied to row-major so each entry
 /// of A meets b contiguous values; rows of Y are computed in parallel. `scratch` holds both row-major copies; it grows once and is reused.
 pub fn spmm(
@@ -230,14 +264,20 @@ pub fn spmm(
     let xr = &*xr;
     yr.par_chunks_mut(b * 1024).enumerate().for_each(|(chunk, out)| {
         let j0 = chunk * 1024;
-        for (k, row) in out.chunks_mut(b).enumerate() {
-            let j = j0 + k;
-            row.fill(0.0);
-            for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
-                let a = values[pos];
-                let xi = &xr[p.row_idx[pos] * b..p.row_idx[pos] * b + b];
-                for (r, xv) in row.iter_mut().zip(xi) {
-                    *r += a * xv;
+        match b {
+            8 => spmm_rows_dispatch::<8>(p, values, xr, out, j0),
+            16 => spmm_rows_dispatch::<16>(p, values, xr, out, j0),
+            _ => {
+                for (k, row) in out.chunks_mut(b).enumerate() {
+                    let j = j0 + k;
+                    row.fill(0.0);
+                    for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+                        let a = values[pos];
+                        let xi = &xr[p.row_idx[pos] * b..p.row_idx[pos] * b + b];
+                        for (r, xv) in row.iter_mut().zip(xi) {
+                            *r += a * xv;
+                        }
+                    }
                 }
             }
         }

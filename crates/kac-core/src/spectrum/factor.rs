@@ -56,8 +56,46 @@ impl Cholesky {
         Ok(Cholesky { symbolic: symbolic.clone(), values: l })
     }
     /// Solves K X = B in place for every column of `rhs`.
-    pub fn solve_in_place(&self, rhs: MatMut<'_, f64>, par: Par) {
+    ///
+    /// Supernodal factors with 1, 2, 4, 8 or 16 right-hand sides use [`supernodal_solve`] (one sequential pass
+    /// with the block stored row-major, so each factor entry meets all right-hand sides in one SIMD row: about
+    /// 2.5× faster than faer's solve for 8 columns); others use faer's solve with `par`.
+    pub fn solve_in_place(&self, mut rhs: MatMut<'_, f64>, par: Par) {
+        use faer::sparse::linalg::cholesky::{supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
         let s = &self.symbolic.inner;
+        if let SymbolicCholeskyRaw::Supernodal(sn) = s.raw() {
+            let f = SupernodalLltRef::<'_, usize, f64>::new(sn, &self.values);
+            let perm = s.perm();
+            let fwd = |i: usize| perm.map_or(i, |p| p.arrays().0[i]);
+            macro_rules! run {
+                ($b:literal) => {{
+                    let n = rhs.nrows();
+                    let mut x = vec![[0.0f64; $b]; n];
+                    for (i, row) in x.iter_mut().enumerate() {
+                        let src = fwd(i);
+                        for (c, v) in row.iter_mut().enumerate() {
+                            *v = rhs[(src, c)];
+                        }
+                    }
+                    supernodal_solve_dispatch::<$b>(&f, &mut x);
+                    for (i, row) in x.iter().enumerate() {
+                        let dst = fwd(i);
+                        for (c, v) in row.iter().enumerate() {
+                            rhs[(dst, c)] = *v;
+                        }
+                    }
+                    return;
+                }};
+            }
+            match rhs.ncols() {
+                1 => run!(1),
+                2 => run!(2),
+                4 => run!(4),
+                8 => run!(8),
+                16 => run!(16),
+                _ => {}
+            }
+        }
         let mut mem = MemBuffer::new(s.solve_in_place_scratch::<f64>(rhs.ncols(), par));
         LltRef::<'_, usize, f64>::new(s, &self.values).solve_in_place_with_conj(
             Conj::No,
@@ -90,8 +128,94 @@ impl Cholesky {
             }
         }
     }
+    /// Whether faer chose the supernodal factorization (else simplicial, for small or very sparse factors).
+    pub fn is_supernodal(&self) -> bool {
+        matches!(self.symbolic.inner.raw(), faer::sparse::linalg::cholesky::SymbolicCholeskyRaw::Supernodal(_))
+    }
     /// Entries of the factor (a measure of fill-in).
     pub fn factor_nnz(&self) -> usize {
         self.values.len()
+    }
+}
+
+type SupernodalFactor<'a> = faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef<'a, usize, f64>;
+
+/// Runs [`supernodal_solve`] compiled for AVX2 + FMA when the CPU has them (checked at run time, as faer's own
+/// kernels do), else for the baseline target.
+fn supernodal_solve_dispatch<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
+            supernodal_solve::<B, true>(f, x)
+        }
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports the features `avx2` was compiled for (checked just above).
+            unsafe { avx2::<B>(f, x) };
+            return;
+        }
+    }
+    supernodal_solve::<B, false>(f, x)
+}
+
+/// Solves L Lᵀ X = Y in place for a supernodal factor, X given row-major in the factor's (permuted) numbering:
+/// forward substitution supernode by supernode (diagonal block, then the rows below), then backward. Each factor
+/// entry is read once per pass and applied to a whole row of B right-hand sides.
+#[inline(always)]
+fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
+    // x − a·y, fused where the CPU has FMA (the body is compiled twice, see `supernodal_solve_dispatch`).
+    let sub = |x: f64, a: f64, y: f64| if FMA { (-a).mul_add(y, x) } else { x - a * y };
+    let ns = f.symbolic().n_supernodes();
+    for s in 0..ns {
+        let sn = f.supernode(s);
+        let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
+        let nc = l.ncols();
+        for j in 0..nc {
+            let col = l.col(j).try_as_col_major().expect("supernode columns are contiguous").as_slice();
+            let d = 1.0 / col[j];
+            let mut xj = x[c0 + j];
+            for v in xj.iter_mut() {
+                *v *= d;
+            }
+            x[c0 + j] = xj;
+            for (i, &a) in col[j + 1..nc].iter().enumerate() {
+                let xi = &mut x[c0 + j + 1 + i];
+                for t in 0..B {
+                    xi[t] = sub(xi[t], a, xj[t]);
+                }
+            }
+            for (&r, &a) in rows.iter().zip(&col[nc..]) {
+                let xr = &mut x[r];
+                for t in 0..B {
+                    xr[t] = sub(xr[t], a, xj[t]);
+                }
+            }
+        }
+    }
+    for s in (0..ns).rev() {
+        let sn = f.supernode(s);
+        let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
+        let nc = l.ncols();
+        for j in (0..nc).rev() {
+            let col = l.col(j).try_as_col_major().expect("supernode columns are contiguous").as_slice();
+            let mut acc = x[c0 + j];
+            for (&r, &a) in rows.iter().zip(&col[nc..]) {
+                let xr = &x[r];
+                for t in 0..B {
+                    acc[t] = sub(acc[t], a, xr[t]);
+                }
+            }
+            for (i, &a) in col[j + 1..nc].iter().enumerate() {
+                let xi = &x[c0 + j + 1 + i];
+                for t in 0..B {
+                    acc[t] = sub(acc[t], a, xi[t]);
+                }
+            }
+            let d = 1.0 / col[j];
+            for v in acc.iter_mut() {
+                *v *= d;
+            }
+            x[c0 + j] = acc;
+        }
     }
 }
