@@ -1,5 +1,7 @@
 """Eigensolver peers on the same icospheres and the same operator as kac (P1 FEM, consistent mass):
-scipy eigsh (ARPACK) in shift-invert mode with SuperLU, as lapy and pyFM do, and lapy's own Solver.eigs.
+scipy eigsh (ARPACK) in shift-invert mode with SuperLU (as lapy and pyFM do) or with CHOLMOD (scikit-sparse 0.4.16,
+Debian's libsuitesparse-dev) as the inverse, and lapy's own Solver.eigs with SuperLU or with cholespy
+(`use_cholmod=True`).
 Reads each OFF file and the matching kac result (JSON from `kac spectrum`), checks that eigenvalues agree to 1e-8
 relative, prints one JSON line per (mesh, k, peer) with time and peak memory (ru_maxrss of a fresh process).
 Usage: spectrum_peers.py PEER OFF K KAC_JSON  (one measurement per process, so peak memory is its own).
@@ -32,8 +34,20 @@ def main():
         solver = lapy.Solver(lapy.TriaMesh(v, f), lump=False)
         a, b = solver.stiffness.tocsc(), solver.mass.tocsc()
         vals, _ = sla.eigsh(a, k=k, M=b, sigma=-0.01, which="LM")
+    elif peer == "scipy-cholmod":
+        from sksparse.cholmod import cholesky
+
+        solver = lapy.Solver(lapy.TriaMesh(v, f), lump=False)
+        a, b = solver.stiffness.tocsc(), solver.mass.tocsc()
+        sigma = -0.01
+        factor = cholesky((a - sigma * b).tocsc())
+        opinv = sla.LinearOperator(a.shape, matvec=factor.solve_A, dtype=np.float64)
+        vals, _ = sla.eigsh(a, k=k, M=b, sigma=sigma, which="LM", OPinv=opinv)
     elif peer == "lapy":
         solver = lapy.Solver(lapy.TriaMesh(v, f), lump=False)
+        vals, _ = solver.eigs(k=k)
+    elif peer == "lapy-cholespy":
+        solver = lapy.Solver(lapy.TriaMesh(v, f), lump=False, use_cholmod=True)
         vals, _ = solver.eigs(k=k)
     else:
         raise SystemExit(f"unknown peer {peer}")

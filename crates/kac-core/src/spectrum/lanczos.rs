@@ -63,6 +63,13 @@ fn col_dots(x: MatRef<'_, f64>, y: MatRef<'_, f64>) -> Vec<f64> {
     (0..x.ncols()).map(|c| x.col(c).iter().zip(y.col(c).iter()).map(|(a, b)| a * b).sum()).collect()
 }
 
+/// A Ritz pair of the current basis: a locked column, or an eigenvector of the active projected matrix.
+#[derive(Clone, Copy)]
+enum Ritz {
+    Locked(usize),
+    Active(usize),
+}
+
 struct Ctx<'a> {
     pair: &'a SparsePair,
     mdiag: Option<Vec<f64>>,
@@ -310,20 +317,25 @@ pub fn eigs_block_lanczos(
                 continue;
             }
         }
-        // Rayleigh–Ritz on the expanded part.
-        let hs = Mat::from_fn(m, m, |i, j| 0.5 * (h[(i, j)] + h[(j, i)]));
+        // Rayleigh–Ritz on the active (unlocked) part of the expanded basis; locked columns are Ritz vectors
+        // already, with H = diag(θ) there and no coupling (deflated).
+        let a0 = locked;
+        let ma = m - a0;
+        let hs = Mat::from_fn(ma, ma, |i, j| 0.5 * (h[(a0 + i, a0 + j)] + h[(a0 + j, a0 + i)]));
         let evd = hs
             .self_adjoint_eigen(Side::Lower)
             .map_err(|err| EigenError::Factorization { message: format!("projected eigenproblem: {err:?}") })?;
-        let (theta, s) = (evd.S(), evd.U());
-        // Largest θ first.
-        let order: Vec<usize> = (0..m).rev().collect();
-        let mut es = Mat::<f64>::zeros(b, m);
-        matmul(es.as_mut(), Accum::Replace, e.as_ref(), s, 1.0, Par::Seq);
-        let resid: Vec<f64> =
-            order.iter().map(|&c| (0..b).map(|r| es[(r, c)] * es[(r, c)]).sum::<f64>().sqrt()).collect();
-        let conv: Vec<bool> = order.iter().zip(&resid).map(|(&c, &r)| r <= o.tol * theta[c].abs()).collect();
-        let leading = conv.iter().take_while(|&&x| x).count();
+        let (theta_a, s_a) = (evd.S(), evd.U());
+        let mut es = Mat::<f64>::zeros(b, ma);
+        matmul(es.as_mut(), Accum::Replace, e.as_ref().subcols(a0, ma), s_a, 1.0, Par::Seq);
+        // Candidates, largest θ first: (θ, locked column or active Ritz index, converged).
+        let mut cand: Vec<(f64, Ritz, bool)> = (0..a0).map(|i| (h[(i, i)], Ritz::Locked(i), true)).collect();
+        for c in 0..ma {
+            let r = (0..b).map(|rr| es[(rr, c)] * es[(rr, c)]).sum::<f64>().sqrt();
+            cand.push((theta_a[c], Ritz::Active(c), r <= o.tol * theta_a[c].abs()));
+        }
+        cand.sort_by(|x, y| y.0.total_cmp(&x.0));
+        let leading = cand.iter().take_while(|c| c.2).count();
         clock.rayleigh_ritz += lap(&mut t);
         if leading.min(k) > best_converged {
             best_converged = leading.min(k);
@@ -337,18 +349,32 @@ pub fn eigs_block_lanczos(
         if !done && steps >= o.max_steps {
             return Err(EigenError::NoConvergence { converged: leading.min(k), wanted: k, steps });
         }
-        // Ritz vectors of the kept (or final) set.
-        let keep = if done { k } else { (want + (msize - want - 2 * b) / 2).min(m - b).max(want.min(m - b)) };
-        let sel: Vec<usize> = order[..keep].to_vec();
-        let s_keep = Mat::from_fn(m, keep, |i, j| s[(i, sel[j])]);
-        let mut x = Mat::<f64>::zeros(n, keep);
-        matmul(x.as_mut(), Accum::Replace, v.as_ref().subcols(0, m), s_keep.as_ref(), 1.0, Par::Seq);
         if done {
-            let values: Vec<f64> = sel.iter().map(|&c| sigma + 1.0 / theta[c]).collect();
+            // The k largest θ: locked columns as they are, active ones as V_active S.
+            let top = &cand[..k];
+            let act: Vec<usize> =
+                top.iter().filter_map(|c| if let Ritz::Active(j) = c.1 { Some(j) } else { None }).collect();
+            let s_sel = Mat::from_fn(ma, act.len(), |i, j| s_a[(i, act[j])]);
+            let mut xa = Mat::<f64>::zeros(n, act.len());
+            matmul(xa.as_mut(), Accum::Replace, v.as_ref().subcols(a0, ma), s_sel.as_ref(), 1.0, Par::Seq);
+            let mut next_active = 0;
+            let mut vectors = Mat::<f64>::zeros(n, k);
+            let mut values = Vec::with_capacity(k);
+            for (j, c) in top.iter().enumerate() {
+                let src = match c.1 {
+                    Ritz::Locked(i) => v.as_ref().col(i),
+                    Ritz::Active(_) => {
+                        next_active += 1;
+                        xa.as_ref().col(next_active - 1)
+                    }
+                };
+                vectors.as_mut().col_mut(j).copy_from(src);
+                values.push(sigma + 1.0 / c.0);
+            }
             // Ascending λ = descending θ already; sort defensively.
             let mut idx: Vec<usize> = (0..k).collect();
-            idx.sort_by(|&a, &b2| values[a].total_cmp(&values[b2]));
-            let vectors = Mat::from_fn(n, k, |i, j| x[(i, idx[j])]);
+            idx.sort_by(|&x, &y| values[x].total_cmp(&values[y]));
+            let vectors = Mat::from_fn(n, k, |i, j| vectors[(i, idx[j])]);
             let values = idx.iter().map(|&j| values[j]).collect();
             clock.restart += lap(&mut t);
             control.report("done", k, k);
@@ -380,20 +406,43 @@ pub fn eigs_block_lanczos(
                 },
             });
         }
-        // Thick restart: [Ritz vectors | Q], H = diag(θ), E ← E S; converged leading pairs are locked (their E
-        // columns are zero: deflated). Q and M Q stay as they are.
+        // Thick restart: [locked | kept active Ritz vectors | Q], H = diag(θ), E ← E S. Locked columns stay in
+        // place (never recomputed); active pairs in the converged leading prefix are locked now (E columns zero:
+        // deflated) and come first. Q and M Q stay as they are.
         restarts += 1;
+        let keep = (want + (msize - want - 2 * b) / 2).min(m - b).max(want.min(m - b)).max(a0 + 1);
+        let mut lock_now: Vec<usize> = Vec::new();
+        let mut rest: Vec<usize> = Vec::new();
+        for (pos, c) in cand.iter().enumerate() {
+            if let Ritz::Active(j) = c.1 {
+                if pos < leading {
+                    lock_now.push(j);
+                } else if a0 + lock_now.len() + rest.len() < keep {
+                    rest.push(j);
+                }
+            }
+        }
+        rest.truncate(keep.saturating_sub(a0 + lock_now.len()));
+        let sel: Vec<usize> = lock_now.iter().chain(&rest).copied().collect();
+        let keep = a0 + sel.len();
+        let s_keep = Mat::from_fn(ma, sel.len(), |i, j| s_a[(i, sel[j])]);
+        let mut x = Mat::<f64>::zeros(n, sel.len());
+        matmul(x.as_mut(), Accum::Replace, v.as_ref().subcols(a0, ma), s_keep.as_ref(), 1.0, Par::Seq);
         let q = v.as_ref().subcols(m, b).to_owned();
-        v.as_mut().subcols_mut(0, keep).copy_from(x.as_ref());
+        v.as_mut().subcols_mut(a0, sel.len()).copy_from(x.as_ref());
         v.as_mut().subcols_mut(keep, b).copy_from(q.as_ref());
+        let locked_theta: Vec<f64> = (0..a0).map(|i| h[(i, i)]).collect();
         h.fill(0.0);
+        for (i, &th) in locked_theta.iter().enumerate() {
+            h[(i, i)] = th;
+        }
+        locked = a0 + lock_now.len();
         let mut e_new = Mat::<f64>::zeros(b, keep);
-        locked = leading.min(keep);
         for (j, &c) in sel.iter().enumerate() {
-            h[(j, j)] = theta[c];
-            if j >= locked {
+            h[(a0 + j, a0 + j)] = theta_a[c];
+            if a0 + j >= locked {
                 for r in 0..b {
-                    e_new[(r, j)] = es[(r, c)];
+                    e_new[(r, a0 + j)] = es[(r, c)];
                 }
             }
         }
