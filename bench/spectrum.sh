@@ -1,13 +1,18 @@
 #!/usr/bin/env bash
 # k smallest eigenpairs of P1 FEM (consistent mass) on unit icospheres: kac (1 and 2 threads) against scipy eigsh
-# (ARPACK shift-invert with SuperLU) and lapy, in one run, on the same files. Peers are single-threaded
-# (OPENBLAS_NUM_THREADS=1). Prints a Markdown table; raw lines in bench/out/spectrum.jsonl.
+# (ARPACK shift-invert with SuperLU or with CHOLMOD from scikit-sparse) and lapy (with SuperLU or with cholespy), in
+# one run, on the same files. Peers are single-threaded (OPENBLAS_NUM_THREADS=1). Prints a Markdown table; raw lines
+# in bench/out/spectrum.jsonl. Installs Debian's libsuitesparse-dev (for scikit-sparse) when it is missing.
 # CASES="level:k ..." selects rows (default: the issue's table; the 163,842-vertex rows take minutes).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=bench/out; mkdir -p "$out"
+if [ ! -f /usr/include/suitesparse/cholmod.h ]; then
+  sudo=""; [ "$(id -u)" = 0 ] || sudo=sudo
+  $sudo apt-get install -y -q libsuitesparse-dev > /dev/null
+fi
 if [ ! -x bench/.venv/bin/python ]; then python3 -m venv bench/.venv; fi
-bench/.venv/bin/pip install -q numpy scipy lapy
+bench/.venv/bin/pip install -q numpy scipy lapy cholespy "scikit-sparse==0.4.16"
 cargo build -q --release
 CASES=${CASES:-"5:50 6:50 6:200 7:50"}
 : > "$out/spectrum.jsonl"
@@ -24,7 +29,7 @@ print(json.dumps({"vertices": d["size"], "k": d["k"], "peer": f"kac-{sys.argv[2]
                   "peak_bytes": int(sys.argv[3]) * 1024, "max_residual": max(d["residuals"]), "solver": d["solver"], "timings": d["timings"]}))
 PY
   done
-  for peer in scipy-superlu lapy; do
+  for peer in scipy-superlu scipy-cholmod lapy lapy-cholespy; do
     OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 bench/.venv/bin/python bench/spectrum_peers.py "$peer" "$f" "$k" "$out/kac-$level-$k-1.json" >> "$out/spectrum.jsonl"
   done
 done
@@ -34,13 +39,14 @@ rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
 by = {}
 for r in rows:
     by.setdefault((r["vertices"], r["k"]), {})[r["peer"]] = r
-print("| vertices | k | kac 1 thread | kac 2 threads | scipy+SuperLU | lapy | best peer / kac (1t) | peak memory kac / best peer | max rel. diff of eigenvalues | kac max residual |")
-print("|---|---|---|---|---|---|---|---|---|---|")
+names = ("scipy-superlu", "scipy-cholmod", "lapy", "lapy-cholespy")
+print("| vertices | k | kac 1 thread | kac 2 threads | scipy+SuperLU | scipy+CHOLMOD | lapy | lapy+cholespy | best peer / kac (1t) | peak memory kac / best peer | max rel. diff of eigenvalues | kac max residual |")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|")
 for (n, k), d in sorted(by.items()):
     k1, k2 = d["kac-1t"], d["kac-2t"]
-    peers = [d[p] for p in ("scipy-superlu", "lapy") if p in d]
+    peers = [d[p] for p in names if p in d]
     best = min(peers, key=lambda r: r["seconds"])
     diff = max(p["max_rel_diff_vs_kac"] for p in peers)
-    print(f"| {n:,} | {k} | {k1['seconds']:.2f} s | {k2['seconds']:.2f} s | " + " | ".join(f"{d[p]['seconds']:.2f} s" if p in d else "—" for p in ("scipy-superlu", "lapy"))
+    print(f"| {n:,} | {k} | {k1['seconds']:.2f} s | {k2['seconds']:.2f} s | " + " | ".join(f"{d[p]['seconds']:.2f} s" if p in d else "—" for p in names)
           + f" | {best['seconds']/k1['seconds']:.2f}× | {k1['peak_bytes']/1e6:.0f} MB / {best['peak_bytes']/1e6:.0f} MB | {diff:.1e} | {k1['max_residual']:.1e} |")
 PY
