@@ -99,3 +99,23 @@ fn operator_report_and_matrix_market() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["k"], 3, "{v}");
 }
+
+#[test]
+fn verify_reports_the_inertia_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let sq = write_square(dir.path(), 24);
+    let out = kac()
+        .args(["spectrum", "-k", "4", "--boundary", "dirichlet", "--method", "sparse", "--verify"])
+        .arg(&sq)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &v["solver"]["completeness"];
+    // 2π², 5π², 5π², 8π²: τ falls between the 5π² pair and 8π², with exactly three eigenvalues below it.
+    assert_eq!(c["complete"], true, "{c}");
+    assert_eq!(c["below_shift"], 3, "{c}");
+    let pi2 = std::f64::consts::PI.powi(2);
+    let shift = c["shift"].as_f64().unwrap();
+    assert!(shift > 5.1 * pi2 && shift < 7.9 * pi2, "{shift}");
+}

@@ -42,6 +42,10 @@ pub struct SpectrumCmd {
     /// Tuning of the sparse solver: Krylov subspace columns kept between restarts (default: see the README).
     #[arg(long)]
     pub subspace: Option<usize>,
+    /// Check by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the found ones was missed; the
+    /// result is `solver.completeness`, and an incomplete spectrum exits with status 1 after printing.
+    #[arg(long)]
+    pub verify: bool,
 }
 
 pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
@@ -67,6 +71,7 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
         sigma: a.sigma,
         block: a.block,
         subspace: a.subspace,
+        verify: a.verify,
         ..Default::default()
     };
     let result = match &a.band {
@@ -114,6 +119,7 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
             "method": st.method, "sigma": st.sigma, "block": st.block, "subspace": st.subspace, "restarts": st.restarts,
             "block_steps": st.block_steps, "solves": st.solves, "factor_nonzeros": st.factor_nnz, "tol": a.tol,
             "threads": if a.threads == 0 { rayon::current_num_threads() } else { a.threads },
+            "completeness": st.completeness,
         },
         "timings": {
             "read_s": read_s, "assembly_s": assembly_s, "symbolic_s": st.timings.symbolic_s, "factorization_s": st.timings.numeric_s,
@@ -121,5 +127,15 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
             "orthogonalize_s": st.timings.orthogonalize_s, "rayleigh_ritz_s": st.timings.rayleigh_ritz_s,
             "restart_s": st.timings.restart_s, "total_s": t0.elapsed().as_secs_f64(),
         },
-    }))
+    }))?;
+    match &st.completeness {
+        Some(c) if !c.complete => Err(Failure {
+            code: 1,
+            message: format!(
+                "incomplete spectrum: {} eigenvalues lie below {}, the solver found {}",
+                c.below_shift, c.shift, c.found_below_shift
+            ),
+        }),
+        _ => Ok(()),
+    }
 }

@@ -289,3 +289,35 @@ fn block_solve_and_block_product_match_single_columns() {
         }
     }
 }
+
+/// Completeness by Sylvester's inertia: cutting the sphere's 15-fold l = 7 cluster (k = 50), the check puts τ
+/// below the cluster and counts exactly Σ_{l<7} (2l + 1) = 49 eigenvalues there; 30 separate triangles have 30
+/// zero eigenvalues below τ. A spectrum with one eigenvalue removed is reported incomplete.
+#[test]
+fn inertia_check_confirms_clusters_and_catches_a_missing_eigenvalue() {
+    use kac_core::spectrum::check_completeness;
+    let s = mesh(generate::icosphere(4));
+    let o = operators::build(&s, &OperatorOptions::default()).unwrap();
+    let options = EigenOptions { k: 50, method: Method::Sparse, verify: true, ..Default::default() };
+    let sp = eigs(&o.pair, &options, None, Control::default()).unwrap();
+    let c = sp.stats.completeness.clone().expect("the found values have a gap");
+    assert!(c.complete && c.below_shift == 49 && c.found_below_shift == 49, "{c:?}");
+    assert!(c.shift > sp.values[48] && c.shift < sp.values[49], "{c:?}");
+
+    let mut missing = sp.values[..40].to_vec();
+    missing.remove(10);
+    let c = check_completeness(&o.pair, &missing, None).unwrap().unwrap();
+    assert!(!c.complete && c.below_shift == c.found_below_shift + 1, "{c:?}");
+
+    let mut m = TriangleMesh::default();
+    for t in 0..30u32 {
+        let x = t as f64 * 3.0;
+        m.vertices.extend([[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 1.0, 0.0]]);
+        m.faces.push([3 * t, 3 * t + 1, 3 * t + 2]);
+    }
+    let o = operators::build(&mesh(m), &OperatorOptions::default()).unwrap();
+    let options = EigenOptions { k: 40, method: Method::Sparse, verify: true, ..Default::default() };
+    let sp = eigs(&o.pair, &options, None, Control::default()).unwrap();
+    let c = sp.stats.completeness.expect("a gap above the zeros");
+    assert!(c.complete && c.below_shift >= 30, "{c:?}");
+}

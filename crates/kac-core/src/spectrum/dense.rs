@@ -56,6 +56,7 @@ pub fn eigs_dense(pair: &SparsePair, k: usize) -> Result<Spectrum, EigenError> {
             solves: 0,
             factor_nnz: n * (n + 1) / 2,
             symbolic_reused: false,
+            completeness: None,
             timings: Timings { iteration_s: total, total_s: total, ..Default::default() },
         },
     })

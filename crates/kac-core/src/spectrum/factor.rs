@@ -30,6 +30,54 @@ impl Symbolic {
     }
 }
 
+/// The diagonal of a factor on `s` (L_jj of an LLᵀ factor, D_jj of an LDLᵀ one), in factor order.
+fn factor_diagonal(s: &SymbolicCholesky<usize>, values: &[f64]) -> Vec<f64> {
+    use faer::sparse::linalg::cholesky::{supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
+    match s.raw() {
+        SymbolicCholeskyRaw::Simplicial(s) => {
+            let (cp, ri) = (s.col_ptr(), s.row_idx());
+            (0..s.ncols())
+                .map(|j| {
+                    debug_assert_eq!(ri[cp[j]], j, "the diagonal leads each column of a simplicial factor");
+                    values[cp[j]]
+                })
+                .collect()
+        }
+        SymbolicCholeskyRaw::Supernodal(s) => {
+            let f = SupernodalLltRef::<'_, usize, f64>::new(s, values);
+            (0..s.n_supernodes())
+                .flat_map(|sn| {
+                    let block = f.supernode(sn).val();
+                    (0..block.ncols()).map(move |j| block[(j, j)])
+                })
+                .collect()
+        }
+    }
+}
+
+/// Sylvester's law of inertia: the number of eigenvalues of L φ = λ M φ below τ is the number of negative pivots
+/// of an LDLᵀ factorization of L − τM (M positive definite). The factorization reuses the symbolic analysis and
+/// does not pivot; `Err` when it meets an exact zero pivot (τ on an eigenvalue, or a singular leading block).
+pub fn count_below(symbolic: &Symbolic, pair: &SparsePair, tau: f64) -> Result<usize, String> {
+    use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
+    let s = &symbolic.inner;
+    let values = pair.shifted(tau);
+    let mut l = vec![0.0f64; s.len_val()];
+    let a = SparseColMatRef::new(symbolic.pattern.faer(), &values);
+    let mut mem = MemBuffer::new(s.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()));
+    s.factorize_numeric_ldlt(
+        &mut l,
+        a,
+        Side::Lower,
+        LdltRegularization::default(),
+        Par::Seq,
+        MemStack::new(&mut mem),
+        Default::default(),
+    )
+    .map_err(|e| format!("LDLᵀ of L − {tau:e}·M failed ({e:?})"))?;
+    Ok(factor_diagonal(s, &l).iter().filter(|&&d| d < 0.0).count())
+}
+
 /// A numeric Cholesky factor of a symmetric positive definite matrix on a symbolic analysis.
 pub struct Cholesky {
     symbolic: Symbolic,
@@ -106,27 +154,7 @@ impl Cholesky {
     }
     /// log det K = 2 Σ log L_jj from the factor's diagonal (the ordering does not change the determinant).
     pub fn log_det(&self) -> f64 {
-        use faer::sparse::linalg::cholesky::{supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
-        match self.symbolic.inner.raw() {
-            SymbolicCholeskyRaw::Simplicial(s) => {
-                let (cp, ri) = (s.col_ptr(), s.row_idx());
-                (0..s.ncols())
-                    .map(|j| {
-                        debug_assert_eq!(ri[cp[j]], j, "the diagonal leads each column of a simplicial factor");
-                        2.0 * self.values[cp[j]].ln()
-                    })
-                    .sum()
-            }
-            SymbolicCholeskyRaw::Supernodal(s) => {
-                let f = SupernodalLltRef::<'_, usize, f64>::new(s, &self.values);
-                (0..s.n_supernodes())
-                    .map(|sn| {
-                        let block = f.supernode(sn).val();
-                        (0..block.ncols()).map(|j| 2.0 * block[(j, j)].ln()).sum::<f64>()
-                    })
-                    .sum()
-            }
-        }
+        factor_diagonal(&self.symbolic.inner, &self.values).iter().map(|d| 2.0 * d.ln()).sum()
     }
     /// Whether faer chose the supernodal factorization (else simplicial, for small or very sparse factors).
     pub fn is_supernodal(&self) -> bool {

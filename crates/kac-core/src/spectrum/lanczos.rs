@@ -393,6 +393,7 @@ pub fn eigs_block_lanczos(
                     solves,
                     factor_nnz: chol.factor_nnz(),
                     symbolic_reused: reused,
+                    completeness: None,
                     timings: Timings {
                         symbolic_s,
                         numeric_s,
