@@ -5,14 +5,17 @@
 //!   positive semidefinite and M positive definite: σ = −mean_j(L_jj / M_jj) / n by default (near the bottom of
 //!   the spectrum; see [`lanczos::default_sigma`]), multiplied by 100 and retried if the factorization meets a non-positive pivot. The operator
 //!   T = K⁻¹M is self-adjoint in the M-inner product; its largest eigenvalues θ = 1/(λ − σ) are the wanted ones.
-//!   A thick-restart block Lanczos method with full M-reorthogonalization finds them: every step solves b
-//!   right-hand sides at once (solves are memory-bound, so a block costs far less than b single solves),
-//!   converged pairs are locked (deflated from the Krylov decomposition), rank-deficient blocks (invariant
+//!   A thick-restart block Lanczos method finds them: every step solves b right-hand sides at once (kac's own
+//!   supernodal triangular solve on faer's factor, right-hand sides row-major), subtracts the recurrence's known
+//!   couplings and then makes one classical Gram–Schmidt pass in the M-inner product against the whole basis
+//!   (a second one only when DGKS asks), converged pairs are locked (deflated from the Krylov decomposition and
+//!   never recomputed), rank-deficient blocks (invariant
 //!   subspaces: several components, high multiplicities) are refilled with random vectors, and the start block
 //!   comes from a fixed seed, so results are deterministic.
 //!
 //! Output: eigenvalues ascending, M-orthonormal eigenvectors with the largest-magnitude entry positive, and
-//! per pair the relative residual ‖Lφ − λMφ‖₂ / (max(|λ|, |σ|) · ‖Mφ‖₂).
+//! per pair the relative residual ‖Lφ − λMφ‖₂ / (max(|λ|, |σ|) · ‖Mφ‖₂). With [`EigenOptions::verify`], Sylvester's
+//! inertia of L − τM confirms that no eigenvalue below the found ones was missed ([`Completeness`]).
 
 pub mod dense;
 pub mod factor;
