@@ -72,11 +72,15 @@ pub enum BoundarySpec {
 pub struct SolverSpec {
     /// Relative residual tolerance (default 1e-10).
     pub tol: f64,
+    /// `spectrum` only: confirm by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the returned
+    /// ones was missed; the result is `completeness` in the summary (default false).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub verify: bool,
 }
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        SolverSpec { tol: 1e-10 }
+        SolverSpec { tol: 1e-10, verify: false }
     }
 }
 
@@ -352,7 +356,8 @@ pub struct Output {
 
 /// The cache key of a spectrum: operator and solver parameters (the shape id is the caller's).
 pub fn spectrum_key(op: &OperatorSpec, solver: &SolverSpec) -> String {
-    serde_json::to_string(&json!({ "operator": op, "solver": solver, "version": ALGORITHM_VERSION }))
+    // Only what changes the eigenpairs: `verify` adds a check, the pairs are the same.
+    serde_json::to_string(&json!({ "operator": op, "solver": { "tol": solver.tol }, "version": ALGORITHM_VERSION }))
         .unwrap_or_default()
 }
 
@@ -552,6 +557,12 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 ),
                 spectrum_json(&e, *k),
             );
+            let mut summary = summary;
+            if solver.verify {
+                let k = (*k).min(e.spectrum.values.len());
+                let c = kac_core::spectrum::check_completeness(&e.operator.pair, &e.spectrum.values[..k], None)?;
+                summary["completeness"] = json!(c);
+            }
             Output { summary, arrays }
         }
         Analysis::Hks { k, options, operator, solver } => {

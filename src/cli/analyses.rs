@@ -70,7 +70,7 @@ fn run(v: &Validated, a: &Analysis, o: &OutArgs) -> Result<Output, Failure> {
 }
 
 fn solver(o: &OutArgs) -> SolverSpec {
-    SolverSpec { tol: o.tol }
+    SolverSpec { tol: o.tol, verify: false }
 }
 
 #[derive(Args)]
@@ -471,8 +471,11 @@ pub fn compare(a: CompareCmd) -> Result<(), Failure> {
         let shape =
             ShapeArgs { file: path.to_path_buf(), format: None, weld: kac_core::Weld::Exact, keep_degenerate: false };
         let (v, _) = shape.load()?;
-        let an =
-            Analysis::ShapeDna { options: a.dna.options(), operator: a.op.spec(), solver: SolverSpec { tol: a.tol } };
+        let an = Analysis::ShapeDna {
+            options: a.dna.options(),
+            operator: a.op.spec(),
+            solver: SolverSpec { tol: a.tol, verify: false },
+        };
         let out = analysis::run(&v, &an, Hooks::default())?;
         Ok(
             json!({ "source": path.display().to_string(), "shape_id": v.id.hex(), "shape_dna": out.summary["shape_dna"], "operator": out.summary["operator"], "mass": out.summary["mass"] }),
