@@ -196,7 +196,7 @@ fn spectrum_shape_dna_and_hks_equal_the_library_and_requests_are_idempotent() {
     let c = &vres.body["completeness"];
     assert_eq!(c["complete"], true, "{}", vres.body);
     let below = c["below_shift"].as_u64().unwrap() as usize;
-    assert!(below >= 1 && below < 12 && c["shift"].as_f64().unwrap() > got[below - 1], "{c}");
+    assert!((1..12).contains(&below) && c["shift"].as_f64().unwrap() > got[below - 1], "{c}");
     assert!(res.body.get("completeness").is_none(), "no check unless asked");
     // Immutable, with a strong ETag and 304 on If-None-Match.
     let etag = res.etag.clone().unwrap();
