@@ -177,7 +177,7 @@ fn supernodal_solve_dispatch<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [
         fn avx2<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
             supernodal_solve::<B, true>(f, x)
         }
-        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        if crate::operators::sparse::avx2_fma() {
             // SAFETY: the CPU supports the features `avx2` was compiled for (checked just above).
             unsafe { avx2::<B>(f, x) };
             return;
