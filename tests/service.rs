@@ -3,6 +3,7 @@
 //! every class of bad input with its problem code, a full queue, the OpenAPI document, and the README's curl
 //! walkthrough run as written.
 
+#[path = "../crates/kac-core/tests/common/mod.rs"]
 mod common;
 
 use serde_json::{json, Value};
