@@ -375,10 +375,12 @@ pub fn eigs_block_lanczos(
             let mut idx: Vec<usize> = (0..k).collect();
             idx.sort_by(|&x, &y| values[x].total_cmp(&values[y]));
             let vectors = Mat::from_fn(n, k, |i, j| vectors[(i, idx[j])]);
-            let values = idx.iter().map(|&j| values[j]).collect();
+            let values: Vec<f64> = idx.iter().map(|&j| values[j]).collect();
             clock.restart += lap(&mut t);
             control.report("done", k, k);
             let iteration_s = t2.elapsed().as_secs_f64();
+            // The inertia check reuses this solve's symbolic analysis.
+            let completeness = if o.verify { super::check_completeness(pair, &values, Some(&sym))? } else { None };
             return Ok(Spectrum {
                 values,
                 vectors,
@@ -393,7 +395,7 @@ pub fn eigs_block_lanczos(
                     solves,
                     factor_nnz: chol.factor_nnz(),
                     symbolic_reused: reused,
-                    completeness: None,
+                    completeness,
                     timings: Timings {
                         symbolic_s,
                         numeric_s,
