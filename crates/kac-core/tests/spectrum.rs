@@ -287,6 +287,30 @@ fn block_solve_and_block_product_match_single_columns() {
                 assert!((y[(i, c)] - rhs[(i, c)]).abs() <= 1e-9 * scale, "b = {b}: residual at row {i}, column {c}");
             }
         }
+        // The same solve and product on row-major blocks (the eigensolver's layout, no transposes inside).
+        let mut xr: Vec<f64> = (0..n * b).map(|t| rhs[(t / b, t % b)]).collect();
+        chol.solve_in_place(faer::MatMut::from_row_major_slice_mut(&mut xr, n, b), faer::Par::Seq);
+        let mut yr = vec![0.0; n * b];
+        let xv = faer::MatRef::from_row_major_slice(&xr, n, b);
+        operators::sparse::spmm(
+            &pair.pattern,
+            &k_values,
+            xv,
+            faer::MatMut::from_row_major_slice_mut(&mut yr, n, b),
+            &mut scratch,
+        );
+        for i in 0..n {
+            for c in 0..b {
+                assert!(
+                    (xr[i * b + c] - x[(i, c)]).abs() <= 1e-13 * x[(i, c)].abs().max(1.0),
+                    "b = {b}: row-major solve"
+                );
+                assert!(
+                    (yr[i * b + c] - y[(i, c)]).abs() <= 1e-13 * y[(i, c)].abs().max(1.0),
+                    "b = {b}: row-major product"
+                );
+            }
+        }
     }
 }
 

@@ -257,17 +257,46 @@ pub fn spmm(
     scratch: &mut Vec<f64>,
 ) {
     let (n, b) = (x.nrows(), x.ncols());
+    // Row i at offset i·b, entries contiguous: (column stride 1 or one column) and (row stride b or one row).
+    let row_major = |rs: isize, cs: isize| (b == 1 || cs == 1) && (n == 1 || rs == b as isize);
+    if row_major(x.row_stride(), x.col_stride()) && row_major(y.row_stride(), y.col_stride()) {
+        // Both blocks already row-major (the eigensolver's layout): no transposes.
+        // SAFETY: by the stride check the n·b entries of each block are one contiguous run from its pointer;
+        // `y` is borrowed mutably for this call and cannot alias `x`.
+        let xr = unsafe { std::slice::from_raw_parts(x.as_ptr(), n * b) };
+        let yr = unsafe { std::slice::from_raw_parts_mut(y.rb_mut().as_ptr_mut(), n * b) };
+        spmm_row_major(p, values, xr, yr, b);
+        return;
+    }
     if scratch.len() < 2 * n * b {
         scratch.resize(2 * n * b, 0.0);
     }
     let (xr, yr) = scratch[..2 * n * b].split_at_mut(n * b);
-    for c in 0..b {
-        let col = x.col(c);
-        for i in 0..n {
-            xr[i * b + c] = col[i];
+    // Transposes in tiles of 64 rows: each column's run is read contiguously and each row-major row written
+    // whole (column by column over all n rows wrote one value per cache line: most of the product's time).
+    for i0 in (0..n).step_by(64) {
+        let i1 = n.min(i0 + 64);
+        for c in 0..b {
+            let col = x.col(c);
+            for i in i0..i1 {
+                xr[i * b + c] = col[i];
+            }
         }
     }
-    let xr = &*xr;
+    spmm_row_major(p, values, xr, yr, b);
+    for i0 in (0..n).step_by(64) {
+        let i1 = n.min(i0 + 64);
+        for c in 0..b {
+            let mut col = y.rb_mut().col_mut(c);
+            for i in i0..i1 {
+                col[i] = yr[i * b + c];
+            }
+        }
+    }
+}
+
+/// Y = A·X for blocks stored row-major (row i of X at `xr[i·b..(i + 1)·b]`).
+fn spmm_row_major(p: &Pattern, values: &[f64], xr: &[f64], yr: &mut [f64], b: usize) {
     yr.par_chunks_mut(b * 1024).enumerate().for_each(|(chunk, out)| {
         let j0 = chunk * 1024;
         match b {
@@ -288,10 +317,4 @@ pub fn spmm(
             }
         }
     });
-    for c in 0..b {
-        let mut col = y.rb_mut().col_mut(c);
-        for i in 0..n {
-            col[i] = yr[i * b + c];
-        }
-    }
 }

@@ -255,14 +255,12 @@ pub fn check_completeness(
     }))
 }
 
-/// Fixes signs (largest-magnitude entry positive) and computes true residuals.
+/// Fixes signs (largest-magnitude entry positive) and computes true residuals (block products with L and M,
+/// eight columns at a time).
 fn finish(pair: &SparsePair, s: &mut Spectrum) {
     let n = pair.n();
     let k = s.values.len();
     let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);
-    let mut lx = vec![0.0; n];
-    let mut mx = vec![0.0; n];
-    s.residuals = vec![0.0; k];
     for j in 0..k {
         let col = s.vectors.col(j);
         let (mut big, mut arg) = (0.0f64, 0usize);
@@ -277,13 +275,26 @@ fn finish(pair: &SparsePair, s: &mut Spectrum) {
                 s.vectors[(i, j)] = -s.vectors[(i, j)];
             }
         }
-        let x: Vec<f64> = (0..n).map(|i| s.vectors[(i, j)]).collect();
-        crate::operators::sparse::matvec(&pair.pattern, &pair.stiffness, &x, &mut lx);
-        crate::operators::sparse::matvec(&pair.pattern, &pair.mass, &x, &mut mx);
-        let lam = s.values[j];
-        let r: f64 = lx.iter().zip(&mx).map(|(a, b)| (a - lam * b).powi(2)).sum::<f64>().sqrt();
-        let mnorm = mx.iter().map(|v| v * v).sum::<f64>().sqrt();
-        s.residuals[j] = r / (lam.abs().max(sigma_floor) * mnorm);
+    }
+    s.residuals = vec![0.0; k];
+    let mut scratch = Vec::new();
+    let mut lx = Mat::<f64>::zeros(n, 8.min(k));
+    let mut mx = Mat::<f64>::zeros(n, 8.min(k));
+    for j0 in (0..k).step_by(8) {
+        let bw = 8.min(k - j0);
+        let x = s.vectors.as_ref().subcols(j0, bw);
+        crate::operators::sparse::spmm(&pair.pattern, &pair.stiffness, x, lx.as_mut().subcols_mut(0, bw), &mut scratch);
+        crate::operators::sparse::spmm(&pair.pattern, &pair.mass, x, mx.as_mut().subcols_mut(0, bw), &mut scratch);
+        for c in 0..bw {
+            let lam = s.values[j0 + c];
+            let (l, m) = (lx.col(c), mx.col(c));
+            let (mut r, mut mnorm) = (0.0, 0.0);
+            for i in 0..n {
+                r += (l[i] - lam * m[i]).powi(2);
+                mnorm += m[i] * m[i];
+            }
+            s.residuals[j0 + c] = r.sqrt() / (lam.abs().max(sigma_floor) * mnorm.sqrt());
+        }
     }
 }
 
