@@ -81,9 +81,15 @@ fn lap(t: &mut Instant) -> f64 {
     d
 }
 
-/// Column-wise inner products ⟨x_c, y_c⟩.
+/// Column-wise inner products ⟨x_c, y_c⟩, row by row (the work blocks are row-major).
 fn col_dots(x: MatRef<'_, f64>, y: MatRef<'_, f64>) -> Vec<f64> {
-    (0..x.ncols()).map(|c| x.col(c).iter().zip(y.col(c).iter()).map(|(a, b)| a * b).sum()).collect()
+    let mut acc = vec![0.0; x.ncols()];
+    for i in 0..x.nrows() {
+        for (c, a) in acc.iter_mut().enumerate() {
+            *a += x[(i, c)] * y[(i, c)];
+        }
+    }
+    acc
 }
 
 /// W += α V C in panels of 16 columns of V. faer's product over all of V's columns at once packs V first (a
