@@ -160,6 +160,10 @@ impl Cholesky {
     pub fn is_supernodal(&self) -> bool {
         matches!(self.symbolic.inner.raw(), faer::sparse::linalg::cholesky::SymbolicCholeskyRaw::Supernodal(_))
     }
+    /// The factor's values in faer's storage order (supernode by supernode, column-major within each).
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
     /// Entries of the factor (a measure of fill-in).
     pub fn factor_nnz(&self) -> usize {
         self.values.len()
