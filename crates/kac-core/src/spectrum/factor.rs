@@ -190,9 +190,13 @@ fn supernodal_solve_dispatch<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [
     supernodal_solve::<B, false>(f, x)
 }
 
-/// Solves L Lᵀ X = Y in place for a supernodal factor, X given row-major in the factor's (permuted) numbering:
-/// forward substitution supernode by supernode (diagonal block, then the rows below), then backward. Each factor
-/// entry is read once per pass and applied to a whole row of B right-hand sides.
+/// Solves L Lᵀ X = Y in place for a supernodal factor, X given row-major in the factor's (permuted) numbering.
+///
+/// Columns of a supernode are taken four at a time (the first `nc % 4` one by one). Forward: the group's 4 × 4
+/// diagonal triangle, then every row below it (in the diagonal block and in the supernode's pattern) is updated once
+/// with all four columns, whose solved rows of X stay in registers — four sequential streams of the factor and one
+/// read-modify-write of X per row instead of four. Backward: each of the four columns gathers the rows below into
+/// its own accumulator in one pass (independent FMA chains), then the group's triangle.
 #[inline(always)]
 fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
     // x − a·y, fused where the CPU has FMA (the body is compiled twice, see `supernodal_solve_dispatch`).
@@ -202,24 +206,62 @@ fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x
         let sn = f.supernode(s);
         let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
         let nc = l.ncols();
-        for j in 0..nc {
-            let col = l.col(j).try_as_col_major().expect("supernode columns are contiguous").as_slice();
-            let d = 1.0 / col[j];
+        let col = |j: usize| l.col(j).try_as_col_major().expect("supernode columns are contiguous").as_slice();
+        let lead = nc % 4;
+        for j in 0..lead {
+            let cj = col(j);
+            let d = 1.0 / cj[j];
             let mut xj = x[c0 + j];
             for v in xj.iter_mut() {
                 *v *= d;
             }
             x[c0 + j] = xj;
-            for (i, &a) in col[j + 1..nc].iter().enumerate() {
+            for (i, &a) in cj[j + 1..nc].iter().enumerate() {
                 let xi = &mut x[c0 + j + 1 + i];
                 for t in 0..B {
                     xi[t] = sub(xi[t], a, xj[t]);
                 }
             }
-            for (&r, &a) in rows.iter().zip(&col[nc..]) {
+            for (&r, &a) in rows.iter().zip(&cj[nc..]) {
                 let xr = &mut x[r];
                 for t in 0..B {
                     xr[t] = sub(xr[t], a, xj[t]);
+                }
+            }
+        }
+        for j in (lead..nc).step_by(4) {
+            let c = [col(j), col(j + 1), col(j + 2), col(j + 3)];
+            // The group's triangle: x_u = (x_u − Σ_{v<u} L[j+u, j+v] x_v) / L[j+u, j+u].
+            let mut g = [[0.0f64; B]; 4];
+            for u in 0..4 {
+                let mut xu = x[c0 + j + u];
+                for v in 0..u {
+                    for t in 0..B {
+                        xu[t] = sub(xu[t], c[v][j + u], g[v][t]);
+                    }
+                }
+                let d = 1.0 / c[u][j + u];
+                for v in xu.iter_mut() {
+                    *v *= d;
+                }
+                g[u] = xu;
+                x[c0 + j + u] = xu;
+            }
+            let (g0, g1, g2, g3) = (g[0], g[1], g[2], g[3]);
+            let (c0v, c1v, c2v, c3v) = (c[0], c[1], c[2], c[3]);
+            for i in j + 4..nc {
+                let (a0, a1, a2, a3) = (c0v[i], c1v[i], c2v[i], c3v[i]);
+                let xr = &mut x[c0 + i];
+                for t in 0..B {
+                    xr[t] = sub(sub(sub(sub(xr[t], a0, g0[t]), a1, g1[t]), a2, g2[t]), a3, g3[t]);
+                }
+            }
+            let (b0, b1, b2, b3) = (&c0v[nc..], &c1v[nc..], &c2v[nc..], &c3v[nc..]);
+            for (p, &r) in rows.iter().enumerate() {
+                let (a0, a1, a2, a3) = (b0[p], b1[p], b2[p], b3[p]);
+                let xr = &mut x[r];
+                for t in 0..B {
+                    xr[t] = sub(sub(sub(sub(xr[t], a0, g0[t]), a1, g1[t]), a2, g2[t]), a3, g3[t]);
                 }
             }
         }
@@ -228,40 +270,66 @@ fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x
         let sn = f.supernode(s);
         let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
         let nc = l.ncols();
-        for j in (0..nc).rev() {
-            let col = l.col(j).try_as_col_major().expect("supernode columns are contiguous").as_slice();
-            // Four partial sums over the rows below, so consecutive entries do not wait on each other's FMA (one
-            // accumulator made the backward pass latency-bound: an FMA latency per factor entry).
-            let (mut p0, mut p1, mut p2, mut p3) = (x[c0 + j], [0.0; B], [0.0; B], [0.0; B]);
-            let below = &col[nc..];
-            let mut rc = rows.chunks_exact(4);
-            let mut ac = below.chunks_exact(4);
-            for (r4, a4) in (&mut rc).zip(&mut ac) {
-                let (x0, x1, x2, x3) = (&x[r4[0]], &x[r4[1]], &x[r4[2]], &x[r4[3]]);
+        let col = |j: usize| l.col(j).try_as_col_major().expect("supernode columns are contiguous").as_slice();
+        let lead = nc % 4;
+        for j in (lead..nc).step_by(4).rev() {
+            let c = [col(j), col(j + 1), col(j + 2), col(j + 3)];
+            let (mut p0, mut p1, mut p2, mut p3) = (x[c0 + j], x[c0 + j + 1], x[c0 + j + 2], x[c0 + j + 3]);
+            let (c0v, c1v, c2v, c3v) = (c[0], c[1], c[2], c[3]);
+            for i in j + 4..nc {
+                let (a0, a1, a2, a3) = (c0v[i], c1v[i], c2v[i], c3v[i]);
+                let xr = &x[c0 + i];
                 for t in 0..B {
-                    p0[t] = sub(p0[t], a4[0], x0[t]);
-                    p1[t] = sub(p1[t], a4[1], x1[t]);
-                    p2[t] = sub(p2[t], a4[2], x2[t]);
-                    p3[t] = sub(p3[t], a4[3], x3[t]);
+                    p0[t] = sub(p0[t], a0, xr[t]);
+                    p1[t] = sub(p1[t], a1, xr[t]);
+                    p2[t] = sub(p2[t], a2, xr[t]);
+                    p3[t] = sub(p3[t], a3, xr[t]);
                 }
             }
-            for (&r, &a) in rc.remainder().iter().zip(ac.remainder()) {
+            let (b0, b1, b2, b3) = (&c0v[nc..], &c1v[nc..], &c2v[nc..], &c3v[nc..]);
+            for (p, &r) in rows.iter().enumerate() {
+                let (a0, a1, a2, a3) = (b0[p], b1[p], b2[p], b3[p]);
                 let xr = &x[r];
                 for t in 0..B {
-                    p0[t] = sub(p0[t], a, xr[t]);
+                    p0[t] = sub(p0[t], a0, xr[t]);
+                    p1[t] = sub(p1[t], a1, xr[t]);
+                    p2[t] = sub(p2[t], a2, xr[t]);
+                    p3[t] = sub(p3[t], a3, xr[t]);
                 }
             }
-            let mut acc = p0;
-            for t in 0..B {
-                acc[t] += (p1[t] + p2[t]) + p3[t];
+            let acc = [p0, p1, p2, p3];
+            // The group's triangle, last column first: x_u = (acc_u − Σ_{v>u} L[j+v, j+u] x_v) / L[j+u, j+u].
+            for u in (0..4).rev() {
+                let mut xu = acc[u];
+                for v in u + 1..4 {
+                    let xv = x[c0 + j + v];
+                    for t in 0..B {
+                        xu[t] = sub(xu[t], c[u][j + v], xv[t]);
+                    }
+                }
+                let d = 1.0 / c[u][j + u];
+                for v in xu.iter_mut() {
+                    *v *= d;
+                }
+                x[c0 + j + u] = xu;
             }
-            for (i, &a) in col[j + 1..nc].iter().enumerate() {
+        }
+        for j in (0..lead).rev() {
+            let cj = col(j);
+            let mut acc = x[c0 + j];
+            for (&r, &a) in rows.iter().zip(&cj[nc..]) {
+                let xr = &x[r];
+                for t in 0..B {
+                    acc[t] = sub(acc[t], a, xr[t]);
+                }
+            }
+            for (i, &a) in cj[j + 1..nc].iter().enumerate() {
                 let xi = &x[c0 + j + 1 + i];
                 for t in 0..B {
                     acc[t] = sub(acc[t], a, xi[t]);
                 }
             }
-            let d = 1.0 / col[j];
+            let d = 1.0 / cj[j];
             for v in acc.iter_mut() {
                 *v *= d;
             }
