@@ -4,17 +4,15 @@
 //! `KAC_REPS` the number of runs, `KAC_MIN=1` reports the fastest run instead of the median (steadier for A/B
 //! comparisons on a noisy machine).
 
+mod common;
+use common::median;
+
 use faer::{Mat, Par};
 use kac_core::geometry::{generate, Shape};
 use kac_core::operators::{self, sparse, Mass, OperatorOptions};
 use kac_core::spectrum::factor::{Cholesky, Symbolic};
 use kac_core::spectrum::lanczos::default_sigma;
 use std::time::Instant;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn time(mut f: impl FnMut()) -> f64 {
     f();
@@ -36,13 +34,9 @@ fn time(mut f: impl FnMut()) -> f64 {
 }
 
 fn main() {
-    if std::env::args().any(|a| a == "--list" || a == "--test") {
+    let Some(levels) = common::levels(&[6]) else {
         return;
-    }
-    let levels: Vec<u32> = std::env::var("KAC_LEVELS")
-        .ok()
-        .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
-        .unwrap_or_else(|| vec![6]);
+    };
     for level in levels {
         let shape = Shape::TriangleMesh(generate::icosphere(level));
         let o = OperatorOptions { mass: Some(Mass::Consistent), ..Default::default() };

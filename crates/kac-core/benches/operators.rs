@@ -2,23 +2,17 @@
 //! (the meshes bench/assembly.sh feeds the peers). Prints one JSON line per case; medians of 9 runs after a
 //! warm-up. Threads: set RAYON_NUM_THREADS.
 
+mod common;
+use common::median;
+
 use kac_core::geometry::{generate, Shape};
 use kac_core::operators::{self, Mass, OperatorKind, OperatorOptions};
 use std::time::Instant;
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() {
-    if std::env::args().any(|a| a == "--list" || a == "--test") {
+    let Some(levels) = common::levels(&[5, 6, 7]) else {
         return;
-    }
-    let levels: Vec<u32> = std::env::var("KAC_LEVELS")
-        .ok()
-        .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
-        .unwrap_or_else(|| vec![5, 6, 7]);
+    };
     for level in levels {
         let shape = Shape::TriangleMesh(generate::icosphere(level));
         for (op, mass) in [
