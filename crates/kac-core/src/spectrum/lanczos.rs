@@ -392,32 +392,34 @@ pub fn eigs_block_lanczos(
             return Err(EigenError::NoConvergence { converged: leading.min(k), wanted: k, steps });
         }
         if done {
-            // The k largest θ: locked columns as they are, active ones as V_active S.
+            // The k largest θ: locked columns as they are, active ones as V_active S; written in ascending λ
+            // (descending θ already; sorted defensively).
             let top = &cand[..k];
             let act: Vec<usize> =
                 top.iter().filter_map(|c| if let Ritz::Active(j) = c.1 { Some(j) } else { None }).collect();
             let s_sel = Mat::from_fn(ma, act.len(), |i, j| s_a[(i, act[j])]);
             let mut xa = Mat::<f64>::zeros(n, act.len());
             matmul(xa.as_mut(), Accum::Replace, v.as_ref().subcols(a0, ma), s_sel.as_ref(), 1.0, Par::Seq);
+            // Column of each candidate: in V (locked) or in xa (active, in `top` order).
             let mut next_active = 0;
-            let mut vectors = Mat::<f64>::zeros(n, k);
-            let mut values = Vec::with_capacity(k);
-            for (j, c) in top.iter().enumerate() {
-                let src = match c.1 {
-                    Ritz::Locked(i) => v.as_ref().col(i),
+            let src: Vec<MatRef<'_, f64>> = top
+                .iter()
+                .map(|c| match c.1 {
+                    Ritz::Locked(i) => v.as_ref().subcols(i, 1),
                     Ritz::Active(_) => {
                         next_active += 1;
-                        xa.as_ref().col(next_active - 1)
+                        xa.as_ref().subcols(next_active - 1, 1)
                     }
-                };
-                vectors.as_mut().col_mut(j).copy_from(src);
-                values.push(sigma + 1.0 / c.0);
-            }
-            // Ascending λ = descending θ already; sort defensively.
+                })
+                .collect();
+            let raw: Vec<f64> = top.iter().map(|c| sigma + 1.0 / c.0).collect();
             let mut idx: Vec<usize> = (0..k).collect();
-            idx.sort_by(|&x, &y| values[x].total_cmp(&values[y]));
-            let vectors = Mat::from_fn(n, k, |i, j| vectors[(i, idx[j])]);
-            let values: Vec<f64> = idx.iter().map(|&j| values[j]).collect();
+            idx.sort_by(|&x, &y| raw[x].total_cmp(&raw[y]));
+            let values: Vec<f64> = idx.iter().map(|&j| raw[j]).collect();
+            let mut vectors = Mat::<f64>::zeros(n, k);
+            for (j, &from) in idx.iter().enumerate() {
+                vectors.as_mut().col_mut(j).copy_from(src[from].col(0));
+            }
             clock.restart += lap(&mut t);
             control.report("done", k, k);
             let iteration_s = t2.elapsed().as_secs_f64();
@@ -467,7 +469,6 @@ pub fn eigs_block_lanczos(
                 }
             }
         }
-        rest.truncate(keep.saturating_sub(a0 + lock_now.len()));
         let sel: Vec<usize> = lock_now.iter().chain(&rest).copied().collect();
         let keep = a0 + sel.len();
         let s_keep = Mat::from_fn(ma, sel.len(), |i, j| s_a[(i, sel[j])]);
