@@ -119,6 +119,21 @@ impl Cholesky {
                 ($b:literal) => {{
                     let n = rhs.nrows();
                     let mut x = vec![[0.0f64; $b]; n];
+                    // Row-major right-hand sides (the eigensolver's blocks) are permuted a whole row at a time.
+                    let row_major = rhs.col_stride() == 1 && (n <= 1 || rhs.row_stride() == $b);
+                    if row_major {
+                        // SAFETY: by the stride check the n·b values are one contiguous run from the pointer, seen as
+                        // n rows of b (`[f64; b]` has the alignment of f64); `rhs` is borrowed mutably for this call.
+                        let rows = unsafe { std::slice::from_raw_parts_mut(rhs.as_ptr_mut().cast::<[f64; $b]>(), n) };
+                        for (i, row) in x.iter_mut().enumerate() {
+                            *row = rows[fwd(i)];
+                        }
+                        supernodal_solve_dispatch::<$b>(&f, &mut x);
+                        for (i, row) in x.iter().enumerate() {
+                            rows[fwd(i)] = *row;
+                        }
+                        return;
+                    }
                     for (i, row) in x.iter_mut().enumerate() {
                         let src = fwd(i);
                         for (c, v) in row.iter_mut().enumerate() {
@@ -172,22 +187,208 @@ impl Cholesky {
 
 type SupernodalFactor<'a> = faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef<'a, usize, f64>;
 
-/// Runs `supernodal_solve` compiled for AVX2 + FMA when the CPU has them (checked at run time, as faer's own
-/// kernels do), else for the baseline target.
+/// Runs the block solve with AVX2 + FMA intrinsics for 4 or 8 right-hand sides when the CPU has them (checked at
+/// run time, as faer's own kernels do), else the portable `supernodal_solve` (compiled for AVX2 + FMA where
+/// available).
 fn supernodal_solve_dispatch<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx2,fma")]
-        fn avx2<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
+        fn portable_avx2<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
             supernodal_solve::<B, true>(f, x)
         }
         if crate::operators::sparse::avx2_fma() {
-            // SAFETY: the CPU supports the features `avx2` was compiled for (checked just above).
-            unsafe { avx2::<B>(f, x) };
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above); the kernels touch rows of `x` named by
+            // the factor's structure (all < n = x.len()) and entries of its supernodes' value blocks.
+            unsafe {
+                match B {
+                    4 => avx2::supernodal_solve::<1>(f, x.as_flattened_mut()),
+                    8 => avx2::supernodal_solve::<2>(f, x.as_flattened_mut()),
+                    _ => portable_avx2::<B>(f, x),
+                }
+            }
             return;
         }
     }
     supernodal_solve::<B, false>(f, x)
+}
+
+/// `supernodal_solve` for B = 4R right-hand sides (R vectors of four doubles per row of X) with AVX2 + FMA
+/// intrinsics: the same passes and groups of four columns, with the group's solved rows (forward) or its four
+/// accumulators (backward) in registers. Written with intrinsics because the compiler vectorized the portable
+/// loops across rows of X instead (transposing shuffles and operands spilled to the stack).
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::SupernodalFactor;
+    use std::arch::x86_64::*;
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn supernodal_solve<const R: usize>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
+        let b = 4 * R;
+        let n = x.len() / b;
+        let xp = x.as_mut_ptr();
+        macro_rules! row {
+            ($r:expr) => {{
+                let r: usize = $r;
+                debug_assert!(r < n);
+                xp.add(r * b)
+            }};
+        }
+        macro_rules! load {
+            ($p:expr) => {{
+                let p: *mut f64 = $p;
+                let mut v = [_mm256_setzero_pd(); R];
+                for q in 0..R {
+                    v[q] = _mm256_loadu_pd(p.add(4 * q));
+                }
+                v
+            }};
+        }
+        macro_rules! store {
+            ($p:expr, $v:expr) => {{
+                let (p, v): (*mut f64, [__m256d; R]) = ($p, $v);
+                for q in 0..R {
+                    _mm256_storeu_pd(p.add(4 * q), v[q]);
+                }
+            }};
+        }
+        macro_rules! scale {
+            ($v:expr, $d:expr) => {{
+                let d = _mm256_set1_pd(1.0 / $d);
+                for q in 0..R {
+                    $v[q] = _mm256_mul_pd($v[q], d);
+                }
+            }};
+        }
+        // x ← x − a·g for one broadcast factor entry a.
+        macro_rules! axpy {
+            ($x:expr, $a:expr, $g:expr) => {{
+                let a = _mm256_broadcast_sd(&*$a);
+                for q in 0..R {
+                    $x[q] = _mm256_fnmadd_pd(a, $g[q], $x[q]);
+                }
+            }};
+        }
+        let ns = f.symbolic().n_supernodes();
+        for s in 0..ns {
+            let sn = f.supernode(s);
+            let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
+            let nc = l.ncols();
+            let ld = nc + rows.len();
+            debug_assert!(l.row_stride() == 1 && (nc <= 1 || l.col_stride() as usize == ld));
+            let lp = l.as_ptr();
+            let lead = nc % 4;
+            for j in 0..lead {
+                let cj = lp.add(j * ld);
+                let mut g = load!(row!(c0 + j));
+                scale!(g, *cj.add(j));
+                store!(row!(c0 + j), g);
+                for i in j + 1..nc {
+                    let p = row!(c0 + i);
+                    let mut xi = load!(p);
+                    axpy!(xi, cj.add(i), g);
+                    store!(p, xi);
+                }
+                for (t, &r) in rows.iter().enumerate() {
+                    let p = row!(r);
+                    let mut xi = load!(p);
+                    axpy!(xi, cj.add(nc + t), g);
+                    store!(p, xi);
+                }
+            }
+            for j in (lead..nc).step_by(4) {
+                let c = [lp.add(j * ld), lp.add((j + 1) * ld), lp.add((j + 2) * ld), lp.add((j + 3) * ld)];
+                // The group's triangle: g_u = (x_u − Σ_{v<u} L[j+u, j+v] g_v) / L[j+u, j+u].
+                let mut g = [[_mm256_setzero_pd(); R]; 4];
+                for u in 0..4 {
+                    let mut xu = load!(row!(c0 + j + u));
+                    for v in 0..u {
+                        axpy!(xu, c[v].add(j + u), g[v]);
+                    }
+                    scale!(xu, *c[u].add(j + u));
+                    g[u] = xu;
+                    store!(row!(c0 + j + u), xu);
+                }
+                // Every row below (diagonal block, then pattern) once with all four: two independent pairs.
+                macro_rules! update4 {
+                    ($p:expr, $o:expr) => {{
+                        let (p, o): (*mut f64, usize) = ($p, $o);
+                        let a0 = _mm256_broadcast_sd(&*c[0].add(o));
+                        let a1 = _mm256_broadcast_sd(&*c[1].add(o));
+                        let a2 = _mm256_broadcast_sd(&*c[2].add(o));
+                        let a3 = _mm256_broadcast_sd(&*c[3].add(o));
+                        let mut xi = load!(p);
+                        for q in 0..R {
+                            let t = _mm256_fnmadd_pd(a1, g[1][q], _mm256_fnmadd_pd(a0, g[0][q], xi[q]));
+                            let u = _mm256_fmadd_pd(a3, g[3][q], _mm256_mul_pd(a2, g[2][q]));
+                            xi[q] = _mm256_sub_pd(t, u);
+                        }
+                        store!(p, xi);
+                    }};
+                }
+                for i in j + 4..nc {
+                    update4!(row!(c0 + i), i);
+                }
+                for (t, &r) in rows.iter().enumerate() {
+                    update4!(row!(r), nc + t);
+                }
+            }
+        }
+        for s in (0..ns).rev() {
+            let sn = f.supernode(s);
+            let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
+            let nc = l.ncols();
+            let ld = nc + rows.len();
+            let lp = l.as_ptr();
+            let lead = nc % 4;
+            for j in (lead..nc).step_by(4).rev() {
+                let c = [lp.add(j * ld), lp.add((j + 1) * ld), lp.add((j + 2) * ld), lp.add((j + 3) * ld)];
+                let mut acc =
+                    [load!(row!(c0 + j)), load!(row!(c0 + j + 1)), load!(row!(c0 + j + 2)), load!(row!(c0 + j + 3))];
+                // Each row below gathered once into the four accumulators (independent FMA chains).
+                macro_rules! gather4 {
+                    ($p:expr, $o:expr) => {{
+                        let (p, o): (*mut f64, usize) = ($p, $o);
+                        let xr = load!(p);
+                        for u in 0..4 {
+                            axpy!(acc[u], c[u].add(o), xr);
+                        }
+                    }};
+                }
+                for (t, &r) in rows.iter().enumerate() {
+                    gather4!(row!(r), nc + t);
+                }
+                for i in j + 4..nc {
+                    gather4!(row!(c0 + i), i);
+                }
+                // The group's triangle, last column first: x_u = (acc_u − Σ_{v>u} L[j+v, j+u] x_v) / L[j+u, j+u].
+                let mut xs = [[_mm256_setzero_pd(); R]; 4];
+                for u in (0..4).rev() {
+                    let mut xu = acc[u];
+                    for v in u + 1..4 {
+                        axpy!(xu, c[u].add(j + v), xs[v]);
+                    }
+                    scale!(xu, *c[u].add(j + u));
+                    xs[u] = xu;
+                    store!(row!(c0 + j + u), xu);
+                }
+            }
+            for j in (0..lead).rev() {
+                let cj = lp.add(j * ld);
+                let mut acc = load!(row!(c0 + j));
+                for (t, &r) in rows.iter().enumerate() {
+                    let xr = load!(row!(r));
+                    axpy!(acc, cj.add(nc + t), xr);
+                }
+                for i in j + 1..nc {
+                    let xr = load!(row!(c0 + i));
+                    axpy!(acc, cj.add(i), xr);
+                }
+                scale!(acc, *cj.add(j));
+                store!(row!(c0 + j), acc);
+            }
+        }
+    }
 }
 
 /// Solves L Lᵀ X = Y in place for a supernodal factor, X given row-major in the factor's (permuted) numbering.

@@ -17,6 +17,7 @@
 //! per pair the relative residual ‖Lφ − λMφ‖₂ / (max(|λ|, |σ|) · ‖Mφ‖₂). With [`EigenOptions::verify`], Sylvester's
 //! inertia of L − τM confirms that no eigenvalue below the found ones was missed ([`Completeness`]).
 
+pub mod basis_products;
 pub mod dense;
 pub mod factor;
 pub mod lanczos;
