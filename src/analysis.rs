@@ -22,7 +22,7 @@ use serde_json::{json, Value};
 use std::sync::Arc;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
-pub const ALGORITHM_VERSION: u32 = 1;
+pub const ALGORITHM_VERSION: u32 = 2;
 
 /// Which operator to build (see `kac_core::operators`).
 #[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -517,7 +517,8 @@ fn spectrum_json(e: &Eigen, k: usize) -> Value {
         "solver": {
             "method": s.stats.method, "sigma": s.stats.sigma, "block": s.stats.block, "subspace": s.stats.subspace,
             "restarts": s.stats.restarts, "block_steps": s.stats.block_steps, "solves": s.stats.solves,
-            "factor_nonzeros": s.stats.factor_nnz,
+            "factor_nonzeros": s.stats.factor_nnz, "factorization": s.stats.factorization,
+            "below_sigma": s.stats.below_sigma,
         },
         "timings": s.stats.timings,
     })

@@ -30,7 +30,9 @@ pub struct SpectrumCmd {
     /// Solver: auto, dense or sparse.
     #[arg(long, default_value = "auto", value_parser = ["auto", "dense", "sparse"])]
     pub method: String,
-    /// Shift σ < 0 of the shift-invert solver (default: −mean(L_ii/M_ii)/n).
+    /// Shift σ of the shift-invert solver: below the spectrum (σ < 0) L − σM is factored by Cholesky, inside it
+    /// by LDLᵀ (default: inside, at 0.7 × Weyl's estimate of λ_k, for meshes, curves and point clouds with k ≥ 8;
+    /// −mean(L_ii/M_ii)/n for graphs and small k).
     #[arg(long, allow_hyphen_values = true)]
     pub sigma: Option<f64>,
     /// Band mode: every eigenpair with λ in [A, B] (then -k is ignored), e.g. `--band 0,100`.
@@ -117,7 +119,8 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
         "parameters": op.parameters,
         "solver": {
             "method": st.method, "sigma": st.sigma, "block": st.block, "subspace": st.subspace, "restarts": st.restarts,
-            "block_steps": st.block_steps, "solves": st.solves, "factor_nonzeros": st.factor_nnz, "tol": a.tol,
+            "block_steps": st.block_steps, "solves": st.solves, "factor_nonzeros": st.factor_nnz,
+            "factorization": st.factorization, "below_sigma": st.below_sigma, "tol": a.tol,
             "threads": if a.threads == 0 { rayon::current_num_threads() } else { a.threads },
             "completeness": st.completeness,
         },

@@ -259,28 +259,25 @@ fn flat_torus_has_fourfold_clusters() {
 
 /// The block solve (own supernodal kernel for 1, 2, 4, 8 and 16 columns, faer's otherwise) and the block
 /// M-product agree with column-by-column sparse products: ‖K X − B‖ is at rounding level for every width.
-#[test]
-fn block_solve_and_block_product_match_single_columns() {
-    use kac_core::spectrum::factor::{Cholesky, Symbolic};
-    let s = mesh(generate::icosphere(5));
-    let o = operators::build(&s, &opts(Mass::Consistent, Boundary::Neumann)).unwrap();
-    let pair = &o.pair;
+/// The block solve (column-major and row-major right-hand sides, every kernel width) against K X = B through
+/// column-by-column products, and the block product with K against single columns.
+fn check_block_solve(
+    pair: &operators::sparse::SparsePair,
+    k_values: &[f64],
+    chol: &kac_core::spectrum::factor::Cholesky,
+) {
     let n = pair.n();
-    let k_values = pair.shifted(-0.5);
-    let sym = Symbolic::analyze(&pair.pattern).unwrap();
-    let chol = Cholesky::factor(&sym, &k_values, faer::Par::Seq).unwrap();
-    assert!(chol.is_supernodal(), "10k vertices: faer picks the supernodal factorization, whose solve is kac's own");
     for b in [1usize, 2, 3, 4, 8, 16] {
         let rhs = faer::Mat::<f64>::from_fn(n, b, |i, j| ((i * 31 + j * 17) % 23) as f64 - 11.0);
         let mut x = rhs.clone();
         chol.solve_in_place(x.as_mut(), faer::Par::Seq);
         let mut y = faer::Mat::<f64>::zeros(n, b);
         let mut scratch = Vec::new();
-        operators::sparse::spmm(&pair.pattern, &k_values, x.as_ref(), y.as_mut(), &mut scratch);
+        operators::sparse::spmm(&pair.pattern, k_values, x.as_ref(), y.as_mut(), &mut scratch);
         let mut single = vec![0.0; n];
         for c in 0..b {
             let xc: Vec<f64> = (0..n).map(|i| x[(i, c)]).collect();
-            operators::sparse::matvec(&pair.pattern, &k_values, &xc, &mut single);
+            operators::sparse::matvec(&pair.pattern, k_values, &xc, &mut single);
             let scale = (0..n).map(|i| rhs[(i, c)].abs()).fold(0.0, f64::max);
             for i in 0..n {
                 assert!((single[i] - y[(i, c)]).abs() <= 1e-12 * scale.max(1.0), "b = {b}: block product row {i}");
@@ -294,7 +291,7 @@ fn block_solve_and_block_product_match_single_columns() {
         let xv = faer::MatRef::from_row_major_slice(&xr, n, b);
         operators::sparse::spmm(
             &pair.pattern,
-            &k_values,
+            k_values,
             xv,
             faer::MatMut::from_row_major_slice_mut(&mut yr, n, b),
             &mut scratch,
@@ -311,6 +308,105 @@ fn block_solve_and_block_product_match_single_columns() {
                 );
             }
         }
+    }
+}
+
+#[test]
+fn block_solve_and_block_product_match_single_columns() {
+    use kac_core::spectrum::factor::{Cholesky, Symbolic};
+    let s = mesh(generate::icosphere(5));
+    let o = operators::build(&s, &opts(Mass::Consistent, Boundary::Neumann)).unwrap();
+    let pair = &o.pair;
+    let k_values = pair.shifted(-0.5);
+    let sym = Symbolic::analyze(&pair.pattern).unwrap();
+    let chol = Cholesky::factor(&sym, &k_values, faer::Par::Seq).unwrap();
+    assert!(chol.is_supernodal(), "10k vertices: faer picks the supernodal factorization, whose solve is kac's own");
+    check_block_solve(pair, &k_values, &chol);
+}
+
+/// L − σM with σ = 7 inside the sphere's spectrum (between l = 2 at 6 and l = 3 at 12): the LDLᵀ factor's inertia
+/// counts the 1 + 3 + 5 = 9 eigenvalues below σ (Sylvester), and its block solve (unit diagonal, D between the
+/// sweeps) solves the indefinite system.
+#[test]
+fn ldlt_factor_counts_eigenvalues_below_an_interior_shift_and_solves() {
+    use kac_core::spectrum::factor::{Cholesky, Symbolic};
+    let s = mesh(generate::icosphere(5));
+    let o = operators::build(&s, &opts(Mass::Consistent, Boundary::Neumann)).unwrap();
+    let pair = &o.pair;
+    let k_values = pair.shifted(7.0);
+    let sym = Symbolic::analyze(&pair.pattern).unwrap();
+    assert!(Cholesky::factor(&sym, &k_values, faer::Par::Seq).is_err(), "L − 7M is indefinite");
+    let (ldlt, below) = Cholesky::factor_ldlt(&sym, &k_values, faer::Par::Seq).unwrap();
+    assert!(ldlt.is_ldlt() && ldlt.is_supernodal());
+    assert_eq!(below, 9);
+    check_block_solve(pair, &k_values, &ldlt);
+}
+
+/// The automatic shift goes inside the spectrum (Weyl's law: σ = 0.7·4πk/area = 35 for k = 50 on the unit
+/// sphere, where λ_50 = 56): an LDLᵀ factor whose inertia the solver matches, and the same eigenpairs as with a
+/// shift below the spectrum (Cholesky) to 10⁻¹⁰ (the returned eigenvalues are Rayleigh quotients).
+#[test]
+fn shift_inside_the_spectrum_by_weyls_law_gives_the_same_spectrum() {
+    let s = mesh(generate::icosphere(5));
+    let op = opts(Mass::Consistent, Boundary::Neumann);
+    let o = operators::build(&s, &op).unwrap();
+    let k = 50;
+    let auto =
+        eigs(&o.pair, &EigenOptions { k, method: Method::Sparse, ..Default::default() }, None, Control::default())
+            .unwrap();
+    let below = eigs(
+        &o.pair,
+        &EigenOptions { k, method: Method::Sparse, sigma: Some(-0.5), ..Default::default() },
+        None,
+        Control::default(),
+    )
+    .unwrap();
+    let st = &auto.stats;
+    assert_eq!(st.factorization, "ldlt");
+    assert_eq!(below.stats.factorization, "cholesky");
+    let area = 4.0 * std::f64::consts::PI;
+    assert!(
+        (st.sigma - 0.7 * 4.0 * std::f64::consts::PI * k as f64 / area).abs() < 0.05 * st.sigma,
+        "σ = {}",
+        st.sigma
+    );
+    let nu = st.below_sigma.expect("an interior shift reports its inertia");
+    assert_eq!(nu, auto.values.iter().filter(|&&l| l < st.sigma).count());
+    assert_eq!(nu, 36, "l = 0..5 (λ ≤ 30) lie below σ ≈ 35, l = 6 (λ = 42) above");
+    for (a, b) in auto.values.iter().zip(&below.values) {
+        assert!((a - b).abs() <= 1e-10 * a.abs().max(1.0), "{a} vs {b}");
+    }
+    assert!(auto.residuals.iter().all(|&r| r < 1e-7), "{:?}", auto.residuals);
+    check_m_orthonormal(&s, &op, &auto, 1e-9);
+}
+
+/// A 100 × 1 strip: Weyl's two-dimensional law overestimates its low spectrum, which is one-dimensional
+/// ((πm/100)², m = 0, 1, …, below (π)² where the first transverse mode starts), so the first interior shift has
+/// more than k eigenvalues below it; the solver lowers it and still returns the exact low spectrum.
+#[test]
+fn thin_strip_lowers_an_overestimated_shift() {
+    let s = mesh(generate::grid(400, 4, 100.0, 1.0));
+    let op = opts(Mass::Consistent, Boundary::Neumann);
+    let o = operators::build(&s, &op).unwrap();
+    let k = 20;
+    let first = kac_core::spectrum::lanczos::weyl_shift(&o.pair, k).unwrap();
+    let exact: Vec<f64> = (0..k).map(|m| (std::f64::consts::PI * m as f64 / 100.0).powi(2)).collect();
+    assert!(exact.iter().filter(|&&l| l < first).count() > k - 1, "the first guess is too high here");
+    let sp = eigs(&o.pair, &EigenOptions { k, method: Method::Sparse, ..Default::default() }, None, Control::default())
+        .unwrap();
+    let st = &sp.stats;
+    assert!(st.sigma < first, "σ lowered from {first} to {}", st.sigma);
+    if let Some(nu) = st.below_sigma {
+        assert!(nu <= k);
+        assert_eq!(nu, sp.values.iter().filter(|&&l| l < st.sigma).count());
+    }
+    let dense =
+        eigs(&o.pair, &EigenOptions { k, method: Method::Dense, ..Default::default() }, None, Control::default())
+            .unwrap();
+    for ((a, b), e) in sp.values.iter().zip(&dense.values).zip(&exact) {
+        assert!((a - b).abs() <= 1e-10 * a.abs().max(1.0), "{a} vs dense {b}");
+        // P1 elements, h = 1/4 along the strip: 1% on these smooth modes.
+        assert!((a - e).abs() <= 1e-2 * e.max(1e-3), "{a} vs exact {e}");
     }
 }
 

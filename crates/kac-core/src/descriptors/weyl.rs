@@ -33,6 +33,13 @@ pub struct WeylEstimate {
     pub string_length_estimate: f64,
 }
 
+/// Weyl's law read forward: the eigenvalue at which N(λ) = ω_d |Ω| λ^{d/2} / (2π)^d reaches `count`, that is
+/// λ ≈ (2π)² (count / (ω_d |Ω|))^{2/d}. The leading term only: a first guess, not an estimate to report.
+pub fn weyl_eigenvalue(dimension: u8, measure: f64, count: f64) -> f64 {
+    let d = f64::from(dimension);
+    (2.0 * PI).powi(2) * (count / (omega(dimension) * measure)).powf(2.0 / d)
+}
+
 fn omega(d: u8) -> f64 {
     match d {
         1 => 2.0,

@@ -69,7 +69,13 @@ pub fn apply(
     let stiffness = vals.pop().unwrap_or_default();
     let kept = keep.iter().map(|&i| i as u32).collect();
     Ok((
-        SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: pair.mass_is_diagonal },
+        SparsePair {
+            pattern: Arc::new(pattern),
+            stiffness,
+            mass,
+            mass_is_diagonal: pair.mass_is_diagonal,
+            dimension: pair.dimension,
+        },
         Some(kept),
     ))
 }

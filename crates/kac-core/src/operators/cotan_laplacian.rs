@@ -208,5 +208,11 @@ pub fn cotan_pair(
     });
     let pattern = super::sparse::Pattern { n, col_ptr, row_idx };
     let (stiffness, mass_values) = (lv, mv);
-    Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: mass_values, mass_is_diagonal: !consistent })
+    Ok(SparsePair {
+        pattern: Arc::new(pattern),
+        stiffness,
+        mass: mass_values,
+        mass_is_diagonal: !consistent,
+        dimension: Some(2),
+    })
 }

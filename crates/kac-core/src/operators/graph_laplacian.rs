@@ -52,7 +52,7 @@ pub fn graph_pair(n: usize, edges: &[[u32; 2]], weights: &[f64], kind: GraphKind
         })
         .unzip();
     let (pattern, [stiffness, mass]) = assemble(n, &off, [&dl, &dm]);
-    SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: true }
+    SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: true, dimension: None }
 }
 
 pub fn string_pair(v: &[Point], segments: &[[u32; 2]], mass: Mass) -> Result<SparsePair, OperatorError> {
@@ -76,5 +76,5 @@ pub fn string_pair(v: &[Point], segments: &[[u32; 2]], mass: Mass) -> Result<Spa
         }
     }
     let (pattern, [stiffness, m]) = assemble(n, &off, [&dl, &dm]);
-    Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: m, mass_is_diagonal: !consistent })
+    Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: m, mass_is_diagonal: !consistent, dimension: Some(1) })
 }

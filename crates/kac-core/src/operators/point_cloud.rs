@@ -276,5 +276,5 @@ pub fn belkin_niyogi_pair(
     used.insert("t".into(), t.into());
     used.insert("radius".into(), r.into());
     used.insert("total_area".into(), areas.iter().sum::<f64>().into());
-    Ok((SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: true }, used))
+    Ok((SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: true, dimension: Some(2) }, used))
 }

@@ -42,6 +42,10 @@ pub struct SparsePair {
     /// M: symmetric positive definite mass (zeros off the diagonal when lumped).
     pub mass: Vec<f64>,
     pub mass_is_diagonal: bool,
+    /// Dimension d of the domain the operator discretizes, whose measure (length, area, volume) the mass matrix
+    /// sums to: 1 for strings, 2 for surfaces and point clouds, 3 for tetrahedral meshes; `None` for graphs.
+    /// The eigensolver reads Weyl's law with it to place its shift (see `spectrum::lanczos::weyl_shift`).
+    pub dimension: Option<u8>,
 }
 
 impl SparsePair {

@@ -40,5 +40,5 @@ pub fn tet_pair(v: &[Point], tets: &[[u32; 4]], mass: Mass) -> Result<SparsePair
         }
     }
     let (pattern, [stiffness, m]) = assemble(n, &off, [&dl, &dm]);
-    Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: m, mass_is_diagonal: !consistent })
+    Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: m, mass_is_diagonal: !consistent, dimension: Some(3) })
 }

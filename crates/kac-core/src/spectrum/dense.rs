@@ -55,6 +55,8 @@ pub fn eigs_dense(pair: &SparsePair, k: usize) -> Result<Spectrum, EigenError> {
             block_steps: 0,
             solves: 0,
             factor_nnz: n * (n + 1) / 2,
+            factorization: "cholesky",
+            below_sigma: None,
             symbolic_reused: false,
             completeness: None,
             timings: Timings { iteration_s: total, total_s: total, ..Default::default() },

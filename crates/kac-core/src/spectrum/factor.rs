@@ -5,7 +5,9 @@
 use crate::operators::sparse::{Pattern, SparsePair};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymmetricOrdering};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering,
+};
 use faer::sparse::SparseColMatRef;
 use faer::{Conj, MatMut, Par, Side};
 use std::sync::Arc;
@@ -59,29 +61,20 @@ fn factor_diagonal(s: &SymbolicCholesky<usize>, values: &[f64]) -> Vec<f64> {
 /// of an LDLᵀ factorization of L − τM (M positive definite). The factorization reuses the symbolic analysis and
 /// does not pivot; `Err` when it meets an exact zero pivot (τ on an eigenvalue, or a singular leading block).
 pub fn count_below(symbolic: &Symbolic, pair: &SparsePair, tau: f64) -> Result<usize, String> {
-    use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
-    let s = &symbolic.inner;
-    let values = pair.shifted(tau);
-    let mut l = vec![0.0f64; s.len_val()];
-    let a = SparseColMatRef::new(symbolic.pattern.faer(), &values);
-    let mut mem = MemBuffer::new(s.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()));
-    s.factorize_numeric_ldlt(
-        &mut l,
-        a,
-        Side::Lower,
-        LdltRegularization::default(),
-        Par::Seq,
-        MemStack::new(&mut mem),
-        Default::default(),
-    )
-    .map_err(|e| format!("LDLᵀ of L − {tau:e}·M failed ({e:?})"))?;
-    Ok(factor_diagonal(s, &l).iter().filter(|&&d| d < 0.0).count())
+    Cholesky::factor_ldlt(symbolic, &pair.shifted(tau), Par::Seq)
+        .map(|(_, below)| below)
+        .map_err(|e| format!("LDLᵀ of L − {tau:e}·M failed ({e})"))
 }
 
-/// A numeric Cholesky factor of a symmetric positive definite matrix on a symbolic analysis.
+/// A numeric factor of a symmetric matrix K on a symbolic analysis: Cholesky K = LLᵀ when K is positive definite,
+/// or K = LDLᵀ (L unit lower triangular, D diagonal, no pivoting) when it may be indefinite, as L − σM is for a
+/// shift σ inside the spectrum. Both live in faer's supernodal (or simplicial) storage on the same analysis; an LDLᵀ
+/// factor keeps D on the diagonal of its blocks.
 pub struct Cholesky {
     symbolic: Symbolic,
     values: Vec<f64>,
+    /// LDLᵀ (unit diagonal in L, D on the diagonal) rather than LLᵀ.
+    ldlt: bool,
 }
 
 impl Cholesky {
@@ -101,7 +94,34 @@ impl Cholesky {
             Default::default(),
         )
         .map_err(|e| format!("the matrix is not positive definite ({e:?})"))?;
-        Ok(Cholesky { symbolic: symbolic.clone(), values: l })
+        Ok(Cholesky { symbolic: symbolic.clone(), values: l, ldlt: false })
+    }
+    /// Factors the (possibly indefinite) matrix with `values` as LDLᵀ without pivoting, and counts the negative
+    /// entries of D: by Sylvester's law of inertia, the number of negative eigenvalues of the matrix. `Err` on an
+    /// exact zero pivot. Without pivoting nothing bounds the growth of L when a leading block is nearly singular;
+    /// callers that need accurate solves check the backward error of a solve.
+    pub fn factor_ldlt(symbolic: &Symbolic, values: &[f64], par: Par) -> Result<(Self, usize), String> {
+        use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
+        let s = &symbolic.inner;
+        let mut l = vec![0.0f64; s.len_val()];
+        let a = SparseColMatRef::new(symbolic.pattern.faer(), values);
+        let mut mem = MemBuffer::new(s.factorize_numeric_ldlt_scratch::<f64>(par, Default::default()));
+        s.factorize_numeric_ldlt(
+            &mut l,
+            a,
+            Side::Lower,
+            LdltRegularization::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .map_err(|e| format!("zero pivot ({e:?})"))?;
+        let negative = factor_diagonal(s, &l).iter().filter(|&&d| d < 0.0).count();
+        Ok((Cholesky { symbolic: symbolic.clone(), values: l, ldlt: true }, negative))
+    }
+    /// Whether this is an LDLᵀ factor (else Cholesky).
+    pub fn is_ldlt(&self) -> bool {
+        self.ldlt
     }
     /// Solves K X = B in place for every column of `rhs`.
     ///
@@ -128,7 +148,7 @@ impl Cholesky {
                         for (i, row) in x.iter_mut().enumerate() {
                             *row = rows[fwd(i)];
                         }
-                        supernodal_solve_dispatch::<$b>(&f, &mut x);
+                        supernodal_solve_dispatch::<$b>(&f, &mut x, self.ldlt);
                         for (i, row) in x.iter().enumerate() {
                             rows[fwd(i)] = *row;
                         }
@@ -140,7 +160,7 @@ impl Cholesky {
                             *v = rhs[(src, c)];
                         }
                     }
-                    supernodal_solve_dispatch::<$b>(&f, &mut x);
+                    supernodal_solve_dispatch::<$b>(&f, &mut x, self.ldlt);
                     for (i, row) in x.iter().enumerate() {
                         let dst = fwd(i);
                         for (c, v) in row.iter().enumerate() {
@@ -160,16 +180,31 @@ impl Cholesky {
             }
         }
         let mut mem = MemBuffer::new(s.solve_in_place_scratch::<f64>(rhs.ncols(), par));
-        LltRef::<'_, usize, f64>::new(s, &self.values).solve_in_place_with_conj(
-            Conj::No,
-            rhs,
-            par,
-            MemStack::new(&mut mem),
-        );
+        if self.ldlt {
+            LdltRef::<'_, usize, f64>::new(s, &self.values).solve_in_place_with_conj(
+                Conj::No,
+                rhs,
+                par,
+                MemStack::new(&mut mem),
+            );
+        } else {
+            LltRef::<'_, usize, f64>::new(s, &self.values).solve_in_place_with_conj(
+                Conj::No,
+                rhs,
+                par,
+                MemStack::new(&mut mem),
+            );
+        }
     }
-    /// log det K = 2 Σ log L_jj from the factor's diagonal (the ordering does not change the determinant).
+    /// log |det K| from the factor's diagonal: 2 Σ log L_jj (Cholesky) or Σ log |D_jj| (LDLᵀ); the ordering does
+    /// not change the determinant.
     pub fn log_det(&self) -> f64 {
-        factor_diagonal(&self.symbolic.inner, &self.values).iter().map(|d| 2.0 * d.ln()).sum()
+        let d = factor_diagonal(&self.symbolic.inner, &self.values);
+        if self.ldlt {
+            d.iter().map(|d| d.abs().ln()).sum()
+        } else {
+            d.iter().map(|d| 2.0 * d.ln()).sum()
+        }
     }
     /// Whether faer chose the supernodal factorization (else simplicial, for small or very sparse factors).
     pub fn is_supernodal(&self) -> bool {
@@ -190,27 +225,34 @@ type SupernodalFactor<'a> = faer::sparse::linalg::cholesky::supernodal::Supernod
 /// Runs the block solve with AVX2 + FMA intrinsics for 4 or 8 right-hand sides when the CPU has them (checked at
 /// run time, as faer's own kernels do), else the portable `supernodal_solve` (compiled for AVX2 + FMA where
 /// available).
-fn supernodal_solve_dispatch<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
+fn supernodal_solve_dispatch<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]], ldlt: bool) {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx2,fma")]
-        fn portable_avx2<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
-            supernodal_solve::<B, true>(f, x)
+        fn portable_avx2<const B: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
+            supernodal_solve::<B, true, UNIT>(f, x)
         }
         if crate::operators::sparse::avx2_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above); the kernels touch rows of `x` named by
             // the factor's structure (all < n = x.len()) and entries of its supernodes' value blocks.
             unsafe {
-                match B {
-                    4 => avx2::supernodal_solve::<1>(f, x.as_flattened_mut()),
-                    8 => avx2::supernodal_solve::<2>(f, x.as_flattened_mut()),
-                    _ => portable_avx2::<B>(f, x),
+                match (B, ldlt) {
+                    (4, false) => avx2::supernodal_solve::<1, false>(f, x.as_flattened_mut()),
+                    (4, true) => avx2::supernodal_solve::<1, true>(f, x.as_flattened_mut()),
+                    (8, false) => avx2::supernodal_solve::<2, false>(f, x.as_flattened_mut()),
+                    (8, true) => avx2::supernodal_solve::<2, true>(f, x.as_flattened_mut()),
+                    (_, false) => portable_avx2::<B, false>(f, x),
+                    (_, true) => portable_avx2::<B, true>(f, x),
                 }
             }
             return;
         }
     }
-    supernodal_solve::<B, false>(f, x)
+    if ldlt {
+        supernodal_solve::<B, false, true>(f, x)
+    } else {
+        supernodal_solve::<B, false, false>(f, x)
+    }
 }
 
 /// `supernodal_solve` for B = 4R right-hand sides (R vectors of four doubles per row of X) with AVX2 + FMA
@@ -223,7 +265,7 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn supernodal_solve<const R: usize>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
+    pub(super) unsafe fn supernodal_solve<const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
         let b = 4 * R;
         let n = x.len() / b;
         let xp = x.as_mut_ptr();
@@ -281,8 +323,14 @@ mod avx2 {
             for j in 0..lead {
                 let cj = lp.add(j * ld);
                 let mut g = load!(row!(c0 + j));
-                scale!(g, *cj.add(j));
-                store!(row!(c0 + j), g);
+                if UNIT {
+                    let mut stored = g;
+                    scale!(stored, *cj.add(j));
+                    store!(row!(c0 + j), stored);
+                } else {
+                    scale!(g, *cj.add(j));
+                    store!(row!(c0 + j), g);
+                }
                 for i in j + 1..nc {
                     let p = row!(c0 + i);
                     let mut xi = load!(p);
@@ -305,9 +353,15 @@ mod avx2 {
                     for v in 0..u {
                         axpy!(xu, c[v].add(j + u), g[v]);
                     }
-                    scale!(xu, *c[u].add(j + u));
+                    if UNIT {
+                        let mut stored = xu;
+                        scale!(stored, *c[u].add(j + u));
+                        store!(row!(c0 + j + u), stored);
+                    } else {
+                        scale!(xu, *c[u].add(j + u));
+                        store!(row!(c0 + j + u), xu);
+                    }
                     g[u] = xu;
-                    store!(row!(c0 + j + u), xu);
                 }
                 // Every row below (diagonal block, then pattern) once with all four: two independent pairs.
                 macro_rules! update4 {
@@ -368,7 +422,9 @@ mod avx2 {
                     for v in u + 1..4 {
                         axpy!(xu, c[u].add(j + v), xs[v]);
                     }
-                    scale!(xu, *c[u].add(j + u));
+                    if !UNIT {
+                        scale!(xu, *c[u].add(j + u));
+                    }
                     xs[u] = xu;
                     store!(row!(c0 + j + u), xu);
                 }
@@ -384,14 +440,18 @@ mod avx2 {
                     let xr = load!(row!(c0 + i));
                     axpy!(acc, cj.add(i), xr);
                 }
-                scale!(acc, *cj.add(j));
+                if !UNIT {
+                    scale!(acc, *cj.add(j));
+                }
                 store!(row!(c0 + j), acc);
             }
         }
     }
 }
 
-/// Solves L Lᵀ X = Y in place for a supernodal factor, X given row-major in the factor's (permuted) numbering.
+/// Solves L Lᵀ X = Y (or, with `UNIT`, L D Lᵀ X = Y for an LDLᵀ factor: unit diagonal in L, D on the diagonal)
+/// in place for a supernodal factor, X given row-major in the factor's (permuted) numbering. For LDLᵀ the forward
+/// sweep stores D⁻¹y for each solved row while it updates the rows below with y itself, so no third pass is needed.
 ///
 /// Columns of a supernode are taken four at a time (the first `nc % 4` one by one). Forward: the group's 4 × 4
 /// diagonal triangle, then every row below it (in the diagonal block and in the supernode's pattern) is updated once
@@ -399,7 +459,7 @@ mod avx2 {
 /// read-modify-write of X per row instead of four. Backward: each of the four columns gathers the rows below into
 /// its own accumulator in one pass (independent FMA chains), then the group's triangle.
 #[inline(always)]
-fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
+fn supernodal_solve<const B: usize, const FMA: bool, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
     // x − a·y, fused where the CPU has FMA (the body is compiled twice, see `supernodal_solve_dispatch`).
     let sub = |x: f64, a: f64, y: f64| if FMA { (-a).mul_add(y, x) } else { x - a * y };
     let ns = f.symbolic().n_supernodes();
@@ -413,10 +473,16 @@ fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x
             let cj = col(j);
             let d = 1.0 / cj[j];
             let mut xj = x[c0 + j];
-            for v in xj.iter_mut() {
-                *v *= d;
+            let mut stored = xj;
+            for (v, st) in xj.iter_mut().zip(stored.iter_mut()) {
+                if UNIT {
+                    *st *= d;
+                } else {
+                    *v *= d;
+                    *st = *v;
+                }
             }
-            x[c0 + j] = xj;
+            x[c0 + j] = stored;
             for (i, &a) in cj[j + 1..nc].iter().enumerate() {
                 let xi = &mut x[c0 + j + 1 + i];
                 for t in 0..B {
@@ -442,11 +508,17 @@ fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x
                     }
                 }
                 let d = 1.0 / c[u][j + u];
-                for v in xu.iter_mut() {
-                    *v *= d;
+                let mut stored = xu;
+                for (v, st) in xu.iter_mut().zip(stored.iter_mut()) {
+                    if UNIT {
+                        *st *= d;
+                    } else {
+                        *v *= d;
+                        *st = *v;
+                    }
                 }
                 g[u] = xu;
-                x[c0 + j + u] = xu;
+                x[c0 + j + u] = stored;
             }
             let (g0, g1, g2, g3) = (g[0], g[1], g[2], g[3]);
             let (c0v, c1v, c2v, c3v) = (c[0], c[1], c[2], c[3]);
@@ -508,9 +580,11 @@ fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x
                         xu[t] = sub(xu[t], c[u][j + v], xv[t]);
                     }
                 }
-                let d = 1.0 / c[u][j + u];
-                for v in xu.iter_mut() {
-                    *v *= d;
+                if !UNIT {
+                    let d = 1.0 / c[u][j + u];
+                    for v in xu.iter_mut() {
+                        *v *= d;
+                    }
                 }
                 x[c0 + j + u] = xu;
             }
@@ -530,9 +604,11 @@ fn supernodal_solve<const B: usize, const FMA: bool>(f: &SupernodalFactor<'_>, x
                     acc[t] = sub(acc[t], a, xi[t]);
                 }
             }
-            let d = 1.0 / cj[j];
-            for v in acc.iter_mut() {
-                *v *= d;
+            if !UNIT {
+                let d = 1.0 / cj[j];
+                for v in acc.iter_mut() {
+                    *v *= d;
+                }
             }
             x[c0 + j] = acc;
         }
