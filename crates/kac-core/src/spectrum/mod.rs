@@ -279,44 +279,57 @@ fn finish(pair: &SparsePair, s: &mut Spectrum) {
     let k = s.values.len();
     let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);
     for j in 0..k {
-        let col = s.vectors.col(j);
-        let (mut big, mut arg) = (0.0f64, 0usize);
-        for i in 0..n {
-            if col[i].abs() > big {
-                big = col[i].abs();
-                arg = i;
+        let (mut big, mut sign) = (0.0f64, 1.0);
+        for &x in s.vectors.col(j).iter() {
+            if x.abs() > big {
+                (big, sign) = (x.abs(), x.signum());
             }
         }
-        if col[arg] < 0.0 {
-            for i in 0..n {
-                s.vectors[(i, j)] = -s.vectors[(i, j)];
-            }
+        if sign < 0.0 {
+            s.vectors.col_mut(j).iter_mut().for_each(|x| *x = -*x);
         }
     }
     s.residuals = vec![0.0; k];
+    // Eight columns at a time as one row-major block: the block products take it without transposing.
+    const B: usize = 8;
     let mut scratch = Vec::new();
-    let mut lx = Mat::<f64>::zeros(n, 8.min(k));
-    let mut mx = Mat::<f64>::zeros(n, 8.min(k));
-    for j0 in (0..k).step_by(8) {
-        let bw = 8.min(k - j0);
-        let x = s.vectors.as_ref().subcols(j0, bw);
-        crate::operators::sparse::spmm(&pair.pattern, &pair.stiffness, x, lx.as_mut().subcols_mut(0, bw), &mut scratch);
-        crate::operators::sparse::spmm(&pair.pattern, &pair.mass, x, mx.as_mut().subcols_mut(0, bw), &mut scratch);
+    let (mut xr, mut lr, mut mr) = (vec![0.0; n * B], vec![0.0; n * B], vec![0.0; n * B]);
+    for j0 in (0..k).step_by(B) {
+        let bw = B.min(k - j0);
         for c in 0..bw {
-            let (xc, l, m) = (x.col(c), lx.col(c), mx.col(c));
-            let (mut xlx, mut xmx) = (0.0, 0.0);
-            for i in 0..n {
-                xlx += xc[i] * l[i];
-                xmx += xc[i] * m[i];
+            for (i, &x) in s.vectors.col(j0 + c).iter().enumerate() {
+                xr[i * bw + c] = x;
             }
-            let lam = if xmx > 0.0 { xlx / xmx } else { s.values[j0 + c] };
-            s.values[j0 + c] = lam;
-            let (mut r, mut mnorm) = (0.0, 0.0);
-            for i in 0..n {
-                r += (l[i] - lam * m[i]).powi(2);
-                mnorm += m[i] * m[i];
+        }
+        let x = faer::MatRef::from_row_major_slice(&xr[..n * bw], n, bw);
+        let product = |values: &[f64], out: &mut [f64], scratch: &mut Vec<f64>| {
+            let y = faer::MatMut::from_row_major_slice_mut(&mut out[..n * bw], n, bw);
+            crate::operators::sparse::spmm(&pair.pattern, values, x, y, scratch);
+        };
+        product(&pair.stiffness, &mut lr, &mut scratch);
+        product(&pair.mass, &mut mr, &mut scratch);
+        let (mut xlx, mut xmx) = ([0.0f64; B], [0.0f64; B]);
+        let (xb, lb, mb) = (&xr[..n * bw], &lr[..n * bw], &mr[..n * bw]);
+        for ((xi, li), mi) in xb.chunks_exact(bw).zip(lb.chunks_exact(bw)).zip(mb.chunks_exact(bw)) {
+            for c in 0..bw {
+                xlx[c] += xi[c] * li[c];
+                xmx[c] += xi[c] * mi[c];
             }
-            s.residuals[j0 + c] = r.sqrt() / (lam.abs().max(sigma_floor) * mnorm.sqrt());
+        }
+        let mut lam = [0.0f64; B];
+        for c in 0..bw {
+            lam[c] = if xmx[c] > 0.0 { xlx[c] / xmx[c] } else { s.values[j0 + c] };
+            s.values[j0 + c] = lam[c];
+        }
+        let (mut r, mut mnorm) = ([0.0f64; B], [0.0f64; B]);
+        for (li, mi) in lb.chunks_exact(bw).zip(mb.chunks_exact(bw)) {
+            for c in 0..bw {
+                r[c] += (li[c] - lam[c] * mi[c]).powi(2);
+                mnorm[c] += mi[c] * mi[c];
+            }
+        }
+        for c in 0..bw {
+            s.residuals[j0 + c] = r[c].sqrt() / (lam[c].abs().max(sigma_floor) * mnorm[c].sqrt());
         }
     }
     // Members of a cluster may trade places by rounding.
@@ -325,7 +338,11 @@ fn finish(pair: &SparsePair, s: &mut Spectrum) {
         idx.sort_by(|&a, &b| s.values[a].total_cmp(&s.values[b]));
         s.values = idx.iter().map(|&j| s.values[j]).collect();
         s.residuals = idx.iter().map(|&j| s.residuals[j]).collect();
-        s.vectors = Mat::from_fn(n, k, |i, j| s.vectors[(i, idx[j])]);
+        let mut sorted = Mat::<f64>::zeros(n, k);
+        for (j, &from) in idx.iter().enumerate() {
+            sorted.col_mut(j).copy_from(s.vectors.col(from));
+        }
+        s.vectors = sorted;
     }
 }
 
