@@ -94,6 +94,19 @@ fn col_dots(x: &[f64], y: &[f64], b: usize) -> Vec<f64> {
     acc
 }
 
+/// V[:, a0..a0 + p] = V[:, a0..a0 + ma] S for S (ma × p, p ≤ ma): Ritz vectors formed in place, by chunks of rows
+/// (each chunk's product is taken before the chunk is overwritten), so no n × p copy is allocated.
+fn ritz_in_place(v: &mut Mat<f64>, a0: usize, ma: usize, s: MatRef<'_, f64>) {
+    let (n, p) = (v.nrows(), s.ncols());
+    let mut x = Mat::<f64>::zeros(RESTART_ROWS.min(n), p);
+    for r0 in (0..n).step_by(RESTART_ROWS) {
+        let rows = RESTART_ROWS.min(n - r0);
+        let mut xc = x.as_mut().subrows_mut(0, rows);
+        matmul(xc.rb_mut(), Accum::Replace, v.as_ref().subrows(r0, rows).subcols(a0, ma), s, 1.0, Par::Seq);
+        v.as_mut().subrows_mut(r0, rows).subcols_mut(a0, p).copy_from(xc.rb());
+    }
+}
+
 /// A Ritz pair of the current basis: a locked column, or an eigenvector of the active projected matrix.
 #[derive(Clone, Copy)]
 enum Ritz {
@@ -378,6 +391,8 @@ pub fn eigs_block_lanczos(
     let mut e_lo = 0usize;
     let (mut steps, mut restarts, mut solves) = (0usize, 0usize, 0usize);
     let mut best_converged = 0;
+    // Converged Ritz pairs at the last test, in any position: once half of k are, the test runs every step.
+    let mut converged_any = 0;
     control.report("iterating", 0, k);
     loop {
         if control.stopped() {
@@ -428,7 +443,7 @@ pub fn eigs_block_lanczos(
             e.as_mut().subcols_mut(m - b, b).copy_from(bm.as_ref());
             e_lo = m - b;
             clock.orthogonalize += lap(&mut t);
-            if m < want || (m + 2 * b <= msize && steps % 2 == 1) {
+            if m < want || (m + 2 * b <= msize && steps % 2 == 1 && 2 * converged_any < k) {
                 continue;
             }
         }
@@ -453,6 +468,7 @@ pub fn eigs_block_lanczos(
         // negative θ (λ < σ) come first, then the positive ones from the largest down.
         cand.sort_by(|x, y| (sigma + 1.0 / x.0).total_cmp(&(sigma + 1.0 / y.0)));
         let leading = cand.iter().take_while(|c| c.2).count();
+        converged_any = cand.iter().filter(|c| c.2).count();
         clock.rayleigh_ritz += lap(&mut t);
         if leading.min(k) > best_converged {
             best_converged = leading.min(k);
@@ -476,17 +492,16 @@ pub fn eigs_block_lanczos(
             let act: Vec<usize> =
                 top.iter().filter_map(|c| if let Ritz::Active(j) = c.1 { Some(j) } else { None }).collect();
             let s_sel = Mat::from_fn(ma, act.len(), |i, j| s_a[(i, act[j])]);
-            let mut xa = Mat::<f64>::zeros(n, act.len());
-            matmul(xa.as_mut(), Accum::Replace, v.as_ref().subcols(a0, ma), s_sel.as_ref(), 1.0, Par::Seq);
-            // Column of each candidate: in V (locked) or in xa (active, in `top` order).
-            let mut next_active = 0;
-            let src: Vec<MatRef<'_, f64>> = top
+            ritz_in_place(&mut v, a0, ma, s_sel.as_ref());
+            // Column of each candidate in V: locked ones where they are, active ones from a0 on in `top` order.
+            let mut next_active = a0;
+            let src: Vec<usize> = top
                 .iter()
                 .map(|c| match c.1 {
-                    Ritz::Locked(i) => v.as_ref().subcols(i, 1),
+                    Ritz::Locked(i) => i,
                     Ritz::Active(_) => {
                         next_active += 1;
-                        xa.as_ref().subcols(next_active - 1, 1)
+                        next_active - 1
                     }
                 })
                 .collect();
@@ -496,7 +511,7 @@ pub fn eigs_block_lanczos(
             let values: Vec<f64> = idx.iter().map(|&j| raw[j]).collect();
             let mut vectors = Mat::<f64>::zeros(n, k);
             for (j, &from) in idx.iter().enumerate() {
-                vectors.as_mut().col_mut(j).copy_from(src[from].col(0));
+                vectors.as_mut().col_mut(j).copy_from(v.col(src[from]));
             }
             clock.restart += lap(&mut t);
             control.report("done", k, k);
@@ -552,27 +567,12 @@ pub fn eigs_block_lanczos(
         let sel: Vec<usize> = lock_now.iter().chain(&rest).copied().collect();
         let keep = a0 + sel.len();
         let s_keep = Mat::from_fn(ma, sel.len(), |i, j| s_a[(i, sel[j])]);
-        // V[:, a0..keep] = V[:, a0..m] S_keep and Q moved to keep..keep + b, in place by chunks of rows (each
-        // chunk read before it is written; keep + b ≤ m, so Q's columns are not among those overwritten).
-        let mut x = Mat::<f64>::zeros(RESTART_ROWS.min(n), sel.len());
-        for r0 in (0..n).step_by(RESTART_ROWS) {
-            let rows = RESTART_ROWS.min(n - r0);
-            let mut xc = x.as_mut().subrows_mut(0, rows);
-            matmul(
-                xc.rb_mut(),
-                Accum::Replace,
-                v.as_ref().subrows(r0, rows).subcols(a0, ma),
-                s_keep.as_ref(),
-                1.0,
-                Par::Seq,
-            );
-            let mut vc = v.as_mut().subrows_mut(r0, rows);
-            vc.rb_mut().subcols_mut(a0, sel.len()).copy_from(xc.rb());
-            for j in 0..b {
-                for i in 0..rows {
-                    vc[(i, keep + j)] = vc[(i, m + j)];
-                }
-            }
+        // V[:, a0..keep] = V[:, a0..m] S_keep in place, then Q moved to keep..keep + b (keep + b ≤ m: Q's columns
+        // are not among those overwritten, and every read of the product is done before the move).
+        ritz_in_place(&mut v, a0, ma, s_keep.as_ref());
+        {
+            let (mut left, right) = v.as_mut().split_at_col_mut(m);
+            left.rb_mut().subcols_mut(keep, b).copy_from(right.subcols(0, b));
         }
         let locked_theta: Vec<f64> = (0..a0).map(|i| h[(i, i)]).collect();
         h.fill(0.0);
