@@ -230,15 +230,17 @@ impl Ctx<'_> {
 /// negative θ = 1/(λ − σ) and those above it the largest positive ones, so the unwanted rest (above λ_k) is squeezed
 /// into (0, 1/(λ_{k+1} − σ)], far from both ends. Measured on the unit icosphere (10k vertices, k = 50, λ_50 = 56):
 /// 38 block steps at σ < 0, 28 at σ = 30, 24 at σ = 40, 26 at σ = 45, 30 at σ = 50; balancing the two ends'
-/// relative gaps puts the optimum near 0.7 λ_k, and Weyl's estimate (50 there) errs low on most shapes.
+/// relative gaps puts the optimum near 0.7 λ_k. Weyl's leading term is 50 there (σ = 35, 26 steps); it
+/// overestimates λ_k where a free boundary adds eigenvalues (N(λ) gains |∂Ω|√λ/4π under Neumann conditions: the
+/// unit square's λ_50 is 484 against 628), which is why the fraction is not taken higher.
 pub const WEYL_FRACTION: f64 = 0.7;
 
 /// Below this k the shift stays below the spectrum (a handful of pairs converge in a few steps either way).
 const INTERIOR_MIN_K: usize = 8;
 
 /// The largest backward error ‖K x − b‖ / (‖K‖_∞ ‖x‖ + ‖b‖) accepted from a test solve with an LDLᵀ factor (no
-/// pivoting): Cholesky solves of these matrices measure 10⁻¹⁷–10⁻¹⁶; above this the factor grew and the default
-/// shift below the spectrum (Cholesky) is used instead.
+/// pivoting): solves with LDLᵀ factors at the Weyl shift measure 10⁻¹⁶–10⁻¹⁴ on 2.5k–164k-vertex spheres; above
+/// this the factor grew and the default shift below the spectrum (Cholesky) is used instead.
 const LDLT_BACKWARD_ERROR: f64 = 1e-12;
 
 /// The shift inside the spectrum from Weyl's law, σ = 0.7·λ̂_k with λ̂_k = (2π)² (k / (ω_d |Ω|))^{2/d} and |Ω| = 1ᵀM1
