@@ -1,5 +1,7 @@
 //! The eigensolver's inner kernels on unit icospheres (P1 FEM, consistent mass): the block solve with the
-//! Cholesky factor of L − σM for 1, 8 and 16 right-hand sides, and the sparse block product with M. Prints one
+//! Cholesky factor of L − σM for 1, 8 and 16 right-hand sides, and the sparse block product with M; the basis
+//! products and the solve with the kernels of the CPU's widest instruction set (`isa`) and, where that is AVX-512,
+//! with the AVX2 ones too (`*_avx2_ms`). Prints one
 //! JSON line per case; medians of 9 runs after a warm-up. `KAC_LEVELS=5,6,7` picks the meshes (default 6),
 //! `KAC_REPS` the number of runs, `KAC_MIN=1` reports the fastest run instead of the median (steadier for A/B
 //! comparisons on a noisy machine).
@@ -12,6 +14,7 @@ use kac_core::geometry::{generate, Shape};
 use kac_core::operators::{self, sparse, Mass, OperatorOptions};
 use kac_core::spectrum::factor::{Cholesky, Symbolic};
 use kac_core::spectrum::lanczos::default_sigma;
+use kac_core::spectrum::simd::Isa;
 use std::time::Instant;
 
 fn reps() -> usize {
@@ -65,7 +68,9 @@ fn main() {
             }
             std::hint::black_box(acc);
         });
-        println!("{{\"vertices\": {n}, \"factor_stream_ms\": {:.3}}}", stream * 1e3);
+        println!("{{\"vertices\": {n}, \"isa\": \"{:?}\", \"factor_stream_ms\": {:.3}}}", Isa::detect(), stream * 1e3);
+        // The narrower kernels, timed where the CPU has wider ones (else the same figures again).
+        let narrow = if Isa::detect() == Isa::Avx512 { Isa::Avx2 } else { Isa::detect() };
         // The Gram–Schmidt pair on a basis of 128 columns: kac's kernels against faer's general product.
         {
             use faer::linalg::matmul::matmul;
@@ -88,8 +93,12 @@ fn main() {
                     Par::Seq,
                 )
             });
+            let gram_narrow = time(|| {
+                std::hint::black_box(basis_products::gram_with(v.as_ref(), &y, b, narrow));
+            });
             let mut w = y.clone();
             let update = time(|| basis_products::update(&mut w, b, v.as_ref(), c.as_ref(), -1e-3));
+            let update_narrow = time(|| basis_products::update_with(&mut w, b, v.as_ref(), c.as_ref(), -1e-3, narrow));
             let update_faer = time(|| {
                 matmul(
                     faer::MatMut::from_row_major_slice_mut(&mut w, n, b),
@@ -101,9 +110,9 @@ fn main() {
                 )
             });
             println!(
-                "{{\"vertices\": {n}, \"basis_columns\": {m}, \"rhs\": {b}, \"basis_stream_ms\": {:.3}, \"gram_ms\": {:.3}, \"gram_faer_ms\": {:.3}, \"update_ms\": {:.3}, \"update_faer_ms\": {:.3}}}",
+                "{{\"vertices\": {n}, \"basis_columns\": {m}, \"rhs\": {b}, \"basis_stream_ms\": {:.3}, \"gram_ms\": {:.3}, \"gram_avx2_ms\": {:.3}, \"gram_faer_ms\": {:.3}, \"update_ms\": {:.3}, \"update_avx2_ms\": {:.3}, \"update_faer_ms\": {:.3}}}",
                 time(|| { std::hint::black_box(v.as_ref().sum()); }) * 1e3,
-                gram * 1e3, gram_faer * 1e3, update * 1e3, update_faer * 1e3
+                gram * 1e3, gram_narrow * 1e3, gram_faer * 1e3, update * 1e3, update_narrow * 1e3, update_faer * 1e3
             );
         }
         for b in [1usize, 8, 16] {
@@ -112,6 +121,10 @@ fn main() {
             let solve = time(|| {
                 y.copy_from(&x);
                 chol.solve_in_place(y.as_mut(), Par::Seq);
+            });
+            let solve_narrow = time(|| {
+                y.copy_from(&x);
+                chol.solve_in_place_with(y.as_mut(), Par::Seq, narrow);
             });
             let solve_ldlt = time(|| {
                 y.copy_from(&x);
@@ -133,10 +146,11 @@ fn main() {
             let mut scratch = Vec::new();
             let spmm = time(|| sparse::spmm(&pair.pattern, &pair.mass, x.as_ref(), y.as_mut(), &mut scratch));
             println!(
-                "{{\"vertices\": {n}, \"factor_nnz\": {}, \"rhs\": {b}, \"solve_ms\": {:.3}, \"solve_ms_per_rhs\": {:.3}, \"solve_after_flush_ms\": {:.3}, \"solve_ldlt_ms\": {:.3}, \"mass_product_ms\": {:.3}}}",
+                "{{\"vertices\": {n}, \"factor_nnz\": {}, \"rhs\": {b}, \"solve_ms\": {:.3}, \"solve_ms_per_rhs\": {:.3}, \"solve_avx2_ms\": {:.3}, \"solve_after_flush_ms\": {:.3}, \"solve_ldlt_ms\": {:.3}, \"mass_product_ms\": {:.3}}}",
                 chol.factor_nnz(),
                 solve * 1e3,
                 solve * 1e3 / b as f64,
+                solve_narrow * 1e3,
                 cold * 1e3,
                 solve_ldlt * 1e3,
                 spmm * 1e3

@@ -257,55 +257,63 @@ fn flat_torus_has_fourfold_clusters() {
     assert!((s.values[4] - s.values[1]).abs() < 1e-8 * c, "{:?}", &s.values[1..5]);
 }
 
-/// The block solve (own supernodal kernel for 1, 2, 4, 8 and 16 columns, faer's otherwise) and the block
-/// M-product agree with column-by-column sparse products: ‖K X − B‖ is at rounding level for every width.
-/// The block solve (column-major and row-major right-hand sides, every kernel width) against K X = B through
+/// The block solve (own supernodal kernel for 1, 2, 4, 8 and 16 columns, faer's otherwise; column-major and
+/// row-major right-hand sides; the kernels of every instruction set the CPU has) against K X = B through
 /// column-by-column products, and the block product with K against single columns.
 fn check_block_solve(
     pair: &operators::sparse::SparsePair,
     k_values: &[f64],
     chol: &kac_core::spectrum::factor::Cholesky,
 ) {
+    use kac_core::spectrum::simd::Isa;
     let n = pair.n();
-    for b in [1usize, 2, 3, 4, 8, 16] {
-        let rhs = faer::Mat::<f64>::from_fn(n, b, |i, j| ((i * 31 + j * 17) % 23) as f64 - 11.0);
-        let mut x = rhs.clone();
-        chol.solve_in_place(x.as_mut(), faer::Par::Seq);
-        let mut y = faer::Mat::<f64>::zeros(n, b);
-        let mut scratch = Vec::new();
-        operators::sparse::spmm(&pair.pattern, k_values, x.as_ref(), y.as_mut(), &mut scratch);
-        let mut single = vec![0.0; n];
-        for c in 0..b {
-            let xc: Vec<f64> = (0..n).map(|i| x[(i, c)]).collect();
-            operators::sparse::matvec(&pair.pattern, k_values, &xc, &mut single);
-            let scale = (0..n).map(|i| rhs[(i, c)].abs()).fold(0.0, f64::max);
-            for i in 0..n {
-                assert!((single[i] - y[(i, c)]).abs() <= 1e-12 * scale.max(1.0), "b = {b}: block product row {i}");
-                assert!((y[(i, c)] - rhs[(i, c)]).abs() <= 1e-9 * scale, "b = {b}: residual at row {i}, column {c}");
-            }
-        }
-        // The same solve and product on row-major blocks (the eigensolver's layout, no transposes inside).
-        let mut xr: Vec<f64> = (0..n * b).map(|t| rhs[(t / b, t % b)]).collect();
-        chol.solve_in_place(faer::MatMut::from_row_major_slice_mut(&mut xr, n, b), faer::Par::Seq);
-        let mut yr = vec![0.0; n * b];
-        let xv = faer::MatRef::from_row_major_slice(&xr, n, b);
-        operators::sparse::spmm(
-            &pair.pattern,
-            k_values,
-            xv,
-            faer::MatMut::from_row_major_slice_mut(&mut yr, n, b),
-            &mut scratch,
-        );
-        for i in 0..n {
+    for isa in Isa::available() {
+        for b in [1usize, 2, 3, 4, 8, 16] {
+            let rhs = faer::Mat::<f64>::from_fn(n, b, |i, j| ((i * 31 + j * 17) % 23) as f64 - 11.0);
+            let mut x = rhs.clone();
+            chol.solve_in_place_with(x.as_mut(), faer::Par::Seq, isa);
+            let mut y = faer::Mat::<f64>::zeros(n, b);
+            let mut scratch = Vec::new();
+            operators::sparse::spmm(&pair.pattern, k_values, x.as_ref(), y.as_mut(), &mut scratch);
+            let mut single = vec![0.0; n];
             for c in 0..b {
-                assert!(
-                    (xr[i * b + c] - x[(i, c)]).abs() <= 1e-13 * x[(i, c)].abs().max(1.0),
-                    "b = {b}: row-major solve"
-                );
-                assert!(
-                    (yr[i * b + c] - y[(i, c)]).abs() <= 1e-13 * y[(i, c)].abs().max(1.0),
-                    "b = {b}: row-major product"
-                );
+                let xc: Vec<f64> = (0..n).map(|i| x[(i, c)]).collect();
+                operators::sparse::matvec(&pair.pattern, k_values, &xc, &mut single);
+                let scale = (0..n).map(|i| rhs[(i, c)].abs()).fold(0.0, f64::max);
+                for i in 0..n {
+                    assert!(
+                        (single[i] - y[(i, c)]).abs() <= 1e-12 * scale.max(1.0),
+                        "{isa:?} b = {b}: block product row {i}"
+                    );
+                    assert!(
+                        (y[(i, c)] - rhs[(i, c)]).abs() <= 1e-9 * scale,
+                        "{isa:?} b = {b}: residual at row {i}, column {c}"
+                    );
+                }
+            }
+            // The same solve and product on row-major blocks (the eigensolver's layout, no transposes inside).
+            let mut xr: Vec<f64> = (0..n * b).map(|t| rhs[(t / b, t % b)]).collect();
+            chol.solve_in_place_with(faer::MatMut::from_row_major_slice_mut(&mut xr, n, b), faer::Par::Seq, isa);
+            let mut yr = vec![0.0; n * b];
+            let xv = faer::MatRef::from_row_major_slice(&xr, n, b);
+            operators::sparse::spmm(
+                &pair.pattern,
+                k_values,
+                xv,
+                faer::MatMut::from_row_major_slice_mut(&mut yr, n, b),
+                &mut scratch,
+            );
+            for i in 0..n {
+                for c in 0..b {
+                    assert!(
+                        (xr[i * b + c] - x[(i, c)]).abs() <= 1e-13 * x[(i, c)].abs().max(1.0),
+                        "{isa:?} b = {b}: row-major solve"
+                    );
+                    assert!(
+                        (yr[i * b + c] - y[(i, c)]).abs() <= 1e-13 * y[(i, c)].abs().max(1.0),
+                        "{isa:?} b = {b}: row-major product"
+                    );
+                }
             }
         }
     }

@@ -330,7 +330,7 @@ fn read_primitive(
     let mut push = |t: [u32; 3]| polygons.push(&[t[0] + b, t[1] + b, t[2] + b]);
     match mode {
         Mode::Triangles => {
-            if indices.len() % 3 != 0 {
+            if !indices.len().is_multiple_of(3) {
                 return Err(syntax(pptr, format!("{} indices is not a multiple of 3", indices.len())));
             }
             indices.chunks_exact(3).for_each(|t| push([t[0], t[1], t[2]]));

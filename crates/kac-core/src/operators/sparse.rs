@@ -217,8 +217,8 @@ pub(crate) fn avx2_fma() -> bool {
     std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
 }
 
-/// Rows `j0..` of Y = A·X for B right-hand sides stored row-major (`xr`), compiled for AVX2 + FMA when the CPU
-/// has them (checked at run time).
+/// Rows `j0..` of Y = A·X for B right-hand sides stored row-major (`xr`), compiled for AVX-512 (eight or more
+/// columns) or AVX2 + FMA when the CPU has them (checked at run time).
 fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
     #[inline(always)]
     fn rows<const B: usize, const FMA: bool>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
@@ -241,6 +241,15 @@ fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], o
         #[target_feature(enable = "avx2,fma")]
         fn avx2<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
             rows::<B, true>(p, values, xr, out, j0)
+        }
+        #[target_feature(enable = "avx512f")]
+        fn avx512<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
+            rows::<B, true>(p, values, xr, out, j0)
+        }
+        if B >= 8 && std::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU supports the features `avx512` was compiled for (checked just above).
+            unsafe { avx512::<B>(p, values, xr, out, j0) };
+            return;
         }
         if avx2_fma() {
             // SAFETY: the CPU supports the features `avx2` was compiled for (checked just above).

@@ -2,6 +2,7 @@
 //! ordering, elimination tree, supernodes) kept apart so that the same pattern with another shift or another
 //! mass never redoes it.
 
+use super::simd::Isa;
 use crate::operators::sparse::{Pattern, SparsePair};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
@@ -128,7 +129,12 @@ impl Cholesky {
     /// Supernodal factors with 1, 2, 4, 8 or 16 right-hand sides use `supernodal_solve` (one sequential pass
     /// with the block stored row-major, so each factor entry meets all right-hand sides in one SIMD row: about
     /// 1.6× faster than faer's solve for 8 columns at 41k vertices); others use faer's solve with `par`.
-    pub fn solve_in_place(&self, mut rhs: MatMut<'_, f64>, par: Par) {
+    pub fn solve_in_place(&self, rhs: MatMut<'_, f64>, par: Par) {
+        self.solve_in_place_with(rhs, par, Isa::detect())
+    }
+    /// [`Cholesky::solve_in_place`] with the block-solve kernels of a given instruction set (`Isa::Scalar`: the
+    /// portable code); the tests run every set the CPU has.
+    pub fn solve_in_place_with(&self, mut rhs: MatMut<'_, f64>, par: Par, isa: Isa) {
         use faer::sparse::linalg::cholesky::{supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
         let s = &self.symbolic.inner;
         if let SymbolicCholeskyRaw::Supernodal(sn) = s.raw() {
@@ -148,7 +154,7 @@ impl Cholesky {
                         for (i, row) in x.iter_mut().enumerate() {
                             *row = rows[fwd(i)];
                         }
-                        supernodal_solve_dispatch::<$b>(&f, &mut x, self.ldlt);
+                        supernodal_solve_with::<$b>(&f, &mut x, self.ldlt, isa);
                         for (i, row) in x.iter().enumerate() {
                             rows[fwd(i)] = *row;
                         }
@@ -160,7 +166,7 @@ impl Cholesky {
                             *v = rhs[(src, c)];
                         }
                     }
-                    supernodal_solve_dispatch::<$b>(&f, &mut x, self.ldlt);
+                    supernodal_solve_with::<$b>(&f, &mut x, self.ldlt, isa);
                     for (i, row) in x.iter().enumerate() {
                         let dst = fwd(i);
                         for (c, v) in row.iter().enumerate() {
@@ -222,27 +228,33 @@ impl Cholesky {
 
 type SupernodalFactor<'a> = faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef<'a, usize, f64>;
 
-/// Runs the block solve with AVX2 + FMA intrinsics for 4 or 8 right-hand sides when the CPU has them (checked at
-/// run time, as faer's own kernels do), else the portable `supernodal_solve` (compiled for AVX2 + FMA where
-/// available).
-fn supernodal_solve_dispatch<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]], ldlt: bool) {
+/// Runs the block solve with intrinsics for 4, 8 or 16 right-hand sides when `isa` is AVX2 + FMA or AVX-512 and
+/// the CPU has it (detected at run time by the caller, as faer's own kernels do), else the portable
+/// `supernodal_solve` (compiled for AVX2 + FMA where available).
+fn supernodal_solve_with<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]], ldlt: bool, isa: Isa) {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx2,fma")]
         fn portable_avx2<const B: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
             supernodal_solve::<B, true, UNIT>(f, x)
         }
-        if crate::operators::sparse::avx2_fma() {
-            // SAFETY: the CPU supports AVX2 and FMA (checked just above); the kernels touch rows of `x` named by
-            // the factor's structure (all < n = x.len()) and entries of its supernodes' value blocks.
+        if isa != Isa::Scalar && isa.supported() {
+            let xs = x.as_flattened_mut();
+            // SAFETY: the CPU supports the instruction set of the kernel called (checked just above; AVX-512 CPUs
+            // have AVX2 + FMA too); the kernels touch rows of `x` named by the factor's structure (all < n =
+            // x.len()) and entries of its supernodes' value blocks.
             unsafe {
-                match (B, ldlt) {
-                    (4, false) => avx2::supernodal_solve::<1, false>(f, x.as_flattened_mut()),
-                    (4, true) => avx2::supernodal_solve::<1, true>(f, x.as_flattened_mut()),
-                    (8, false) => avx2::supernodal_solve::<2, false>(f, x.as_flattened_mut()),
-                    (8, true) => avx2::supernodal_solve::<2, true>(f, x.as_flattened_mut()),
-                    (_, false) => portable_avx2::<B, false>(f, x),
-                    (_, true) => portable_avx2::<B, true>(f, x),
+                match (isa, B, ldlt) {
+                    (Isa::Avx512, 8, false) => kernels::solve_avx512::<1, false>(f, xs),
+                    (Isa::Avx512, 8, true) => kernels::solve_avx512::<1, true>(f, xs),
+                    (Isa::Avx512, 16, false) => kernels::solve_avx512::<2, false>(f, xs),
+                    (Isa::Avx512, 16, true) => kernels::solve_avx512::<2, true>(f, xs),
+                    (_, 4, false) => kernels::solve_avx2::<1, false>(f, xs),
+                    (_, 4, true) => kernels::solve_avx2::<1, true>(f, xs),
+                    (_, 8, false) => kernels::solve_avx2::<2, false>(f, xs),
+                    (_, 8, true) => kernels::solve_avx2::<2, true>(f, xs),
+                    (_, _, false) => portable_avx2::<B, false>(f, x),
+                    (_, _, true) => portable_avx2::<B, true>(f, x),
                 }
             }
             return;
@@ -255,18 +267,29 @@ fn supernodal_solve_dispatch<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [
     }
 }
 
-/// `supernodal_solve` for B = 4R right-hand sides (R vectors of four doubles per row of X) with AVX2 + FMA
-/// intrinsics: the same passes and groups of four columns, with the group's solved rows (forward) or its four
+/// `supernodal_solve` for B = R·LANES right-hand sides (R registers of `S::LANES` doubles per row of X: AVX2's four
+/// or AVX-512's eight, see [`super::simd`]) with intrinsics: the same passes and groups of four columns, with the group's solved rows (forward) or its four
 /// accumulators (backward) in registers. Written with intrinsics because the compiler vectorized the portable
 /// loops across rows of X instead (transposing shuffles and operands spilled to the stack).
 #[cfg(target_arch = "x86_64")]
-mod avx2 {
+mod kernels {
+    use super::super::simd::F64s;
     use super::SupernodalFactor;
-    use std::arch::x86_64::*;
+    use std::arch::x86_64::{__m256d, __m512d};
 
     #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn supernodal_solve<const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
-        let b = 4 * R;
+    pub(super) unsafe fn solve_avx2<const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
+        supernodal_solve::<__m256d, R, UNIT>(f, x)
+    }
+
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn solve_avx512<const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
+        supernodal_solve::<__m512d, R, UNIT>(f, x)
+    }
+
+    #[inline(always)]
+    unsafe fn supernodal_solve<S: F64s, const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
+        let b = S::LANES * R;
         let n = x.len() / b;
         let xp = x.as_mut_ptr();
         macro_rules! row {
@@ -279,35 +302,35 @@ mod avx2 {
         macro_rules! load {
             ($p:expr) => {{
                 let p: *mut f64 = $p;
-                let mut v = [_mm256_setzero_pd(); R];
+                let mut v = [S::zero(); R];
                 for q in 0..R {
-                    v[q] = _mm256_loadu_pd(p.add(4 * q));
+                    v[q] = S::load(p.add(S::LANES * q));
                 }
                 v
             }};
         }
         macro_rules! store {
             ($p:expr, $v:expr) => {{
-                let (p, v): (*mut f64, [__m256d; R]) = ($p, $v);
+                let (p, v): (*mut f64, [S; R]) = ($p, $v);
                 for q in 0..R {
-                    _mm256_storeu_pd(p.add(4 * q), v[q]);
+                    v[q].store(p.add(S::LANES * q));
                 }
             }};
         }
         macro_rules! scale {
             ($v:expr, $d:expr) => {{
-                let d = _mm256_set1_pd(1.0 / $d);
+                let d = S::splat(&(1.0 / $d));
                 for q in 0..R {
-                    $v[q] = _mm256_mul_pd($v[q], d);
+                    $v[q] = $v[q].mul(d);
                 }
             }};
         }
         // x ← x − a·g for one broadcast factor entry a.
         macro_rules! axpy {
             ($x:expr, $a:expr, $g:expr) => {{
-                let a = _mm256_broadcast_sd(&*$a);
+                let a = S::splat($a);
                 for q in 0..R {
-                    $x[q] = _mm256_fnmadd_pd(a, $g[q], $x[q]);
+                    $x[q] = a.neg_mul_add($g[q], $x[q]);
                 }
             }};
         }
@@ -347,7 +370,7 @@ mod avx2 {
             for j in (lead..nc).step_by(4) {
                 let c = [lp.add(j * ld), lp.add((j + 1) * ld), lp.add((j + 2) * ld), lp.add((j + 3) * ld)];
                 // The group's triangle: g_u = (x_u − Σ_{v<u} L[j+u, j+v] g_v) / L[j+u, j+u].
-                let mut g = [[_mm256_setzero_pd(); R]; 4];
+                let mut g = [[S::zero(); R]; 4];
                 for u in 0..4 {
                     let mut xu = load!(row!(c0 + j + u));
                     for v in 0..u {
@@ -367,15 +390,15 @@ mod avx2 {
                 macro_rules! update4 {
                     ($p:expr, $o:expr) => {{
                         let (p, o): (*mut f64, usize) = ($p, $o);
-                        let a0 = _mm256_broadcast_sd(&*c[0].add(o));
-                        let a1 = _mm256_broadcast_sd(&*c[1].add(o));
-                        let a2 = _mm256_broadcast_sd(&*c[2].add(o));
-                        let a3 = _mm256_broadcast_sd(&*c[3].add(o));
+                        let a0 = S::splat(c[0].add(o));
+                        let a1 = S::splat(c[1].add(o));
+                        let a2 = S::splat(c[2].add(o));
+                        let a3 = S::splat(c[3].add(o));
                         let mut xi = load!(p);
                         for q in 0..R {
-                            let t = _mm256_fnmadd_pd(a1, g[1][q], _mm256_fnmadd_pd(a0, g[0][q], xi[q]));
-                            let u = _mm256_fmadd_pd(a3, g[3][q], _mm256_mul_pd(a2, g[2][q]));
-                            xi[q] = _mm256_sub_pd(t, u);
+                            let t = a1.neg_mul_add(g[1][q], a0.neg_mul_add(g[0][q], xi[q]));
+                            let u = a3.mul_add(g[3][q], a2.mul(g[2][q]));
+                            xi[q] = t.sub(u);
                         }
                         store!(p, xi);
                     }};
@@ -416,7 +439,7 @@ mod avx2 {
                     gather4!(row!(c0 + i), i);
                 }
                 // The group's triangle, last column first: x_u = (acc_u − Σ_{v>u} L[j+v, j+u] x_v) / L[j+u, j+u].
-                let mut xs = [[_mm256_setzero_pd(); R]; 4];
+                let mut xs = [[S::zero(); R]; 4];
                 for u in (0..4).rev() {
                     let mut xu = acc[u];
                     for v in u + 1..4 {
@@ -460,7 +483,7 @@ mod avx2 {
 /// its own accumulator in one pass (independent FMA chains), then the group's triangle.
 #[inline(always)]
 fn supernodal_solve<const B: usize, const FMA: bool, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
-    // x − a·y, fused where the CPU has FMA (the body is compiled twice, see `supernodal_solve_dispatch`).
+    // x − a·y, fused where the CPU has FMA (the body is compiled twice, see `supernodal_solve_with`).
     let sub = |x: f64, a: f64, y: f64| if FMA { (-a).mul_add(y, x) } else { x - a * y };
     let ns = f.symbolic().n_supernodes();
     for s in 0..ns {

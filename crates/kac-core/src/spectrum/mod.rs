@@ -26,6 +26,7 @@ pub mod basis_products;
 pub mod dense;
 pub mod factor;
 pub mod lanczos;
+pub mod simd;
 
 use crate::operators::sparse::SparsePair;
 use faer::Mat;
