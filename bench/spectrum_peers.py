@@ -58,6 +58,8 @@ def main():
     agree = float(np.max(np.abs(vals - kac) / scale))
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     print(json.dumps({"vertices": len(v), "k": k, "peer": peer, "seconds": elapsed, "peak_bytes": peak, "max_rel_diff_vs_kac": agree}), flush=True)
+    if not agree <= 1e-8:
+        raise SystemExit(f"{peer}: eigenvalues differ from kac's by {agree:.2e} relative (more than 1e-8) on {path}")
 
 
 if __name__ == "__main__":
