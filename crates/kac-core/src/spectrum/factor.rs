@@ -268,8 +268,8 @@ fn supernodal_solve_with<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64
 }
 
 /// `supernodal_solve` for B = R·LANES right-hand sides (R registers of `S::LANES` doubles per row of X: AVX2's four
-/// or AVX-512's eight, see [`super::simd`]) with intrinsics: the same passes and groups of four columns, with the group's solved rows (forward) or its four
-/// accumulators (backward) in registers. Written with intrinsics because the compiler vectorized the portable
+/// or AVX-512's eight, see [`super::simd`]) with intrinsics: the same passes and groups of four columns, with the
+/// group's solved rows (forward) or its four accumulators (backward) in registers. Written with intrinsics because the compiler vectorized the portable
 /// loops across rows of X instead (transposing shuffles and operands spilled to the stack).
 #[cfg(target_arch = "x86_64")]
 mod kernels {
