@@ -1,8 +1,7 @@
 //! The eigensolver's inner kernels on unit icospheres (P1 FEM, consistent mass): the block solve with the
 //! Cholesky factor of L − σM for 1, 8 and 16 right-hand sides, and the sparse block product with M; the basis
 //! products and the solve with the kernels of the CPU's widest instruction set (`isa`) and, where that is AVX-512,
-//! with the AVX2 ones too (`*_avx2_ms`). Prints one
-//! JSON line per case; medians of 9 runs after a warm-up. `KAC_LEVELS=5,6,7` picks the meshes (default 6),
+//! with the AVX2 ones too (`*_avx2_ms`). Prints one JSON line per case; medians of 9 runs after a warm-up. `KAC_LEVELS=5,6,7` picks the meshes (default 6),
 //! `KAC_REPS` the number of runs, `KAC_MIN=1` reports the fastest run instead of the median (steadier for A/B
 //! comparisons on a noisy machine).
 
@@ -12,9 +11,9 @@ use common::median;
 use faer::{Mat, Par};
 use kac_core::geometry::{generate, Shape};
 use kac_core::operators::{self, sparse, Mass, OperatorOptions};
+use kac_core::simd::Isa;
 use kac_core::spectrum::factor::{Cholesky, Symbolic};
 use kac_core::spectrum::lanczos::default_sigma;
-use kac_core::spectrum::simd::Isa;
 use std::time::Instant;
 
 fn reps() -> usize {

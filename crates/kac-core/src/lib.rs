@@ -21,6 +21,7 @@ pub mod geometry;
 pub mod io;
 pub mod operators;
 pub mod pde;
+pub mod simd;
 pub mod spectrum;
 
 pub use error::{Element, Location, ShapeError};

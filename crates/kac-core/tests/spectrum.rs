@@ -265,7 +265,7 @@ fn check_block_solve(
     k_values: &[f64],
     chol: &kac_core::spectrum::factor::Cholesky,
 ) {
-    use kac_core::spectrum::simd::Isa;
+    use kac_core::simd::Isa;
     let n = pair.n();
     for isa in Isa::available() {
         for b in [1usize, 2, 3, 4, 8, 16] {

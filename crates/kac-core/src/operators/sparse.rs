@@ -211,12 +211,6 @@ pub fn submatrix(p: &Pattern, values: &[&[f64]], keep: &[usize]) -> (Pattern, Ve
     (Pattern { n: keep.len(), col_ptr, row_idx }, out)
 }
 
-/// Whether this x86-64 CPU has AVX2 and FMA (kernels compiled for them are chosen at run time, as faer's are).
-#[cfg(target_arch = "x86_64")]
-pub(crate) fn avx2_fma() -> bool {
-    std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
-}
-
 /// Rows `j0..` of Y = A·X for B right-hand sides stored row-major (`xr`), compiled for AVX-512 (eight or more
 /// columns) or AVX2 + FMA when the CPU has them (checked at run time).
 fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
@@ -246,15 +240,13 @@ fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], o
         fn avx512<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize) {
             rows::<B, true>(p, values, xr, out, j0)
         }
-        if B >= 8 && std::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU supports the features `avx512` was compiled for (checked just above).
-            unsafe { avx512::<B>(p, values, xr, out, j0) };
-            return;
-        }
-        if avx2_fma() {
-            // SAFETY: the CPU supports the features `avx2` was compiled for (checked just above).
-            unsafe { avx2::<B>(p, values, xr, out, j0) };
-            return;
+        use crate::simd::Isa;
+        match Isa::detect() {
+            // SAFETY (both arms): the CPU supports the features the function was compiled for (detected; AVX-512
+            // CPUs count as such only with AVX2 + FMA too).
+            Isa::Avx512 if B >= 8 => return unsafe { avx512::<B>(p, values, xr, out, j0) },
+            Isa::Avx512 | Isa::Avx2 => return unsafe { avx2::<B>(p, values, xr, out, j0) },
+            Isa::Scalar => {}
         }
     }
     rows::<B, false>(p, values, xr, out, j0)

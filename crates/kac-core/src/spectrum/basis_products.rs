@@ -11,7 +11,7 @@
 //! on a Xeon with AVX-512, 41k rows: Gram 2.5 → 1.9 ms, update 2.8 → 2.4 ms); other widths and CPUs use faer's
 //! product. Nothing here knows about Lanczos.
 
-pub use super::simd::Isa;
+pub use crate::simd::Isa;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatRef, Par};
 
@@ -122,8 +122,8 @@ impl<'a> Columns<'a> {
 /// operands on the stack).
 #[cfg(target_arch = "x86_64")]
 mod kernels {
-    use super::super::simd::F64s;
     use super::{Columns, ROWS};
+    use crate::simd::F64s;
     use std::arch::x86_64::{__m256d, __m512d};
 
     /// C[j] += Σ_i V[i, j] Y[i] (C row-major m × B, Y row-major n × B).

@@ -2,8 +2,8 @@
 //! ordering, elimination tree, supernodes) kept apart so that the same pattern with another shift or another
 //! mass never redoes it.
 
-use super::simd::Isa;
 use crate::operators::sparse::{Pattern, SparsePair};
+use crate::simd::Isa;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::cholesky::{
@@ -268,13 +268,13 @@ fn supernodal_solve_with<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64
 }
 
 /// `supernodal_solve` for B = R·LANES right-hand sides (R registers of `S::LANES` doubles per row of X: AVX2's four
-/// or AVX-512's eight, see [`super::simd`]) with intrinsics: the same passes and groups of four columns, with the
+/// or AVX-512's eight, see [`crate::simd`]) with intrinsics: the same passes and groups of four columns, with the
 /// group's solved rows (forward) or its four accumulators (backward) in registers. Written with intrinsics because the compiler vectorized the portable
 /// loops across rows of X instead (transposing shuffles and operands spilled to the stack).
 #[cfg(target_arch = "x86_64")]
 mod kernels {
-    use super::super::simd::F64s;
     use super::SupernodalFactor;
+    use crate::simd::F64s;
     use std::arch::x86_64::{__m256d, __m512d};
 
     #[target_feature(enable = "avx2,fma")]

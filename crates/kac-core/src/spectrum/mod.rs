@@ -26,7 +26,6 @@ pub mod basis_products;
 pub mod dense;
 pub mod factor;
 pub mod lanczos;
-pub mod simd;
 
 use crate::operators::sparse::SparsePair;
 use faer::Mat;

@@ -1,4 +1,5 @@
-//! Vectors of doubles for the eigensolver's hand-written kernels (the block solve, the basis products): one
+//! Vectors of doubles for the hand-written numerical kernels (the eigensolver's block solve and basis products,
+//! the sparse block product): one
 //! kernel body, written against [`F64s`], compiled once per instruction set — AVX2 + FMA (four lanes) and
 //! AVX-512F (eight lanes) — and chosen at run time by [`Isa::detect`], as faer chooses its own kernels.
 //!
