@@ -36,7 +36,7 @@ pub enum Format {
     Glb,
     /// Medit `.mesh` (INRIA), ASCII.
     Medit,
-    /// Gmsh `.msh`, versions 2 (ASCII and binary) and 4 (ASCII).
+    /// Gmsh `.msh`, versions 2.2 and 4.1, ASCII and binary; data, entity and comment sections are skipped.
     Gmsh,
     /// Legacy VTK, ASCII.
     Vtk,
@@ -143,7 +143,10 @@ impl Format {
         if trimmed.starts_with("ply") {
             return Some(Format::Ply);
         }
-        if trimmed.starts_with("$MeshFormat") {
+        // Gmsh files open with $MeshFormat, or with a comment section before it.
+        if trimmed.starts_with("$MeshFormat")
+            || (trimmed.starts_with('$') && trimmed.lines().any(|l| l.trim_end() == "$MeshFormat"))
+        {
             return Some(Format::Gmsh);
         }
         if trimmed.starts_with("# vtk") {
