@@ -9,6 +9,13 @@
 //! Conventions (stated once, echoed in every result): the Laplacian `L` is positive semidefinite (the stiffness
 //! matrix; libigl's `cotmatrix` is `−L`), the eigenproblem is `L φ = λ M φ` with `M` the mass matrix,
 //! eigenvalues ascend, eigenvectors are `M`-orthonormal.
+//!
+//! Sign, one convention everywhere (the textbook chapter's, eq. 9.7): Δ = −∇·∇ is positive semidefinite and `L`
+//! is its weak form, `L ⪰ 0`. So "Δf = g" means `L f = M g` ([`pde::poisson`]); the heat equation is
+//! ∂u/∂t = −Δu, `M u̇ = −L u` (eq. 9.23; [`descriptors::heat`], [`pde::heat_implicit`]); the wave equation is
+//! ∂²u/∂t² = −Δu (example 9.7; [`pde::wave`]); smoothing is u + αΔu = ū, `(M + αL) u = M ū` (exercise 9.4;
+//! [`pde::smooth`]); harmonic functions satisfy Δu = 0 ([`pde::harmonic`]). On the unit sphere a degree-l
+//! spherical harmonic has Δ Y_l = l(l+1) Y_l.
 
 // Compressed-column loops index parallel arrays (row indices and values) by position.
 #![allow(clippy::needless_range_loop)]

@@ -442,7 +442,7 @@ fn labels_follow_the_harmonic_split() {
 
 #[test]
 fn poisson_converges_at_second_order_and_neumann_problems_are_made_compatible() {
-    // Δf = 4 with f = x² + y² on the boundary: the solution is x² + y².
+    // Δ = −∇·∇ (positive semidefinite): Δf = −4 with f = x² + y² on the boundary has the solution x² + y².
     let mut errors = vec![];
     for n in [8, 16, 32] {
         let m = generate::unit_square(n);
@@ -451,18 +451,18 @@ fn poisson_converges_at_second_order_and_neumann_problems_are_made_compatible() 
         let b = operators::boundary::boundary_vertices(&shape);
         let exact: Vec<f64> = m.vertices.iter().map(|p| p[0] * p[0] + p[1] * p[1]).collect();
         let known: Vec<(usize, f64)> = (0..exact.len()).filter(|&i| b[i]).map(|i| (i, exact[i])).collect();
-        let p = pde::poisson(&op.pair, &vec![4.0; exact.len()], Some(&known)).unwrap();
+        let p = pde::poisson(&op.pair, &vec![-4.0; exact.len()], Some(&known)).unwrap();
         errors.push(p.values.iter().zip(&exact).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max));
     }
     for w in errors.windows(2) {
         assert!(w[0] / w[1] > 3.0, "errors {errors:?} do not fall like h²");
     }
-    // Neumann on the sphere: Δf = −2z has the solution f = z (l = 1), g has mean zero.
+    // Neumann on the sphere: Δz = 2z (l = 1), so Δf = 2z has the solution f = z; g has mean zero.
     let m = generate::icosphere(4);
     let z: Vec<f64> = m.vertices.iter().map(|p| p[2]).collect();
     let shape = Shape::TriangleMesh(m);
     let op = build(&shape, Mass::Consistent, Boundary::Neumann);
-    let g: Vec<f64> = z.iter().map(|v| -2.0 * v + 5.0).collect(); // + a constant that must be removed
+    let g: Vec<f64> = z.iter().map(|v| 2.0 * v + 5.0).collect(); // + a constant that must be removed
     let p = pde::poisson(&op.pair, &g, None).unwrap();
     assert!((p.removed_mean[0] - 5.0).abs() < 1e-10);
     let err = p.values.iter().zip(&z).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);

@@ -1,9 +1,13 @@
-//! The heat kernel read from the spectrum: k_t(x, y) = Σ_i e^{−λ_i t} φ_i(x) φ_i(y) (φ_i M-orthonormal),
+//! The heat kernel read from the spectrum: k_t(x, y) = Σ_i e^{−λ_i t} φ_i(x) φ_i(y) (φ_i M-orthonormal, eq. 9.26),
 //! the heat trace Z(t) = Σ_i e^{−λ_i t}, spectral heat diffusion of a function with a bound on what the
 //! truncation to k eigenpairs leaves out, and the heat content of a Dirichlet problem.
 //!
+//! Sign: the heat equation is ∂u/∂t = −Δu (eq. 9.23 with α = 1; 9.25 for the kernel), Δ = −∇·∇ positive
+//! semidefinite, discretely M u̇ = −L u with L the stiffness matrix (L φ = λ M φ, λ ≥ 0): every mode decays as
+//! e^{−λt}, and on the unit sphere a degree-l harmonic as e^{−l(l+1)t}.
+//!
 //! Truncation: write u₀ = Σ_{i≤k} c_i φ_i + r with r M-orthogonal to the computed eigenvectors. Every eigenvalue
-//! not computed is at least λ_k (the largest computed), so the part of e^{−tL}u₀ the sum leaves out has M-norm at
+//! not computed is at least λ_k (the largest computed), so the part of e^{−tM⁻¹L}u₀ the sum leaves out has M-norm at
 //! most e^{−λ_k t} ‖r‖_M. That bound is returned with every diffusion.
 
 use super::{check_times, m_project, Basis, DescriptorError};
@@ -25,7 +29,7 @@ pub fn heat_trace_tail_bound(values: &[f64], n: usize, t: f64) -> f64 {
     (n.saturating_sub(k)) as f64 * (-lk * t).exp()
 }
 
-/// Rows of the heat kernel: column j is k_t(sources[j], ·) at every vertex (a density with respect to the
+/// Rows of the heat kernel: column j is `k_t(sources[j], ·)` at every vertex (a density with respect to the
 /// area: Σ_y M-integral of a row is 1 up to truncation on a closed surface).
 pub fn heat_kernel_rows(basis: &Basis<'_>, sources: &[usize], t: f64) -> Result<Mat<f64>, DescriptorError> {
     check_times("t", &[t])?;
@@ -69,7 +73,8 @@ pub struct SpectralDiffusion {
     pub eigenpairs: usize,
 }
 
-/// u(t) = Σ_i e^{−λ_i t} ⟨u₀, φ_i⟩_M φ_i: the solution of ∂u/∂t = Δu (M u̇ = −L u) from u₀, for each time.
+/// u(t) = Σ_i e^{−λ_i t} ⟨u₀, φ_i⟩_M φ_i (eq. 9.24): the solution of ∂u/∂t = −Δu (M u̇ = −L u) from u₀, for each
+/// time.
 pub fn diffuse_spectral(
     basis: &Basis<'_>,
     pair: &SparsePair,

@@ -1,16 +1,21 @@
-//! The chapter's PDE tools on a discrete operator pair (L, M), L = −Δ in weak form (positive semidefinite),
-//! M the mass. Each solves sparse symmetric positive definite systems by Cholesky (faer), reusing one symbolic
-//! analysis where a tool factors several matrices on the same pattern.
+//! The chapter's PDE tools on a discrete operator pair (L, M). Sign: Δ = −∇·∇ (eq. 9.7), positive semidefinite;
+//! L is its weak form, the stiffness matrix L_ij = ∫ ∇ψ_i·∇ψ_j (L ⪰ 0, libigl's `cotmatrix` is −L), and M the mass,
+//! so "Δf = g" means L f = M g (§9.5, Galerkin FEM) and eigenpairs Δφ = λφ, λ ≥ 0, are L φ = λ M φ. Each tool
+//! solves sparse symmetric positive definite systems by Cholesky (faer), reusing one symbolic analysis where a tool
+//! factors several matrices on the same pattern.
 //!
-//! | tool | equation | discrete system |
+//! | tool | equation (Δ ⪰ 0) | discrete system |
 //! |---|---|---|
-//! | [`smooth`] | u − αΔu = ū (exercise 9.4) | (M + αL) u = M ū |
-//! | [`heat_implicit`] | ∂u/∂t = Δu | backward Euler (M + τL) u_{j+1} = M u_j, τ = t/steps |
-//! | [`harmonic`] | Δu = 0, u given on a vertex set | L_II u_I = −L_IB u_B |
+//! | [`smooth`] | u + αΔu = ū (exercise 9.4, eq. 9.40) | (M + αL) u = M ū |
+//! | [`heat_implicit`] | ∂u/∂t = −Δu (eq. 9.23, α = 1) | backward Euler (M + τL) u_{j+1} = M u_j, τ = t/steps |
+//! | [`harmonic`] | Δu = 0 (§9.2.2), u given on a vertex set | L_II u_I = −L_IB u_B |
 //! | [`labels`] | harmonic functions of one-hot labels (Zhu, Ghahramani & Lafferty 2003) | as above, argmax |
-//! | [`poisson`] | Δf = g | L f = −M g (Neumann: g made compatible, f of mean zero) |
-//! | [`wave`] | ∂²u/∂t² = Δu (9.4) | modal superposition over computed eigenpairs |
+//! | [`poisson`] | Δf = g (§9.5) | L f = M g (Neumann: g made compatible, f of mean zero) |
+//! | [`wave`] | ∂²u/∂t² = −Δu (example 9.7) | modal superposition over computed eigenpairs (as in eq. 9.4) |
 //! | [`geodesic::heat_method`] | distance from heat (Crane, Weischedel & Wardetzky 2013) | two solves |
+//!
+//! So heat decays (e^{−λt} per mode), waves oscillate (cos √λ t per mode) and on the unit sphere a degree-l
+//! spherical harmonic Y_l (Δ Y_l = l(l+1) Y_l) solves Poisson as f = Y_l / (l(l+1)).
 //!
 //! "Fixed" vertices (Dirichlet data) are eliminated, never replaced by identity rows.
 
@@ -108,9 +113,10 @@ fn check_positive(name: &'static str, v: f64) -> Result<(), DescriptorError> {
     Ok(())
 }
 
-/// Smoothing (exercise 9.4): the minimizer of ∫ (u − ū)² + α |∇u|², i.e. (M + αL) u = M ū, for each column of
-/// `ubar`. With `fixed`, those vertices keep ū (a clamped boundary); then, as L annihilates linear functions
-/// at interior vertices of a flat mesh (linear precision), a linear ū is reproduced exactly.
+/// Smoothing (exercise 9.4): the minimizer of ∫ (u − ū)² + α |∇u|² (eq. 9.40), i.e. u + αΔu = ū, discretely
+/// (M + αL) u = M ū, for each column of `ubar`; each mode is damped by 1/(1 + αλ). With `fixed`, those vertices
+/// keep ū (a clamped boundary); then, as L annihilates linear functions at interior vertices of a flat mesh
+/// (linear precision), a linear ū is reproduced exactly.
 pub fn smooth(
     pair: &SparsePair,
     ubar: MatRef<'_, f64>,
@@ -124,8 +130,10 @@ pub fn smooth(
     solve_spd(&pair.pattern, &k, rhs.as_ref(), fixed.map(|f| (f, ubar)))
 }
 
-/// Heat diffusion by backward Euler: for each t, `steps` steps (M + τL) u_{j+1} = M u_j with τ = t/steps from
-/// u₀ (one factorization per distinct τ, one symbolic analysis in all). Unconditionally stable; first-order in τ.
+/// Heat diffusion ∂u/∂t = −Δu (eq. 9.23), M u̇ = −L u, by backward Euler: for each t, `steps` steps
+/// (M + τL) u_{j+1} = M u_j with τ = t/steps from u₀ (one factorization per distinct τ, one symbolic analysis in
+/// all). Each mode is multiplied by (1 + τλ)^{−steps} → e^{−λt}: it decays, never grows. Unconditionally stable;
+/// first-order in τ.
 pub fn heat_implicit(pair: &SparsePair, u0: &[f64], times: &[f64], steps: usize) -> Result<Mat<f64>, DescriptorError> {
     let n = pair.n();
     check_len("u0", u0.len(), n)?;
@@ -254,7 +262,7 @@ pub struct Poisson {
     pub removed_mean: Vec<f64>,
 }
 
-/// Poisson's equation Δf = g (Δ the negative semidefinite Laplace–Beltrami operator): L f = −M g. With
+/// Poisson's equation Δf = g with Δ = −∇·∇ positive semidefinite: L f = M g (Galerkin FEM, §9.5). With
 /// `dirichlet`, f takes the given values on those vertices; without, the problem is Neumann (compatible only
 /// when g integrates to zero on each component: the mean is removed and reported).
 pub fn poisson(pair: &SparsePair, g: &[f64], dirichlet: Option<&[(usize, f64)]>) -> Result<Poisson, DescriptorError> {
@@ -285,8 +293,7 @@ pub fn poisson(pair: &SparsePair, g: &[f64], dirichlet: Option<&[(usize, f64)]>)
         }
     };
     let gm = Mat::from_fn(n, 1, |i, _| g[i]);
-    let mut rhs = mass_times(pair, gm.as_ref());
-    rhs.col_mut(0).iter_mut().for_each(|v| *v = -*v);
+    let rhs = mass_times(pair, gm.as_ref());
     let fm = Mat::from_fn(n, 1, |i, _| fixed[i]);
     let x = solve_spd(&pair.pattern, &pair.stiffness, rhs.as_ref(), Some((&mask, fm.as_ref())))?;
     let mut f: Vec<f64> = x.col(0).iter().copied().collect();
@@ -311,7 +318,7 @@ fn component_means(pair: &SparsePair, labels: &[u32], count: usize, u: &[f64]) -
     (0..count).map(|c| s[c] / w[c]).collect()
 }
 
-/// The wave equation ∂²u/∂t² = Δu from u₀ with velocity v₀, by modal superposition over the computed
+/// The wave equation ∂²u/∂t² = −Δu (example 9.7) from u₀ with velocity v₀, by modal superposition over the computed
 /// eigenpairs (the chapter's (9.4)): u(t) = Σ_i [a_i cos(ω_i t) + b_i sin(ω_i t)/ω_i] φ_i with ω_i = √λ_i,
 /// a = ΦᵀM u₀, b = ΦᵀM v₀ (zero modes: a_i + b_i t). Energy is conserved exactly; the part of u₀ outside the
 /// basis is dropped (its M-norm is returned).
