@@ -22,7 +22,7 @@ use serde_json::{json, Value};
 use std::sync::Arc;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
-pub const ALGORITHM_VERSION: u32 = 2;
+pub const ALGORITHM_VERSION: u32 = 3;
 
 /// Which operator to build (see `kac_core::operators`).
 #[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -72,15 +72,20 @@ pub enum BoundarySpec {
 pub struct SolverSpec {
     /// Relative residual tolerance (default 1e-10).
     pub tol: f64,
-    /// `spectrum` only: confirm by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the returned
-    /// ones was missed; the result is `completeness` in the summary (default false).
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    /// Confirm by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the returned ones was missed,
+    /// and solve again for any that were (default true; the result's `solver.completeness`). `false` skips the
+    /// check: the result then says `completeness: null`.
+    #[serde(skip_serializing_if = "is_true")]
     pub verify: bool,
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
 }
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        SolverSpec { tol: 1e-10, verify: false }
+        SolverSpec { tol: 1e-10, verify: true }
     }
 }
 
@@ -356,8 +361,8 @@ pub struct Output {
 
 /// The cache key of a spectrum: operator and solver parameters (the shape id is the caller's).
 pub fn spectrum_key(op: &OperatorSpec, solver: &SolverSpec) -> String {
-    // Only what changes the eigenpairs: `verify` adds a check, the pairs are the same.
-    serde_json::to_string(&json!({ "operator": op, "solver": { "tol": solver.tol }, "version": ALGORITHM_VERSION }))
+    // An unverified spectrum must not serve a request that asks for the check.
+    serde_json::to_string(&json!({ "operator": op, "solver": solver, "version": ALGORITHM_VERSION }))
         .unwrap_or_default()
 }
 
@@ -445,7 +450,7 @@ pub fn eigenpairs(
     if k == 0 || k > n {
         return Err(bad("invalid-k", format!("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {n})")));
     }
-    let opts = EigenOptions { k, tol: solver.tol, threads: hooks.threads, ..Default::default() };
+    let opts = EigenOptions { k, tol: solver.tol, threads: hooks.threads, verify: solver.verify, ..Default::default() };
     let spectrum = spectrum::eigs(&operator.pair, &opts, None, hooks.control)?;
     if let Some(f) = hooks.on_solve {
         f(&spectrum.stats);
@@ -518,7 +523,8 @@ fn spectrum_json(e: &Eigen, k: usize) -> Value {
             "method": s.stats.method, "sigma": s.stats.sigma, "block": s.stats.block, "subspace": s.stats.subspace,
             "restarts": s.stats.restarts, "block_steps": s.stats.block_steps, "solves": s.stats.solves,
             "factor_nonzeros": s.stats.factor_nnz, "factorization": s.stats.factorization,
-            "below_sigma": s.stats.below_sigma,
+            "below_sigma": s.stats.below_sigma, "components": s.stats.components, "zero_modes": s.stats.zero_modes,
+            "completeness": s.stats.completeness,
         },
         "timings": s.stats.timings,
     })
@@ -558,12 +564,9 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 ),
                 spectrum_json(&e, *k),
             );
+            // Also at the top level, where results before the check was on by default carried it.
             let mut summary = summary;
-            if solver.verify {
-                let k = (*k).min(e.spectrum.values.len());
-                let c = kac_core::spectrum::check_completeness(&e.operator.pair, &e.spectrum.values[..k], None)?;
-                summary["completeness"] = json!(c);
-            }
+            summary["completeness"] = json!(e.spectrum.stats.completeness);
             Output { summary, arrays }
         }
         Analysis::Hks { k, options, operator, solver } => {

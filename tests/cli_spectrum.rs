@@ -101,21 +101,31 @@ fn operator_report_and_matrix_market() {
 }
 
 #[test]
-fn verify_reports_the_inertia_check() {
+fn completeness_is_checked_by_default_and_no_verify_turns_it_off() {
     let dir = tempfile::tempdir().unwrap();
     let sq = write_square(dir.path(), 24);
-    let out = kac()
-        .args(["spectrum", "-k", "4", "--boundary", "dirichlet", "--method", "sparse", "--verify"])
-        .arg(&sq)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let c = &v["solver"]["completeness"];
-    // 2π², 5π², 5π², 8π²: τ falls between the 5π² pair and 8π², with exactly three eigenvalues below it.
-    assert_eq!(c["complete"], true, "{c}");
-    assert_eq!(c["below_shift"], 3, "{c}");
-    let pi2 = std::f64::consts::PI.powi(2);
-    let shift = c["shift"].as_f64().unwrap();
-    assert!(shift > 5.1 * pi2 && shift < 7.9 * pi2, "{shift}");
+    let run = |extra: &[&str]| {
+        let out = kac()
+            .args(["spectrum", "-k", "4", "--boundary", "dirichlet", "--method", "sparse"])
+            .args(extra)
+            .arg(&sq)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    for v in [run(&[]), run(&["--verify"])] {
+        let c = &v["solver"]["completeness"];
+        // 2π², 5π², 5π², 8π², then 10π² (twice): τ falls in the first gap above λ₄ among the converged pairs,
+        // between 8π² and 10π², with exactly four eigenvalues below it.
+        assert_eq!(c["method"], "inertia", "{c}");
+        assert_eq!(c["complete"], true, "{c}");
+        assert_eq!(c["below_shift"], 4, "{c}");
+        let pi2 = std::f64::consts::PI.powi(2);
+        let shift = c["shift"].as_f64().unwrap();
+        assert!(shift > 8.1 * pi2 && shift < 9.9 * pi2, "{shift}");
+        assert_eq!(v["solver"]["zero_modes"], 0, "Dirichlet: no zero mode");
+    }
+    let v = run(&["--no-verify"]);
+    assert!(v["solver"]["completeness"].is_null(), "{v}");
 }

@@ -189,16 +189,22 @@ fn spectrum_shape_dna_and_hks_equal_the_library_and_requests_are_idempotent() {
     for (a, b) in got.iter().zip(&lib.values) {
         assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{a} vs {b}");
     }
-    // `solver.verify`: the inertia check counts the eigenvalues below the last gap of the found ones and agrees.
-    let vj = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 12, "solver": { "verify": true } }));
+    // Completeness is checked by default: the inertia count below a shift above λ₁₂ agrees with the pairs found.
+    let c = &res.body["solver"]["completeness"];
+    assert_eq!(c, &res.body["completeness"], "also at the top level");
+    assert_eq!(c["complete"], true, "{}", res.body);
+    if c["method"] == "inertia" {
+        let below = c["below_shift"].as_u64().unwrap() as usize;
+        assert!(below >= 12 && c["shift"].as_f64().unwrap() > got[11], "{c}");
+    }
+    // `solver.verify: false` is the documented escape: another job, and no check.
+    let vj = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 12, "solver": { "verify": false } }));
     assert_ne!(vj.body["id"], j.body["id"], "verify is part of the request");
     let vdone = wait_done(&s, vj.body["id"].as_str().unwrap());
     let vres = reply(agent().get(&s.url(vdone["result"].as_str().unwrap())).call());
-    let c = &vres.body["completeness"];
-    assert_eq!(c["complete"], true, "{}", vres.body);
-    let below = c["below_shift"].as_u64().unwrap() as usize;
-    assert!((1..12).contains(&below) && c["shift"].as_f64().unwrap() > got[below - 1], "{c}");
-    assert!(res.body.get("completeness").is_none(), "no check unless asked");
+    assert!(vres.body["solver"]["completeness"].is_null(), "{}", vres.body);
+    let unverified: Vec<f64> = serde_json::from_value(vres.body["eigenvalues"].clone()).unwrap();
+    assert_eq!(unverified.len(), 12);
     // Immutable, with a strong ETag and 304 on If-None-Match.
     let etag = res.etag.clone().unwrap();
     assert!(etag.starts_with('"'));
@@ -260,7 +266,7 @@ fn spectrum_shape_dna_and_hks_equal_the_library_and_requests_are_idempotent() {
     assert_eq!(c.body["distances"].as_array().unwrap().len(), 3);
     // Jobs list with filters.
     let l = reply(agent().get(&s.url(&format!("/v1/jobs?shape_id={id}&status=succeeded"))).call());
-    assert_eq!(l.body["total"], 4, "spectrum, spectrum with verify, shape-dna, hks");
+    assert_eq!(l.body["total"], 4, "spectrum, spectrum without verify, shape-dna, hks");
     // Progress as server-sent events ends with the finished job.
     let ev = reply(agent().get(&s.url(&format!("/v1/jobs/{job}/events"))).call());
     let text = String::from_utf8_lossy(&ev.raw);

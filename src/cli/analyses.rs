@@ -25,6 +25,9 @@ pub struct OutArgs {
     /// Solver threads (default: all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Skip the eigensolver's completeness check (Sylvester's inertia, with repair; on by default).
+    #[arg(long)]
+    pub no_verify: bool,
 }
 
 fn io_fail(path: &Path, e: impl std::fmt::Display) -> Failure {
@@ -70,7 +73,7 @@ fn run(v: &Validated, a: &Analysis, o: &OutArgs) -> Result<Output, Failure> {
 }
 
 fn solver(o: &OutArgs) -> SolverSpec {
-    SolverSpec { tol: o.tol, verify: false }
+    SolverSpec { tol: o.tol, verify: !o.no_verify }
 }
 
 #[derive(Args)]
@@ -327,7 +330,7 @@ pub struct TreesCmd {
 
 pub fn trees(a: TreesCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
-    let o = OutArgs { out: None, tol: 1e-10, threads: 0 };
+    let o = OutArgs { out: None, tol: 1e-10, threads: 0, no_verify: false };
     emit(run(&v, &Analysis::Trees {}, &o)?, &o)
 }
 
@@ -451,6 +454,9 @@ pub struct CompareCmd {
     pub metric: Metric,
     #[arg(long, default_value_t = 1e-10)]
     pub tol: f64,
+    /// Skip the eigensolver's completeness check (Sylvester's inertia, with repair; on by default).
+    #[arg(long)]
+    pub no_verify: bool,
 }
 
 pub fn compare(a: CompareCmd) -> Result<(), Failure> {
@@ -474,7 +480,7 @@ pub fn compare(a: CompareCmd) -> Result<(), Failure> {
         let an = Analysis::ShapeDna {
             options: a.dna.options(),
             operator: a.op.spec(),
-            solver: SolverSpec { tol: a.tol, verify: false },
+            solver: SolverSpec { tol: a.tol, verify: !a.no_verify },
         };
         let out = analysis::run(&v, &an, Hooks::default())?;
         Ok(

@@ -214,6 +214,11 @@ pub const CODES: &[(&str, &str)] = &[
     ("invalid-option", "An eigensolver option is out of range."),
     ("factorization-failed", "L − σM could not be factored."),
     ("no-convergence", "The eigensolver did not converge within its step limit."),
+    (
+        "incomplete-spectrum",
+        "Sylvester's inertia counts more eigenvalues below the check's shift than the solver found, after its \
+         repair rounds; no result is given rather than an incomplete one.",
+    ),
     ("invalid-parameter", "A descriptor or operator parameter is out of range."),
     ("too-few-eigenpairs", "The descriptor needs more eigenpairs than were requested."),
     ("not-applicable", "The analysis does not apply to this kind of shape."),

@@ -418,9 +418,10 @@ fn thin_strip_lowers_an_overestimated_shift() {
     }
 }
 
-/// Completeness by Sylvester's inertia: cutting the sphere's 15-fold l = 7 cluster (k = 50), the check puts τ
-/// below the cluster and counts exactly Σ_{l<7} (2l + 1) = 49 eigenvalues there; 30 separate triangles have 30
-/// zero eigenvalues below τ. A spectrum with one eigenvalue removed is reported incomplete.
+/// Completeness by Sylvester's inertia: k = 50 cuts the sphere's l = 7 cluster (indices 49–63, which the
+/// icosahedral mesh splits into sub-clusters), and the check counts below a shift in the first gap above λ₅₀
+/// among the converged pairs, so every returned eigenvalue is covered; 30 separate triangles have 30 zero
+/// eigenvalues below τ. A spectrum with one eigenvalue removed is reported incomplete.
 #[test]
 fn inertia_check_confirms_clusters_and_catches_a_missing_eigenvalue() {
     use kac_core::spectrum::check_completeness;
@@ -429,13 +430,14 @@ fn inertia_check_confirms_clusters_and_catches_a_missing_eigenvalue() {
     let options = EigenOptions { k: 50, method: Method::Sparse, verify: true, ..Default::default() };
     let sp = eigs(&o.pair, &options, None, Control::default()).unwrap();
     let c = sp.stats.completeness.clone().expect("the found values have a gap");
-    assert!(c.complete && c.below_shift == 49 && c.found_below_shift == 49, "{c:?}");
-    assert!(c.shift > sp.values[48] && c.shift < sp.values[49], "{c:?}");
+    assert!(c.complete && c.below_shift == c.found_below_shift && c.found_below_shift >= Some(50), "{c:?}");
+    let shift = c.shift.expect("an inertia count");
+    assert!(shift > sp.values[49], "{c:?}");
 
     let mut missing = sp.values[..40].to_vec();
     missing.remove(10);
-    let c = check_completeness(&o.pair, &missing, None).unwrap().unwrap();
-    assert!(!c.complete && c.below_shift == c.found_below_shift + 1, "{c:?}");
+    let c = check_completeness(&o.pair, &missing, missing.len(), None).unwrap().unwrap();
+    assert!(!c.complete && c.below_shift == c.found_below_shift.map(|f| f + 1), "{c:?}");
 
     let mut m = TriangleMesh::default();
     for t in 0..30u32 {
@@ -447,5 +449,7 @@ fn inertia_check_confirms_clusters_and_catches_a_missing_eigenvalue() {
     let options = EigenOptions { k: 40, method: Method::Sparse, verify: true, ..Default::default() };
     let sp = eigs(&o.pair, &options, None, Control::default()).unwrap();
     let c = sp.stats.completeness.expect("a gap above the zeros");
-    assert!(c.complete && c.below_shift >= 30, "{c:?}");
+    // The 30 congruent triangles' eigenvalues come in clusters of 30, more than the block: either the inertia
+    // confirms the count, or the repairs ran out of Krylov room and the dense path computed everything.
+    assert!(c.complete && (c.below_shift >= Some(30) || c.method == "dense"), "{c:?}");
 }

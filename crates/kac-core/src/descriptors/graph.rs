@@ -3,7 +3,6 @@
 //! embeddings.
 
 use super::{Basis, DescriptorError};
-use crate::geometry::topology::UnionFind;
 use crate::operators::graph_laplacian::{graph_pair, GraphKind};
 use crate::operators::sparse::{submatrix, Pattern, SparsePair};
 use crate::spectrum::factor::{Cholesky, Symbolic};
@@ -14,17 +13,7 @@ use std::sync::Arc;
 /// Connected components of the graph of non-zero off-diagonal entries of L: label per vertex and count. For a
 /// Laplacian with non-negative weights, the count is the multiplicity of the eigenvalue 0.
 pub fn components(pair: &SparsePair) -> (Vec<u32>, usize) {
-    let p = &pair.pattern;
-    let mut uf = UnionFind::new(p.n);
-    for j in 0..p.n {
-        for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
-            let i = p.row_idx[pos];
-            if i < j && pair.stiffness[pos] != 0.0 {
-                uf.union(i as u32, j as u32);
-            }
-        }
-    }
-    uf.labels()
+    pair.components()
 }
 
 /// The number of spanning trees (for weighted graphs: the sum over spanning trees of the product of their

@@ -20,7 +20,6 @@
 
 use super::DescriptorError;
 use serde::{Deserialize, Serialize};
-use std::f64::consts::PI;
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
@@ -106,13 +105,7 @@ impl Measures {
 /// λ_n^{Weyl} = (2π)² (n / (ω_d |Ω|))^{2/d}: the n-th eigenvalue Weyl's law predicts (ω_d the volume of the unit
 /// ball in R^d).
 pub fn weyl_eigenvalue(n: f64, dimension: u8, measure: f64) -> f64 {
-    let d = dimension as f64;
-    let omega = match dimension {
-        1 => 2.0,
-        2 => PI,
-        _ => 4.0 * PI / 3.0,
-    };
-    (2.0 * PI).powi(2) * (n / (omega * measure)).powf(2.0 / d)
+    crate::spectrum::weyl_law::weyl_eigenvalue(dimension, measure, n)
 }
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]

@@ -33,19 +33,10 @@ pub struct WeylEstimate {
     pub string_length_estimate: f64,
 }
 
-/// Weyl's law read forward: the eigenvalue at which N(λ) = ω_d |Ω| λ^{d/2} / (2π)^d reaches `count`, that is
-/// λ ≈ (2π)² (count / (ω_d |Ω|))^{2/d}. The leading term only: a first guess, not an estimate to report.
-pub fn weyl_eigenvalue(dimension: u8, measure: f64, count: f64) -> f64 {
-    let d = f64::from(dimension);
-    (2.0 * PI).powi(2) * (count / (omega(dimension) * measure)).powf(2.0 / d)
-}
+pub use crate::spectrum::weyl_law::weyl_eigenvalue;
 
 fn omega(d: u8) -> f64 {
-    match d {
-        1 => 2.0,
-        2 => PI,
-        _ => 4.0 * PI / 3.0,
-    }
+    crate::spectrum::weyl_law::unit_ball_volume(d)
 }
 
 /// Solves the small normal equations of a least-squares fit y ≈ X c (columns of X given as functions).

@@ -2,7 +2,7 @@
 //! and M (the principal submatrix on interior vertices), never replaced by identity rows, which would add
 //! spurious eigenvalues. The kept indices let vectors be put back with zeros on the boundary.
 
-use super::sparse::{submatrix, SparsePair};
+use super::sparse::{submatrix, Kernel, SparsePair};
 use super::{Boundary, OperatorError};
 use crate::geometry::{topology, Shape};
 use std::sync::Arc;
@@ -67,6 +67,22 @@ pub fn apply(
     let (pattern, mut vals) = submatrix(&pair.pattern, &[&pair.stiffness, &pair.mass], &keep);
     let mass = vals.pop().unwrap_or_default();
     let stiffness = vals.pop().unwrap_or_default();
+    // A kept vertex coupled to an eliminated one is anchored: its component's constant (weighted) vector is no
+    // longer in the kernel, the part of it that was on the boundary being held at zero.
+    let kernel = match &pair.kernel {
+        Kernel::Unknown => Kernel::Unknown,
+        Kernel::Components { weights, anchored } => {
+            let p = &pair.pattern;
+            let anchored_by = |j: usize| {
+                anchored.as_ref().is_some_and(|a| a[j])
+                    || (p.col_ptr[j]..p.col_ptr[j + 1]).any(|pos| fixed[p.row_idx[pos]] && pair.stiffness[pos] != 0.0)
+            };
+            Kernel::Components {
+                weights: weights.as_ref().map(|w| Arc::new(keep.iter().map(|&i| w[i]).collect())),
+                anchored: Some(Arc::new(keep.iter().map(|&j| anchored_by(j)).collect())),
+            }
+        }
+    };
     let kept = keep.iter().map(|&i| i as u32).collect();
     Ok((
         SparsePair {
@@ -75,6 +91,7 @@ pub fn apply(
             mass,
             mass_is_diagonal: pair.mass_is_diagonal,
             dimension: pair.dimension,
+            kernel,
         },
         Some(kept),
     ))

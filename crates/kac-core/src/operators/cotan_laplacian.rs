@@ -214,5 +214,6 @@ pub fn cotan_pair(
         mass: mass_values,
         mass_is_diagonal: !consistent,
         dimension: Some(2),
+        kernel: super::sparse::Kernel::CONSTANTS,
     })
 }

@@ -13,7 +13,7 @@
 //! lumped mass and Dirichlet ends this is exactly the matrix of eq. (9.3), tridiag(−1, 2, −1), whose eigenvalues
 //! are 2 − 2cos(kπ/n).
 
-use super::sparse::{assemble, SparsePair};
+use super::sparse::{assemble, Kernel, SparsePair};
 use super::{Mass, OperatorError};
 use crate::geometry::{vec3, Point};
 use std::sync::Arc;
@@ -52,7 +52,16 @@ pub fn graph_pair(n: usize, edges: &[[u32; 2]], weights: &[f64], kind: GraphKind
         })
         .unzip();
     let (pattern, [stiffness, mass]) = assemble(n, &off, [&dl, &dm]);
-    SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: true, dimension: None }
+    // D − W annihilates constants on each component; I − D^{−½}WD^{−½} annihilates D^{½} times them (an
+    // isolated vertex, with L_ii = 0, its unit vector).
+    let kernel = match kind {
+        GraphKind::Normalized => Kernel::Components {
+            weights: Some(Arc::new(deg.iter().map(|&d| if d > 0.0 { d.sqrt() } else { 1.0 }).collect())),
+            anchored: None,
+        },
+        _ => Kernel::CONSTANTS,
+    };
+    SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: true, dimension: None, kernel }
 }
 
 pub fn string_pair(v: &[Point], segments: &[[u32; 2]], mass: Mass) -> Result<SparsePair, OperatorError> {
@@ -76,5 +85,12 @@ pub fn string_pair(v: &[Point], segments: &[[u32; 2]], mass: Mass) -> Result<Spa
         }
     }
     let (pattern, [stiffness, m]) = assemble(n, &off, [&dl, &dm]);
-    Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: m, mass_is_diagonal: !consistent, dimension: Some(1) })
+    Ok(SparsePair {
+        pattern: Arc::new(pattern),
+        stiffness,
+        mass: m,
+        mass_is_diagonal: !consistent,
+        dimension: Some(1),
+        kernel: Kernel::CONSTANTS,
+    })
 }

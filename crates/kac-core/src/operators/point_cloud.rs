@@ -6,13 +6,13 @@
 //! Belkin–Niyogi heat-kernel weights (eq. 9.39), written symmetrically with the areas as quadrature weights:
 //! `L_ij = −A_i A_j e^{−|x_i − x_j|²/4t} / (4π t² m)` for |x_i − x_j| < r, `L_ii = −Σ_j L_ij`, `M = diag(A_i)`,
 //! where m = 1 − e^{−a}(1 + a), a = r²/4t, corrects for the kernel's truncation at r (the second moment of the
-//! truncated Gaussian), so that (M⁻¹L f)_i → −Δf(x_i) as t → 0. Defaults: t = (2h)², h the mean distance to the
+//! truncated Gaussian), so that (M⁻¹L f)_i → Δf(x_i) as t → 0 (Δ = −∇·∇, positive semidefinite). Defaults: t = (2h)², h the mean distance to the
 //! nearest neighbour; r = 3√t. With `Knn` neighbourhoods the sum runs over the symmetrized k-nearest-neighbour
 //! graph instead, t defaults to (d_k/3)² (d_k the mean distance to the k-th neighbour, so the graph reaches about
 //! 3√t) and m is that of r = 3√t, an approximation where the k-th neighbour is nearer or farther. Sign: L positive semidefinite. Units: L
 //! dimensionless·area, M area.
 
-use super::sparse::{assemble, SparsePair};
+use super::sparse::{assemble, Kernel, SparsePair};
 use super::{CloudParams, Neighbourhood, OperatorError};
 use crate::geometry::{vec3, Point};
 use kiddo::{KdTree, SquaredEuclidean};
@@ -276,5 +276,15 @@ pub fn belkin_niyogi_pair(
     used.insert("t".into(), t.into());
     used.insert("radius".into(), r.into());
     used.insert("total_area".into(), areas.iter().sum::<f64>().into());
-    Ok((SparsePair { pattern: Arc::new(pattern), stiffness, mass, mass_is_diagonal: true, dimension: Some(2) }, used))
+    Ok((
+        SparsePair {
+            pattern: Arc::new(pattern),
+            stiffness,
+            mass,
+            mass_is_diagonal: true,
+            dimension: Some(2),
+            kernel: Kernel::CONSTANTS,
+        },
+        used,
+    ))
 }

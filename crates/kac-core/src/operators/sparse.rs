@@ -46,6 +46,42 @@ pub struct SparsePair {
     /// sums to: 1 for strings, 2 for surfaces and point clouds, 3 for tetrahedral meshes; `None` for graphs.
     /// The eigensolver reads Weyl's law with it to place its shift (see `spectrum::lanczos::weyl_shift`).
     pub dimension: Option<u8>,
+    /// What is known of L's null space; the eigensolver puts these zero modes in its result exactly and
+    /// iterates only on their M-orthogonal complement (see `spectrum::null_space`).
+    pub kernel: Kernel,
+}
+
+/// L's null space as the operator knows it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Kernel {
+    /// Nothing is known: zero eigenvalues are found like any other.
+    Unknown,
+    /// L w_c = 0 for the restriction w_c of a per-vertex weight vector w to each connected component c of L's
+    /// graph (its non-zero off-diagonal entries) that holds no anchored vertex. `weights`: w, all ones when
+    /// `None` (operators whose constants lie in the kernel); `anchored`: vertices that lost a coupling when
+    /// Dirichlet vertices were eliminated (their component's constant is no longer in the kernel).
+    Components { weights: Option<Arc<Vec<f64>>>, anchored: Option<Arc<Vec<bool>>> },
+}
+
+impl Kernel {
+    /// Constants on each connected component.
+    pub const CONSTANTS: Kernel = Kernel::Components { weights: None, anchored: None };
+}
+
+/// Connected components of the graph of a symmetric matrix's non-zero off-diagonal entries: a label per row
+/// (numbered in order of each component's first row) and the count. For a Laplacian with constants in its
+/// kernel, the count is the multiplicity of the eigenvalue 0.
+pub fn components(p: &Pattern, values: &[f64]) -> (Vec<u32>, usize) {
+    let mut uf = crate::geometry::topology::UnionFind::new(p.n);
+    for j in 0..p.n {
+        for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+            let i = p.row_idx[pos];
+            if i < j && values[pos] != 0.0 {
+                uf.union(i as u32, j as u32);
+            }
+        }
+    }
+    uf.labels()
 }
 
 impl SparsePair {
@@ -65,6 +101,10 @@ impl SparsePair {
     /// The diagonal of M.
     pub fn mass_diagonal(&self) -> Vec<f64> {
         (0..self.n()).map(|j| self.mass[self.pattern.diag_pos(j)]).collect()
+    }
+    /// Connected components of L's graph (see [`components`]).
+    pub fn components(&self) -> (Vec<u32>, usize) {
+        components(&self.pattern, &self.stiffness)
     }
     /// Non-zero count of L (off-diagonal entries that are stored).
     pub fn nnz(&self) -> usize {

@@ -3,7 +3,7 @@
 //! dihedral angle at the opposite edge kl. Units: L has units of length, M of volume; eigenvalues 1/length².
 //! Masses: `consistent` V/10 on the diagonal and V/20 off it per tet; `lumped` V/4 per corner.
 
-use super::sparse::{assemble, SparsePair};
+use super::sparse::{assemble, Kernel, SparsePair};
 use super::{Mass, OperatorError};
 use crate::geometry::{vec3, Point};
 use std::sync::Arc;
@@ -40,5 +40,12 @@ pub fn tet_pair(v: &[Point], tets: &[[u32; 4]], mass: Mass) -> Result<SparsePair
         }
     }
     let (pattern, [stiffness, m]) = assemble(n, &off, [&dl, &dm]);
-    Ok(SparsePair { pattern: Arc::new(pattern), stiffness, mass: m, mass_is_diagonal: !consistent, dimension: Some(3) })
+    Ok(SparsePair {
+        pattern: Arc::new(pattern),
+        stiffness,
+        mass: m,
+        mass_is_diagonal: !consistent,
+        dimension: Some(3),
+        kernel: Kernel::CONSTANTS,
+    })
 }

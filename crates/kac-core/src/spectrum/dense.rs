@@ -58,8 +58,8 @@ pub fn eigs_dense(pair: &SparsePair, k: usize) -> Result<Spectrum, EigenError> {
             factorization: "cholesky",
             below_sigma: None,
             symbolic_reused: false,
-            completeness: None,
             timings: Timings { iteration_s: total, total_s: total, ..Default::default() },
+            ..Default::default()
         },
     })
 }

@@ -5,6 +5,7 @@
 
 use super::basis_products;
 use super::factor::{Cholesky, Symbolic};
+use super::null_space::Deflation;
 use super::{Control, EigenError, EigenOptions, Spectrum, Stats, Timings};
 use crate::operators::sparse::SparsePair;
 use faer::linalg::matmul::matmul;
@@ -116,6 +117,8 @@ enum Ritz {
 
 struct Ctx<'a> {
     pair: &'a SparsePair,
+    /// Directions the basis stays M-orthogonal to (exact zero modes, pairs found before a repair).
+    deflation: &'a Deflation<'a>,
     mdiag: Option<Vec<f64>>,
     mean_mass: f64,
     /// Scratch of the sparse block product (grows once).
@@ -209,6 +212,7 @@ impl Ctx<'_> {
             let mut mx = vec![0.0; n];
             for _attempt in 0..3 {
                 self.apply_m(MatRef::from_row_major_slice(&x, n, 1), MatMut::from_row_major_slice_mut(&mut mx, n, 1));
+                self.deflation.project(&mut x, &mut mx, 1);
                 let mut sink = Mat::<f64>::zeros(lead + j, 1);
                 self.project_out(v.rb().subcols(0, lead + j), &mut x, &mut mx, sink.as_mut());
                 let nrm = col_dots(&x, &mx, 1)[0].sqrt();
@@ -251,8 +255,26 @@ pub fn weyl_shift(pair: &SparsePair, k: usize) -> Option<f64> {
     if k < INTERIOR_MIN_K || !(measure > 0.0) || !measure.is_finite() {
         return None;
     }
-    let s = WEYL_FRACTION * crate::descriptors::weyl::weyl_eigenvalue(d, measure, k as f64);
+    let s = WEYL_FRACTION * super::weyl_law::weyl_eigenvalue(d, measure, k as f64);
     (s > 0.0 && s.is_finite()).then_some(s)
+}
+
+/// What one block-Lanczos run is asked beyond [`EigenOptions`] (whose `k` counts the pairs this run finds).
+pub struct Run<'a> {
+    /// Directions the basis stays M-orthogonal to: exact zero modes, and pairs found before a repair.
+    pub deflation: &'a Deflation<'a>,
+    /// Their eigenvalues (each deflated direction's), to count them against the inertia of L − σM.
+    pub deflated_values: &'a [f64],
+    /// Whether σ may go inside the spectrum by Weyl's law (counting the deflated pairs as found): yes for a first
+    /// solve; a repair looks for pairs lying among others it does not count, and keeps σ below the spectrum.
+    pub interior_shift: bool,
+}
+
+impl Run<'_> {
+    /// Deflated pairs with eigenvalues below σ (they are among those the inertia of L − σM counts).
+    fn deflated_below(&self, sigma: f64) -> usize {
+        self.deflated_values.iter().filter(|&&v| v < sigma).count()
+    }
 }
 
 /// K = L − σM factored, with what the factorization says about the spectrum.
@@ -269,7 +291,13 @@ struct Shifted {
 /// stable; with more than k below, σ is lowered once as if N(λ) grew like √λ (thin shapes, whose low spectrum is
 /// one-dimensional, are what Weyl's two- or three-dimensional law overestimates). Otherwise, and as the last
 /// resort, σ = [`default_sigma`] below the spectrum with a Cholesky factor, multiplied by 100 while a pivot fails.
-fn factor_shift(pair: &SparsePair, o: &EigenOptions, sym: &Symbolic, par: Par) -> Result<Shifted, EigenError> {
+fn factor_shift(
+    pair: &SparsePair,
+    o: &EigenOptions,
+    sym: &Symbolic,
+    par: Par,
+    run: &Run<'_>,
+) -> Result<Shifted, EigenError> {
     let failed =
         |sigma: f64, message: String| EigenError::Factorization { message: format!("σ = {sigma:e}: {message}") };
     if let Some(sigma) = o.sigma {
@@ -280,12 +308,14 @@ fn factor_shift(pair: &SparsePair, o: &EigenOptions, sym: &Symbolic, par: Par) -
         let (factor, below) = Cholesky::factor_ldlt(sym, &pair.shifted(sigma), par).map_err(|m| failed(sigma, m))?;
         return Ok(Shifted { sigma, factor, below_sigma: Some(below) });
     }
-    if let Some(mut sigma) = weyl_shift(pair, o.k) {
+    let interior = if run.interior_shift { weyl_shift(pair, o.k + run.deflated_values.len()) } else { None };
+    if let Some(mut sigma) = interior {
         for _attempt in 0..2 {
             let values = pair.shifted(sigma);
             let Ok((factor, below)) = Cholesky::factor_ldlt(sym, &values, par) else { break };
-            if below > o.k {
-                sigma *= WEYL_FRACTION * (o.k as f64 / below as f64).powi(2);
+            let undeflated = below.saturating_sub(run.deflated_below(sigma));
+            if undeflated > o.k {
+                sigma *= WEYL_FRACTION * (o.k as f64 / undeflated as f64).powi(2);
                 continue;
             }
             if solve_backward_error(pair, &values, &factor, par) <= LDLT_BACKWARD_ERROR {
@@ -312,7 +342,7 @@ fn factor_shift(pair: &SparsePair, o: &EigenOptions, sym: &Symbolic, par: Par) -
 
 /// Backward error ‖K x − b‖₂ / (‖K‖_∞ ‖x‖₂ + ‖b‖₂) of one solve with `factor` (K's values on the pair's pattern)
 /// for a fixed pseudo-random b.
-fn solve_backward_error(pair: &SparsePair, values: &[f64], factor: &Cholesky, par: Par) -> f64 {
+pub(crate) fn solve_backward_error(pair: &SparsePair, values: &[f64], factor: &Cholesky, par: Par) -> f64 {
     let n = pair.n();
     let mut rng = Rng(0x5eed);
     let rhs: Vec<f64> = (0..n).map(|_| rng.next()).collect();
@@ -333,31 +363,41 @@ fn solve_backward_error(pair: &SparsePair, values: &[f64], factor: &Cholesky, pa
     }
 }
 
+/// The block size and subspace a run with these options would use on `n` unknowns of which `deflated` are
+/// deflated, or `None` when the problem is too small for the Krylov method (the caller solves it densely).
+pub fn plan(n: usize, deflated: usize, o: &EigenOptions) -> Option<(usize, usize, usize)> {
+    // The iteration lives in the M-orthogonal complement of the deflated directions.
+    let n = n.saturating_sub(deflated);
+    if n < 2 || o.k + 1 > n {
+        return None;
+    }
+    // Block 8 and a subspace of about 3w for w up to ~50 (2w beyond): measured best on 10k–41k icospheres for
+    // k = 10…200 with one thread (block 16 cost 1.4× at k = 50: more solves per converged pair, bigger GEMMs).
+    let b = o.block.unwrap_or(8).clamp(1, n - 1);
+    let guard = (b / 2).max(2);
+    let want = (o.k + guard).min(n - 1);
+    let default_m = (2 * want).max(want + 6 * b).max((3 * want).min(want + 100));
+    let msize = o.subspace.unwrap_or(default_m).max(want + 2 * b).min(n);
+    // Room for the wanted pairs, one expanded and one waiting block (a thick restart keeps the wanted pairs and
+    // appends the waiting block).
+    (msize >= want + 2 * b).then_some((b, want, msize))
+}
+
+/// The `o.k` smallest eigenpairs of the problem deflated by `run.deflation`, and the converged guard pairs above
+/// them (the result holds `want` ≥ k pairs, ascending, for the completeness check to place its shift above λ_k).
+/// `Ok(None)` when the problem is too small for the Krylov method (see [`plan`]).
 pub fn eigs_block_lanczos(
     pair: &SparsePair,
     o: &EigenOptions,
     symbolic: Option<&Symbolic>,
     control: Control<'_>,
-) -> Result<Spectrum, EigenError> {
+    run: &Run<'_>,
+) -> Result<Option<Spectrum>, EigenError> {
     let t_start = Instant::now();
     let n = pair.n();
     let k = o.k;
     let par = if o.threads == 1 { Par::Seq } else { Par::rayon(o.threads) };
-    // Block 8 and a subspace of about 3w for w up to ~50 (2w beyond): measured best on 10k–41k icospheres for
-    // k = 10…200 with one thread (block 16 cost 1.4× at k = 50: more solves per converged pair, bigger GEMMs).
-    let b = o.block.unwrap_or(8).clamp(1, n.saturating_sub(1).max(1));
-    let guard = (b / 2).max(2);
-    let want = (k + guard).min(n - 1);
-    let default_m = (2 * want).max(want + 6 * b).max((3 * want).min(want + 100));
-    let msize = o.subspace.unwrap_or(default_m).max(want + 2 * b).min(n);
-    // Block count must fit: expanded part + one waiting block.
-    if msize < want + b {
-        // Tiny problem relative to the block: fall back to dense.
-        return super::dense::eigs_dense(pair, k).map(|mut s| {
-            s.stats.sigma = default_sigma(pair);
-            s
-        });
-    }
+    let Some((b, want, msize)) = plan(n, run.deflation.len(), o) else { return Ok(None) };
     // Factor L − σM (symbolic analysis reused when given).
     let t0 = Instant::now();
     let (sym, reused) = match symbolic {
@@ -366,13 +406,21 @@ pub fn eigs_block_lanczos(
     };
     let symbolic_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let Shifted { sigma, factor: chol, below_sigma } = factor_shift(pair, o, &sym, par)?;
+    let Shifted { sigma, factor: chol, below_sigma } = factor_shift(pair, o, &sym, par, run)?;
+    // Eigenvalues below σ the iteration must find itself (the inertia less the deflated ones).
+    let below_undeflated = below_sigma.map(|nu| nu.saturating_sub(run.deflated_below(sigma)));
     let numeric_s = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();
     let mut clock = Clock::default();
     let mdiag = pair.mass_diagonal();
     let mean_mass = mdiag.iter().sum::<f64>() / n as f64;
-    let mut ctx = Ctx { pair, mdiag: pair.mass_is_diagonal.then_some(mdiag), mean_mass, scratch: Vec::new() };
+    let mut ctx = Ctx {
+        pair,
+        deflation: run.deflation,
+        mdiag: pair.mass_is_diagonal.then_some(mdiag),
+        mean_mass,
+        scratch: Vec::new(),
+    };
     let mut rng = Rng(o.seed);
 
     // V: the basis (expanded columns, then the waiting block Q); MQ = M Q; H = Vᵀ M T V on the expanded part;
@@ -383,8 +431,10 @@ pub fn eigs_block_lanczos(
     let mut w = RowBlock::zeros(n, b);
     let mut mw = RowBlock::zeros(n, b);
     {
-        let q0 = Mat::<f64>::from_fn(n, b, |_, _| rng.next());
+        let mut q0 = RowBlock::zeros(n, b);
+        q0.data.iter_mut().for_each(|x| *x = rng.next());
         ctx.apply_m(q0.as_ref(), mw.as_mut());
+        run.deflation.project(&mut q0.data, &mut mw.data, b);
         ctx.normalize(v.as_mut(), 0, q0.as_ref(), mw.as_ref(), mq.as_mut(), &mut rng, &[1.0]);
     }
     let mut m = 0usize; // expanded columns
@@ -423,8 +473,10 @@ pub fn eigs_block_lanczos(
                 matmul(a.as_mut(), Accum::Replace, mq.as_ref().transpose(), w.as_ref(), 1.0, Par::Seq);
                 basis_products::update(&mut w.data, b, basis.subcols(m, b), a.as_ref(), -1.0);
                 coef.as_mut().subrows_mut(m, b).copy_from(a.as_ref());
-                // Full reorthogonalization against the whole basis (locked vectors included).
+                // Full reorthogonalization against the whole basis (locked vectors included), after the deflated
+                // directions (T keeps their complement, so this removes rounding only).
                 ctx.apply_m(w.as_ref(), mw.as_mut());
+                run.deflation.project(&mut w.data, &mut mw.data, b);
                 ctx.project_out(basis, &mut w.data, &mut mw.data, coef.as_mut());
             }
             for r in locked..m + b {
@@ -483,7 +535,7 @@ pub fn eigs_block_lanczos(
         }
         // With σ inside the spectrum, the inertia says how many eigenvalues lie below it: all of them must be among
         // the pairs returned (a cluster member the Krylov space has not met yet would otherwise go unnoticed).
-        let inertia_met = below_sigma.is_none_or(|nu| cand.iter().take(k).filter(|c| c.0 < 0.0).count() == nu);
+        let inertia_met = below_undeflated.is_none_or(|nu| cand.iter().take(k).filter(|c| c.0 < 0.0).count() == nu);
         let done = leading >= want && inertia_met;
         let full = m + 2 * b > msize;
         if !done && !full {
@@ -495,7 +547,8 @@ pub fn eigs_block_lanczos(
         if done {
             // The k smallest λ: locked columns as they are, active ones as V_active S; written in ascending λ
             // (the candidates' order already; sorted defensively).
-            let top = &cand[..k];
+            // The k wanted pairs and the converged guard pairs above them (for the completeness check's shift).
+            let top = &cand[..want];
             let act: Vec<usize> =
                 top.iter().filter_map(|c| if let Ritz::Active(j) = c.1 { Some(j) } else { None }).collect();
             let s_sel = Mat::from_fn(ma, act.len(), |i, j| s_a[(i, act[j])]);
@@ -513,19 +566,17 @@ pub fn eigs_block_lanczos(
                 })
                 .collect();
             let raw: Vec<f64> = top.iter().map(|c| sigma + 1.0 / c.0).collect();
-            let mut idx: Vec<usize> = (0..k).collect();
+            let mut idx: Vec<usize> = (0..want).collect();
             idx.sort_by(|&x, &y| raw[x].total_cmp(&raw[y]));
             let values: Vec<f64> = idx.iter().map(|&j| raw[j]).collect();
-            let mut vectors = Mat::<f64>::zeros(n, k);
+            let mut vectors = Mat::<f64>::zeros(n, want);
             for (j, &from) in idx.iter().enumerate() {
                 vectors.as_mut().col_mut(j).copy_from(v.col(src[from]));
             }
             clock.restart += lap(&mut t);
             control.report("done", k, k);
             let iteration_s = t2.elapsed().as_secs_f64();
-            // The inertia check reuses this solve's symbolic analysis.
-            let completeness = if o.verify { super::check_completeness(pair, &values, Some(&sym))? } else { None };
-            return Ok(Spectrum {
+            return Ok(Some(Spectrum {
                 values,
                 vectors,
                 residuals: vec![],
@@ -541,7 +592,6 @@ pub fn eigs_block_lanczos(
                     factorization: if chol.is_ldlt() { "ldlt" } else { "cholesky" },
                     below_sigma,
                     symbolic_reused: reused,
-                    completeness,
                     timings: Timings {
                         symbolic_s,
                         numeric_s,
@@ -551,15 +601,17 @@ pub fn eigs_block_lanczos(
                         rayleigh_ritz_s: clock.rayleigh_ritz,
                         restart_s: clock.restart,
                         total_s: t_start.elapsed().as_secs_f64(),
+                        ..Default::default()
                     },
+                    ..Default::default()
                 },
-            });
+            }));
         }
         // Thick restart: [locked | kept active Ritz vectors | Q], H = diag(θ), E ← E S. Locked columns stay in
         // place (never recomputed); active pairs in the converged leading prefix are locked now (E columns zero:
         // deflated) and come first. Q and M Q stay as they are.
         restarts += 1;
-        let keep = (want + (msize - want - 2 * b) / 2).min(m - b).max(want.min(m - b)).max(a0 + 1);
+        let keep = (want + msize.saturating_sub(want + 2 * b) / 2).min(m - b).max(want.min(m - b)).max(a0 + 1);
         let mut lock_now: Vec<usize> = Vec::new();
         let mut rest: Vec<usize> = Vec::new();
         for (pos, c) in cand.iter().enumerate() {

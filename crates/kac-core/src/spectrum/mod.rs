@@ -1,5 +1,9 @@
-//! Generalized symmetric eigensolvers for L φ = λ M φ: the k smallest eigenpairs (or all in a band).
+//! Generalized symmetric eigensolvers for L φ = λ M φ: the k smallest eigenpairs (or all in a band), complete.
 //!
+//! - [`null_space`]: the zero modes the operator knows (one per connected component for Laplacians whose
+//!   constants lie in the kernel) are put in the result exactly, eigenvalue 0, M-orthonormal; everything else is
+//!   solved on their M-orthogonal complement. A shape in 100 parts then costs what its largest part costs, and no
+//!   multiplicity of 0 can exceed the block.
 //! - [`dense`]: small problems or k close to n: M = RRᵀ (Cholesky), eigen-decomposition of R⁻¹LR⁻ᵀ.
 //! - [`lanczos`]: the sparse path, shift-invert with K = L − σM. The operator T = K⁻¹M is self-adjoint in the
 //!   M-inner product with eigenvalues θ = 1/(λ − σ); the wanted pairs are the k smallest λ = σ + 1/θ. Where the
@@ -17,26 +21,36 @@
 //!   never recomputed), rank-deficient blocks (invariant
 //!   subspaces: several components, high multiplicities) are refilled with random vectors, and the start block
 //!   comes from a fixed seed, so results are deterministic.
+//! - **Completeness, checked and repaired** (on by default, [`EigenOptions::verify`]): Sylvester's inertia of
+//!   L − τM, τ in the first gap above λ_k among the converged pairs (one more LDLᵀ on the same symbolic analysis),
+//!   counts the eigenvalues below τ. When the count exceeds the pairs found, the found pairs are deflated and the
+//!   iteration runs again for the missing ones, until the count matches ([`Completeness`]); a spectrum that stays
+//!   incomplete is an error ([`EigenError::Incomplete`]), never a silent result.
 //!
-//! Output: eigenvalues ascending (the Rayleigh quotients φᵀLφ / φᵀMφ of the returned vectors), M-orthonormal
-//! eigenvectors with the largest-magnitude entry positive, and per pair the relative residual ‖Lφ − λMφ‖₂ / (max(|λ|, |σ|) · ‖Mφ‖₂). With [`EigenOptions::verify`], Sylvester's
-//! inertia of L − τM confirms that no eigenvalue below the found ones was missed ([`Completeness`]).
+//! Output: eigenvalues ascending (exact zeros for the known zero modes, then the Rayleigh quotients
+//! φᵀLφ / φᵀMφ of the returned vectors), M-orthonormal eigenvectors with the largest-magnitude entry positive, and
+//! per pair the relative residual ‖Lφ − λMφ‖₂ / (max(|λ|, |σ|) · ‖Mφ‖₂).
 
 pub mod basis_products;
 pub mod dense;
 pub mod factor;
 pub mod lanczos;
+pub mod null_space;
+pub mod weyl_law;
 
 use crate::operators::sparse::SparsePair;
-use faer::Mat;
+use faer::{Mat, MatRef};
+use null_space::{Deflation, ZeroModes};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 /// Which solver.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
-    /// Dense for n ≤ 1500 or k > n/3 (n ≤ 8000), sparse otherwise.
+    /// Dense for n ≤ 1500 or k > n/3 (n ≤ 8000), sparse otherwise (n counting the unknowns left once the known
+    /// zero modes are deflated).
     #[default]
     Auto,
     Dense,
@@ -62,9 +76,14 @@ pub struct EigenOptions {
     /// Threads for the factorization and solves (0: all of rayon's).
     pub threads: usize,
     pub method: Method,
-    /// Check completeness after a sparse solve by Sylvester's inertia (see [`Completeness`]): one more numeric
-    /// factorization (LDLᵀ of L − τM) on the same symbolic analysis.
+    /// Check completeness of a sparse solve by Sylvester's inertia and repair it (default true; see
+    /// [`Completeness`]): one more numeric factorization (LDLᵀ of L − τM) on the same symbolic analysis, and
+    /// further solves only when eigenvalues were missed. `false` skips the check (the result then says
+    /// `completeness: null`).
     pub verify: bool,
+    /// Put the operator's known zero modes in the result exactly and iterate on their complement (default true;
+    /// see [`null_space`]).
+    pub deflate_null_space: bool,
 }
 
 impl Default for EigenOptions {
@@ -79,7 +98,8 @@ impl Default for EigenOptions {
             seed: 0x6b61_6321,
             threads: 0,
             method: Method::Auto,
-            verify: false,
+            verify: true,
+            deflate_null_space: true,
         }
     }
 }
@@ -124,11 +144,14 @@ pub struct Timings {
     pub rayleigh_ritz_s: f64,
     /// Inside the iteration: Ritz vectors at thick restarts and at the end.
     pub restart_s: f64,
+    /// The completeness check (inertia) and any repair solves.
+    pub verify_s: f64,
     pub total_s: f64,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct Stats {
+    /// `dense`, `block-lanczos`, or `null-space` (every pair asked for is a known zero mode: nothing solved).
     pub method: &'static str,
     pub sigma: f64,
     pub block: usize,
@@ -144,24 +167,56 @@ pub struct Stats {
     /// of which the solver returned.
     pub below_sigma: Option<usize>,
     pub symbolic_reused: bool,
+    /// Connected components of L's graph (where the operator's null space is known).
+    pub components: Option<usize>,
+    /// Known zero modes put in the result exactly (eigenvalue 0) and deflated from the iteration.
+    pub zero_modes: usize,
     pub timings: Timings,
-    /// The inertia check, when asked for and possible.
+    /// The completeness check; `None` when it was turned off.
     pub completeness: Option<Completeness>,
 }
 
-/// No eigenvalue was missed below a shift τ: the LDLᵀ inertia of L − τM counts the eigenvalues below τ
-/// (Sylvester), and the solver found exactly that many. τ is the midpoint of the largest-index gap between found
-/// eigenvalues wider than 10⁻⁶ relative, so a cut through a multiplicity cluster (the sphere's 2l + 1) is checked
-/// below the cluster and nothing depends on how the cluster itself was split.
+/// Whether the returned eigenvalues are the k smallest, with nothing missed.
+///
+/// `inertia`: Sylvester's law of inertia counts the eigenvalues below a shift τ as the negative pivots of an LDLᵀ
+/// factorization of L − τM; τ sits in the first gap wider than 10⁻⁶ (relative) above λ_k among the converged
+/// pairs (the solver converges a few guard pairs beyond k for this), so the count must equal the pairs found below
+/// τ, which include all k returned. When the cluster at λ_k extends past the guard pairs, τ goes in the last gap
+/// below it instead: a pair missed inside that cluster would differ from a returned one by less than 10⁻⁶, and
+/// the returned pairs are then still a valid choice of the cluster's eigenvectors. When the count exceeds the pairs
+/// found, the found pairs are deflated and the missing ones solved for (`repairs` times). `dense`: every
+/// eigenvalue was computed. `null-space`: every returned pair is a known zero mode.
 #[derive(Debug, Clone, Serialize)]
 pub struct Completeness {
-    pub shift: f64,
-    /// Eigenvalues of the problem below `shift` (inertia).
-    pub below_shift: usize,
-    /// Eigenvalues the solver returned below `shift`.
-    pub found_below_shift: usize,
+    /// `inertia`, `dense` or `null-space`.
+    pub method: &'static str,
     pub complete: bool,
+    /// τ of the (last) inertia count.
+    pub shift: Option<f64>,
+    /// Eigenvalues of the problem below `shift` (inertia).
+    pub below_shift: Option<usize>,
+    /// Eigenvalues the solver found below `shift`.
+    pub found_below_shift: Option<usize>,
+    /// Repair rounds that found missed pairs.
+    pub repairs: usize,
+    /// Pairs the repairs added.
+    pub repaired_pairs: usize,
     pub seconds: f64,
+}
+
+impl Completeness {
+    fn by(method: &'static str) -> Self {
+        Completeness {
+            method,
+            complete: true,
+            shift: None,
+            below_shift: None,
+            found_below_shift: None,
+            repairs: 0,
+            repaired_pairs: 0,
+            seconds: 0.0,
+        }
+    }
 }
 
 /// Eigenpairs with their residuals.
@@ -187,6 +242,11 @@ pub enum EigenError {
     NoConvergence { converged: usize, wanted: usize, steps: usize },
     #[error("invalid option {name}: {message}")]
     InvalidOption { name: &'static str, message: String },
+    #[error(
+        "incomplete spectrum: {below} eigenvalues lie below {shift:e} (Sylvester's inertia), the solver found {found} \
+         after {repairs} repair rounds"
+    )]
+    Incomplete { shift: f64, below: usize, found: usize, repairs: usize },
 }
 
 impl EigenError {
@@ -197,58 +257,319 @@ impl EigenError {
             EigenError::Canceled => "canceled",
             EigenError::NoConvergence { .. } => "no-convergence",
             EigenError::InvalidOption { .. } => "invalid-option",
+            EigenError::Incomplete { .. } => "incomplete-spectrum",
         }
     }
 }
 
-/// The k smallest eigenpairs of L φ = λ M φ.
+/// Repair rounds before a spectrum that stays incomplete is an error. Each round finds every pair missed below
+/// the check's shift unless the repair solve itself misses one, which the next round sees.
+const MAX_REPAIRS: usize = 3;
+
+/// The largest problem (or block) a repair hands to the dense path when too few unknowns are left for the
+/// Krylov method.
+const DENSE_REPAIR_MAX: usize = 8000;
+
+/// Relative width of a gap between consecutive eigenvalues that the inertia check may put its shift in.
+const GAP: f64 = 1e-6;
+
+/// Whether a problem of `n` unknowns (`free` of them left after deflation, `k` pairs wanted beyond the deflated
+/// ones) is solved densely; `block` is the largest problem the dense path would factor (a component's size
+/// when the components are solved one by one, see [`Blocks`]).
+fn use_dense(method: Method, block: usize, free: usize, k: usize) -> bool {
+    match method {
+        Method::Dense => true,
+        Method::Sparse => false,
+        Method::Auto => block <= 1500 || (3 * k > free && block <= 8000) || k + 1 >= free,
+    }
+}
+
+/// The connected components of L's graph when M couples none of them either: the pencil is then block diagonal
+/// (after a permutation) and its spectrum the union of the blocks' spectra, so the dense path factors each
+/// component alone (Σ n_c³ work instead of n³).
+struct Blocks {
+    labels: Vec<u32>,
+    count: usize,
+    largest: usize,
+}
+
+impl Blocks {
+    fn of(pair: &SparsePair) -> Option<Blocks> {
+        let (labels, count) = pair.components();
+        if count < 2 {
+            return None;
+        }
+        let p = &pair.pattern;
+        for j in 0..p.n {
+            for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+                if labels[p.row_idx[pos]] != labels[j] && pair.mass[pos] != 0.0 {
+                    return None;
+                }
+            }
+        }
+        let mut size = vec![0usize; count];
+        labels.iter().for_each(|&l| size[l as usize] += 1);
+        let largest = size.iter().copied().max().unwrap_or(0);
+        Some(Blocks { labels, count, largest })
+    }
+
+    /// Rows of each block, ascending.
+    fn rows(&self) -> Vec<Vec<usize>> {
+        let mut rows = vec![Vec::new(); self.count];
+        for (i, &l) in self.labels.iter().enumerate() {
+            rows[l as usize].push(i);
+        }
+        rows
+    }
+}
+
+/// The k smallest eigenpairs of L φ = λ M φ, complete (see [`Completeness`]).
 pub fn eigs(
     pair: &SparsePair,
     options: &EigenOptions,
     symbolic: Option<&factor::Symbolic>,
     control: Control<'_>,
 ) -> Result<Spectrum, EigenError> {
+    let t0 = Instant::now();
     let n = pair.n();
     let k = options.k;
-    let dense = match options.method {
-        Method::Dense => true,
-        Method::Sparse => false,
-        Method::Auto => n <= 1500 || (3 * k > n && n <= 8000) || k + 1 >= n,
-    };
+    if !(options.tol > 0.0 && options.tol < 1.0) {
+        return Err(EigenError::InvalidOption { name: "tol", message: format!("{} is not in (0, 1)", options.tol) });
+    }
+    let zeros = if options.deflate_null_space { null_space::zero_modes(pair) } else { ZeroModes::default() };
+    let z = zeros.len();
+    let blocks = Blocks::of(pair);
+    let dense = use_dense(options.method, blocks.as_ref().map_or(n, |b| b.largest), n - z, k.saturating_sub(z));
     let max = if dense { n } else { n.saturating_sub(1) };
     if k == 0 || k > max {
         return Err(EigenError::InvalidK { k, n, max });
     }
-    if !(options.tol > 0.0 && options.tol < 1.0) {
-        return Err(EigenError::InvalidOption { name: "tol", message: format!("{} is not in (0, 1)", options.tol) });
-    }
-    // The dense path runs in one call to faer; a stop requested before it starts is honoured here.
     if control.stopped() {
         return Err(EigenError::Canceled);
     }
-    let mut s = if dense {
-        dense::eigs_dense(pair, k)?
+    let components = matches!(pair.kernel, crate::operators::sparse::Kernel::Components { .. })
+        .then_some(zeros.components)
+        .filter(|_| options.deflate_null_space);
+    let mut s = if k <= z {
+        // Every pair asked for is a known zero mode.
+        zero_mode_spectrum(pair, &zeros, k)
+    } else if dense {
+        dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k)?
     } else {
-        lanczos::eigs_block_lanczos(pair, options, symbolic, control)?
+        let symbolic_t = Instant::now();
+        let owned;
+        let (sym, reused) = match symbolic {
+            Some(s) if s.fits(pair) => (s, true),
+            _ => {
+                owned = factor::Symbolic::analyze(&pair.pattern)
+                    .map_err(|message| EigenError::Factorization { message })?;
+                (&owned, false)
+            }
+        };
+        let symbolic_s = symbolic_t.elapsed().as_secs_f64();
+        let deflation = Deflation { sparse: &zeros.vectors, dense: None };
+        let zero_values = vec![0.0; z];
+        let run = lanczos::Run { deflation: &deflation, deflated_values: &zero_values, interior_shift: true };
+        let o = EigenOptions { k: k - z, ..options.clone() };
+        let mut s = match lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)? {
+            Some(s) => prepend_zero_modes(pair, &zeros, s),
+            None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k)?,
+        };
+        s.stats.symbolic_reused = reused;
+        s.stats.timings.symbolic_s = symbolic_s;
+        finish(pair, &mut s, z);
+        if options.verify && s.stats.method == "block-lanczos" {
+            verify_and_repair(pair, sym, options, control, (&zeros, blocks.as_ref()), &mut s, k)?;
+        }
+        s
     };
-    finish(pair, &mut s);
+    if s.stats.method != "block-lanczos" {
+        finish(pair, &mut s, z.min(k));
+        if options.verify {
+            s.stats.completeness =
+                Some(Completeness::by(if s.stats.method == "dense" { "dense" } else { "null-space" }));
+        }
+    }
+    truncate(&mut s, k);
+    s.stats.components = components;
+    s.stats.zero_modes = z.min(k);
+    s.stats.timings.total_s = t0.elapsed().as_secs_f64();
     Ok(s)
 }
 
-/// The inertia check of [`Completeness`]; `None` when the found eigenvalues have no gap to put τ in.
+/// The first k known zero modes as a spectrum (nothing solved).
+fn zero_mode_spectrum(pair: &SparsePair, zeros: &ZeroModes, k: usize) -> Spectrum {
+    let n = pair.n();
+    let mut vectors = Mat::<f64>::zeros(n, k);
+    for (j, z) in zeros.vectors.iter().take(k).enumerate() {
+        for (&i, &v) in z.rows.iter().zip(&z.values) {
+            vectors[(i as usize, j)] = v;
+        }
+    }
+    Spectrum {
+        values: vec![0.0; k],
+        vectors,
+        residuals: vec![],
+        stats: Stats {
+            method: "null-space",
+            factorization: "none",
+            sigma: lanczos::default_sigma(pair),
+            ..Default::default()
+        },
+    }
+}
+
+/// The known zero modes (eigenvalue 0) followed by the pairs of a deflated solve.
+fn prepend_zero_modes(pair: &SparsePair, zeros: &ZeroModes, s: Spectrum) -> Spectrum {
+    let z = zeros.len();
+    if z == 0 {
+        return s;
+    }
+    let n = pair.n();
+    let head = zero_mode_spectrum(pair, zeros, z);
+    let k = s.values.len();
+    let mut vectors = Mat::<f64>::zeros(n, z + k);
+    vectors.as_mut().subcols_mut(0, z).copy_from(head.vectors.as_ref());
+    vectors.as_mut().subcols_mut(z, k).copy_from(s.vectors.as_ref());
+    let mut values = head.values;
+    values.extend_from_slice(&s.values);
+    Spectrum { values, vectors, residuals: vec![], stats: s.stats }
+}
+
+/// The dense solve (every eigenvalue is computed, so nothing can be missed), block by block where the pencil is
+/// block diagonal, with the known zero modes in place of the dense solver's basis of the null space when the
+/// dense solver agrees on its dimension.
+fn dense_with_zero_modes(
+    pair: &SparsePair,
+    zeros: &ZeroModes,
+    blocks: Option<&Blocks>,
+    k: usize,
+) -> Result<Spectrum, EigenError> {
+    let mut s = match blocks {
+        Some(b) => dense_by_blocks(pair, b, k)?,
+        None => dense::eigs_dense(pair, k)?,
+    };
+    let z = zeros.len().min(k);
+    let scale = crate::spectrum::lanczos::default_sigma(pair).abs() * pair.n() as f64;
+    // The dense solver's first z eigenvalues are zeros to rounding (10⁻¹⁴ of the operator's scale); its (z + 1)-th
+    // is not, or the known zero modes do not span its null space and its own basis stays.
+    let agrees = s.values[..z].iter().all(|l| l.abs() <= 1e-9 * scale)
+        && s.values.get(zeros.len()).is_none_or(|l| l.abs() > 1e-9 * scale);
+    if z > 0 && agrees {
+        let head = zero_mode_spectrum(pair, zeros, z);
+        s.vectors.as_mut().subcols_mut(0, z).copy_from(head.vectors.as_ref());
+        s.values[..z].iter_mut().for_each(|v| *v = 0.0);
+    }
+    Ok(s)
+}
+
+/// Every eigenpair of each block, merged: the k smallest of the union, ascending.
+fn dense_by_blocks(pair: &SparsePair, blocks: &Blocks, k: usize) -> Result<Spectrum, EigenError> {
+    let t0 = Instant::now();
+    let n = pair.n();
+    let mut parts = Vec::with_capacity(blocks.count);
+    for rows in blocks.rows() {
+        let (pattern, mut values) =
+            crate::operators::sparse::submatrix(&pair.pattern, &[&pair.stiffness, &pair.mass], &rows);
+        let mass = values.pop().unwrap_or_default();
+        let stiffness = values.pop().unwrap_or_default();
+        let sub = SparsePair {
+            pattern: std::sync::Arc::new(pattern),
+            stiffness,
+            mass,
+            mass_is_diagonal: pair.mass_is_diagonal,
+            dimension: pair.dimension,
+            kernel: crate::operators::sparse::Kernel::Unknown,
+        };
+        let m = rows.len();
+        parts.push((rows, dense::eigs_dense(&sub, m)?));
+    }
+    let mut order: Vec<(f64, usize, usize)> = parts
+        .iter()
+        .enumerate()
+        .flat_map(|(b, (_, s))| s.values.iter().enumerate().map(move |(j, &v)| (v, b, j)))
+        .collect();
+    order.sort_by(|x, y| x.0.total_cmp(&y.0));
+    order.truncate(k);
+    let mut vectors = Mat::<f64>::zeros(n, order.len());
+    for (c, &(_, b, j)) in order.iter().enumerate() {
+        let (rows, s) = &parts[b];
+        for (r, &i) in rows.iter().enumerate() {
+            vectors[(i, c)] = s.vectors[(r, j)];
+        }
+    }
+    let total = t0.elapsed().as_secs_f64();
+    Ok(Spectrum {
+        values: order.iter().map(|o| o.0).collect(),
+        vectors,
+        residuals: vec![],
+        stats: Stats {
+            method: "dense",
+            sigma: lanczos::default_sigma(pair),
+            subspace: blocks.largest,
+            factor_nnz: parts.iter().map(|(r, _)| r.len() * (r.len() + 1) / 2).sum(),
+            factorization: "cholesky",
+            timings: Timings { iteration_s: total, total_s: total, ..Default::default() },
+            ..Default::default()
+        },
+    })
+}
+
+/// Keeps the first k pairs.
+fn truncate(s: &mut Spectrum, k: usize) {
+    if s.values.len() > k {
+        s.values.truncate(k);
+        s.residuals.truncate(k);
+        s.vectors = s.vectors.as_ref().subcols(0, k).to_owned();
+    }
+}
+
+/// Where to count: τ in the first gap wider than [`GAP`] above the `wanted`-th of the ascending `values` (which
+/// may hold converged pairs beyond `wanted`), else in the last such gap below it. Returns τ and the number of
+/// `values` below it; `None` when the values have no gap at all.
+fn check_shift(values: &[f64], wanted: usize) -> Option<(f64, usize)> {
+    let wide = |j: usize| values[j + 1] - values[j] > GAP * values[j + 1].abs().max(values[j].abs()).max(1e-300);
+    let last = values.len().checked_sub(1)?;
+    let above = (wanted.saturating_sub(1)..last).find(|&j| wide(j));
+    let j = above.or_else(|| (0..wanted.saturating_sub(1).min(last)).rev().find(|&j| wide(j)))?;
+    Some((0.5 * (values[j] + values[j + 1]), j + 1))
+}
+
+/// The largest backward error of a test solve accepted from the check's LDLᵀ factor (as for the solver's own
+/// factor: [`lanczos`]'s LDLᵀ stability test); beyond it the count may be wrong and τ moves within its gap.
+const CHECK_BACKWARD_ERROR: f64 = 1e-10;
+
+/// Sylvester's inertia at τ: the eigenvalues of the problem below τ, from an LDLᵀ factor whose test solve is
+/// backward stable; τ is tried at the middle, then at a third and two thirds of the gap (lo, hi).
+fn inertia_in_gap(sym: &factor::Symbolic, pair: &SparsePair, lo: f64, hi: f64) -> Result<(f64, usize), EigenError> {
+    let mut last = String::new();
+    for f in [0.5, 1.0 / 3.0, 2.0 / 3.0] {
+        let tau = lo + f * (hi - lo);
+        let values = pair.shifted(tau);
+        match factor::Cholesky::factor_ldlt(sym, &values, faer::Par::Seq) {
+            Ok((factor, below)) => {
+                let e = lanczos::solve_backward_error(pair, &values, &factor, faer::Par::Seq);
+                if e <= CHECK_BACKWARD_ERROR {
+                    return Ok((tau, below));
+                }
+                last = format!("the LDLᵀ factor of L − {tau:e}·M is not backward stable ({e:.1e})");
+            }
+            Err(e) => last = format!("LDLᵀ of L − {tau:e}·M failed ({e})"),
+        }
+    }
+    Err(EigenError::Factorization { message: format!("the completeness check could not count: {last}") })
+}
+
+/// Checks by inertia that the ascending `values` hold every eigenvalue below the check's shift (see
+/// [`Completeness`]), without repairing; `Ok(None)` when the values have no gap to put a shift in.
 pub fn check_completeness(
     pair: &SparsePair,
     values: &[f64],
+    wanted: usize,
     symbolic: Option<&factor::Symbolic>,
 ) -> Result<Option<Completeness>, EigenError> {
-    let t = std::time::Instant::now();
-    let Some(j) = (0..values.len().saturating_sub(1))
-        .rev()
-        .find(|&j| values[j + 1] - values[j] > 1e-6 * values[j + 1].abs().max(values[j].abs()).max(1e-300))
-    else {
-        return Ok(None);
-    };
-    let shift = 0.5 * (values[j] + values[j + 1]);
+    let t = Instant::now();
+    let Some((_, found)) = check_shift(values, wanted) else { return Ok(None) };
     let owned;
     let sym = match symbolic {
         Some(s) if s.fits(pair) => s,
@@ -258,23 +579,148 @@ pub fn check_completeness(
             &owned
         }
     };
-    let below = factor::count_below(sym, pair, shift).map_err(|message| EigenError::Factorization { message })?;
+    let (tau, below) = inertia_in_gap(sym, pair, values[found - 1], values[found])?;
     Ok(Some(Completeness {
-        shift,
-        below_shift: below,
-        found_below_shift: j + 1,
-        complete: below == j + 1,
+        method: "inertia",
+        complete: below == found,
+        shift: Some(tau),
+        below_shift: Some(below),
+        found_below_shift: Some(found),
+        repairs: 0,
+        repaired_pairs: 0,
         seconds: t.elapsed().as_secs_f64(),
     }))
 }
 
+/// The completeness check of a sparse solve, repaired: while the inertia counts more eigenvalues below τ than were
+/// found, every found pair is deflated and the iteration runs again (σ below the spectrum, another seed) for the
+/// missing ones, which are the smallest of what is left; their pairs join the others and the count is taken
+/// again. `s` holds the k wanted pairs and any converged guard pairs, ascending, the first `zeros.len()` the known
+/// zero modes.
+fn verify_and_repair(
+    pair: &SparsePair,
+    sym: &factor::Symbolic,
+    options: &EigenOptions,
+    control: Control<'_>,
+    (zeros, blocks): (&ZeroModes, Option<&Blocks>),
+    s: &mut Spectrum,
+    k: usize,
+) -> Result<(), EigenError> {
+    let t = Instant::now();
+    let z = zeros.len();
+    let mut repairs = 0;
+    let mut repaired_pairs = 0;
+    loop {
+        // The gap to count in; with no gap at all (every value found is one cluster), just below the cluster,
+        // where nothing may lie.
+        let (lo, hi, found) = match check_shift(&s.values, k) {
+            Some((_, found)) => (s.values[found - 1], s.values[found], found),
+            None => {
+                let v0 = s.values[0];
+                let scale = v0.abs().max(lanczos::default_sigma(pair).abs());
+                (v0 - 2.0 * GAP * scale, v0 - GAP * scale, 0)
+            }
+        };
+        control.report("verifying", k, k);
+        let (tau, below) = inertia_in_gap(sym, pair, lo, hi)?;
+        let c = Completeness {
+            method: "inertia",
+            complete: below == found,
+            shift: Some(tau),
+            below_shift: Some(below),
+            found_below_shift: Some(found),
+            repairs,
+            repaired_pairs,
+            seconds: 0.0,
+        };
+        if below == found {
+            s.stats.completeness = Some(c);
+            break;
+        }
+        if below < found || repairs == MAX_REPAIRS {
+            // Fewer eigenvalues than pairs found cannot be (the found vectors are M-orthonormal); more after the
+            // repairs means the repair solves keep missing them.
+            return Err(EigenError::Incomplete { shift: tau, below, found, repairs });
+        }
+        if control.stopped() {
+            return Err(EigenError::Canceled);
+        }
+        repairs += 1;
+        let missing = below - found;
+        let p = s.values.len() - z;
+        let found_vectors = s.vectors.as_ref().subcols(z, p).to_owned();
+        let m_found = mass_times(pair, found_vectors.as_ref());
+        let deflation = Deflation { sparse: &zeros.vectors, dense: Some((found_vectors.as_ref(), m_found.as_ref())) };
+        let mut deflated_values = vec![0.0; z];
+        deflated_values.extend_from_slice(&s.values[z..]);
+        let run = lanczos::Run { deflation: &deflation, deflated_values: &deflated_values, interior_shift: false };
+        let o = EigenOptions {
+            k: missing,
+            sigma: Some(lanczos::default_sigma(pair)),
+            seed: options.seed.wrapping_add(repairs as u64),
+            ..options.clone()
+        };
+        let Some(mut extra) = lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)? else {
+            // Too few unknowns left for the Krylov method: the dense path computes every eigenvalue.
+            if blocks.map_or(pair.n(), |b| b.largest) > DENSE_REPAIR_MAX {
+                return Err(EigenError::Incomplete { shift: tau, below, found, repairs });
+            }
+            let stats = std::mem::take(&mut s.stats);
+            *s = dense_with_zero_modes(pair, zeros, blocks, k)?;
+            s.stats = Stats { completeness: Some(Completeness { repairs, ..Completeness::by("dense") }), ..stats };
+            finish(pair, s, z.min(k));
+            break;
+        };
+        finish(pair, &mut extra, 0);
+        repaired_pairs += extra.values.len().min(missing);
+        merge(s, extra);
+    }
+    if let Some(c) = s.stats.completeness.as_mut() {
+        c.seconds = t.elapsed().as_secs_f64();
+    }
+    s.stats.timings.verify_s = t.elapsed().as_secs_f64();
+    Ok(())
+}
+
+/// M X for a dense block.
+fn mass_times(pair: &SparsePair, x: MatRef<'_, f64>) -> Mat<f64> {
+    let mut out = Mat::<f64>::zeros(x.nrows(), x.ncols());
+    let mut scratch = Vec::new();
+    crate::operators::sparse::spmm(&pair.pattern, &pair.mass, x, out.as_mut(), &mut scratch);
+    out
+}
+
+/// Adds the pairs of a repair solve to a spectrum, keeping the ascending order.
+fn merge(s: &mut Spectrum, extra: Spectrum) {
+    let (n, a, b) = (s.vectors.nrows(), s.values.len(), extra.values.len());
+    let mut order: Vec<(f64, bool, usize)> = (0..a).map(|j| (s.values[j], false, j)).collect();
+    order.extend((0..b).map(|j| (extra.values[j], true, j)));
+    // Stable: the known zero modes (exact zeros) stay first.
+    order.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let mut vectors = Mat::<f64>::zeros(n, a + b);
+    let (mut values, mut residuals) = (Vec::with_capacity(a + b), Vec::with_capacity(a + b));
+    for (j, &(v, from_extra, i)) in order.iter().enumerate() {
+        let (src, res) = if from_extra { (&extra.vectors, &extra.residuals) } else { (&s.vectors, &s.residuals) };
+        vectors.as_mut().col_mut(j).copy_from(src.col(i));
+        values.push(v);
+        residuals.push(res.get(i).copied().unwrap_or(0.0));
+    }
+    s.values = values;
+    s.residuals = residuals;
+    s.vectors = vectors;
+    s.stats.block_steps += extra.stats.block_steps;
+    s.stats.solves += extra.stats.solves;
+    s.stats.restarts += extra.stats.restarts;
+}
+
 /// Fixes signs (largest-magnitude entry positive), replaces each eigenvalue by the Rayleigh quotient φᵀLφ / φᵀMφ
 /// of its vector and computes true residuals (block products with L and M, eight columns at a time), then keeps
-/// the pairs in ascending order. The Rayleigh quotient's error is quadratic in the vector's, and it does not
+/// the pairs in ascending order. The first `exact` pairs are known zero modes: their eigenvalue stays exactly 0.
+/// The Rayleigh quotient's error is quadratic in the vector's, and it does not
 /// depend on the shift: a solver's λ = σ + 1/θ carries θ's rounding error magnified by (λ − σ)², which with σ
 /// inside the spectrum reached 10⁻¹¹ relative on the lowest eigenvalues of a 41k-vertex sphere (10⁻¹⁴ with the
 /// quotient).
-fn finish(pair: &SparsePair, s: &mut Spectrum) {
+fn finish(pair: &SparsePair, s: &mut Spectrum, exact: usize) {
     let n = pair.n();
     let k = s.values.len();
     let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);
@@ -318,7 +764,13 @@ fn finish(pair: &SparsePair, s: &mut Spectrum) {
         }
         let mut lam = [0.0f64; B];
         for c in 0..bw {
-            lam[c] = if xmx[c] > 0.0 { xlx[c] / xmx[c] } else { s.values[j0 + c] };
+            lam[c] = if j0 + c < exact {
+                0.0
+            } else if xmx[c] > 0.0 {
+                xlx[c] / xmx[c]
+            } else {
+                s.values[j0 + c]
+            };
             s.values[j0 + c] = lam[c];
         }
         let (mut r, mut mnorm) = ([0.0f64; B], [0.0f64; B]);
@@ -346,10 +798,10 @@ fn finish(pair: &SparsePair, s: &mut Spectrum) {
     }
 }
 
-/// All eigenpairs with λ in [a, b]. The shift stays below the spectrum (K must be positive definite), so this
-/// asks for the smallest k pairs with k doubling (from 16) until the largest found exceeds b or k reaches the
-/// solver's limit; the symbolic analysis is done once and reused. Efficient for bands near the bottom of the
-/// spectrum, which is where shape analysis looks.
+/// All eigenpairs with λ in [a, b]. This asks for the smallest k pairs with k doubling (from 16) until the
+/// largest found exceeds b or k reaches the solver's limit; the symbolic analysis is done once and reused, and only
+/// every solve is checked for completeness, the last one's shift lying above b, so the check covers the band. Efficient for
+/// bands near the bottom of the spectrum, which is where shape analysis looks.
 pub fn eigs_band(
     pair: &SparsePair,
     a: f64,
