@@ -17,6 +17,10 @@
 //! [`pde::smooth`]); harmonic functions satisfy Δu = 0 ([`pde::harmonic`]). On the unit sphere a degree-l
 //! spherical harmonic has Δ Y_l = l(l+1) Y_l.
 
+// Unsafe code (the style guide, "Unsafe code"): every unsafe operation inside an `unsafe fn` sits in an explicit `unsafe`
+// block, and every `unsafe` block carries a `SAFETY:` comment naming the check that makes it sound.
+#![deny(unsafe_op_in_unsafe_fn)]
+#![deny(clippy::undocumented_unsafe_blocks)]
 // Compressed-column loops index parallel arrays (row indices and values) by position.
 #![allow(clippy::needless_range_loop)]
 // `!(x > 0.0)` is deliberate throughout: it is also true for NaN, which must fail every positivity check.

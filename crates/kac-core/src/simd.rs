@@ -1,7 +1,8 @@
 //! Vectors of doubles for the hand-written numerical kernels (the eigensolver's block solve and basis products,
-//! the sparse block product): one
-//! kernel body, written against [`F64s`], compiled once per instruction set — AVX2 + FMA (four lanes) and
-//! AVX-512F (eight lanes) — and chosen at run time by [`Isa::detect`], as faer chooses its own kernels.
+//! the sparse block product): one kernel body, written against `F64s` (crate-private, like the kernels: callers
+//! reach them through safe wrappers that check sizes and strides), compiled once per instruction set — AVX2 + FMA
+//! (four lanes) and AVX-512F (eight lanes) — and chosen at run time by [`Isa::detect`], as faer chooses its own
+//! kernels.
 //!
 //! The pattern: a kernel is an `#[inline(always)]` generic function over `S: F64s`; a thin wrapper per instruction
 //! set, compiled with `#[target_feature]`, instantiates it with `__m256d` or `__m512d`, so the whole body (the
@@ -48,15 +49,16 @@ impl Isa {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub use registers::F64s;
+pub(crate) use registers::F64s;
 
 #[cfg(target_arch = "x86_64")]
 mod registers {
     use std::arch::x86_64::*;
 
     /// A register of `LANES` doubles and the operations the kernels use. Every method may only run on a CPU with the
-    /// register's instruction set, from code compiled for it.
-    pub trait F64s: Copy {
+    /// register's instruction set, from code compiled for it. Crate-private: the kernels behind the safe wrappers
+    /// (`Cholesky::solve_in_place_with`, `basis_products::gram_with`, `update_with`) are its only users.
+    pub(crate) trait F64s: Copy {
         /// Doubles per register.
         const LANES: usize;
         /// # Safety
@@ -98,17 +100,20 @@ mod registers {
         #[inline]
         #[target_feature(enable = "avx2,fma")]
         unsafe fn splat(p: *const f64) -> Self {
-            _mm256_broadcast_sd(&*p)
+            // SAFETY: `p` is valid for one read (this method's contract).
+            _mm256_broadcast_sd(unsafe { &*p })
         }
         #[inline]
         #[target_feature(enable = "avx2,fma")]
         unsafe fn load(p: *const f64) -> Self {
-            _mm256_loadu_pd(p)
+            // SAFETY: `p` is valid for four reads (this method's contract); `loadu` needs no alignment.
+            unsafe { _mm256_loadu_pd(p) }
         }
         #[inline]
         #[target_feature(enable = "avx2,fma")]
         unsafe fn store(self, p: *mut f64) {
-            _mm256_storeu_pd(p, self)
+            // SAFETY: `p` is valid for four writes (this method's contract); `storeu` needs no alignment.
+            unsafe { _mm256_storeu_pd(p, self) }
         }
         #[inline]
         #[target_feature(enable = "avx2,fma")]
@@ -142,17 +147,20 @@ mod registers {
         #[inline]
         #[target_feature(enable = "avx512f")]
         unsafe fn splat(p: *const f64) -> Self {
-            _mm512_set1_pd(*p)
+            // SAFETY: `p` is valid for one read (this method's contract).
+            _mm512_set1_pd(unsafe { *p })
         }
         #[inline]
         #[target_feature(enable = "avx512f")]
         unsafe fn load(p: *const f64) -> Self {
-            _mm512_loadu_pd(p)
+            // SAFETY: `p` is valid for eight reads (this method's contract); `loadu` needs no alignment.
+            unsafe { _mm512_loadu_pd(p) }
         }
         #[inline]
         #[target_feature(enable = "avx512f")]
         unsafe fn store(self, p: *mut f64) {
-            _mm512_storeu_pd(p, self)
+            // SAFETY: `p` is valid for eight writes (this method's contract); `storeu` needs no alignment.
+            unsafe { _mm512_storeu_pd(p, self) }
         }
         #[inline]
         #[target_feature(enable = "avx512f")]

@@ -282,9 +282,10 @@ fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], o
         }
         use crate::simd::Isa;
         match Isa::detect() {
-            // SAFETY (both arms): the CPU supports the features the function was compiled for (detected; AVX-512
-            // CPUs count as such only with AVX2 + FMA too).
+            // SAFETY: the CPU has AVX-512F (`Isa::detect` checked it); the body indexes with bounds checks.
             Isa::Avx512 if B >= 8 => return unsafe { avx512::<B>(p, values, xr, out, j0) },
+            // SAFETY: the CPU has AVX2 + FMA (`Isa::detect` checked it; AVX-512 CPUs count as such only with AVX2 +
+            // FMA too); the body indexes with bounds checks.
             Isa::Avx512 | Isa::Avx2 => return unsafe { avx2::<B>(p, values, xr, out, j0) },
             Isa::Scalar => {}
         }
@@ -294,6 +295,10 @@ fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], o
 
 /// Y = A·X for a symmetric A on `p` and a block X (n × b, column-major): X is copied to row-major so each entry
 /// of A meets b contiguous values; rows of Y are computed in parallel. `scratch` holds both row-major copies; it grows once and is reused.
+///
+/// # Panics
+/// If X is not `p.n` rows, Y not the shape of X, or `values` not one value per stored entry of `p`. X and Y may be
+/// any views (strided, reversed, transposed).
 pub fn spmm(
     p: &Pattern,
     values: &[f64],
@@ -302,21 +307,28 @@ pub fn spmm(
     scratch: &mut Vec<f64>,
 ) {
     let (n, b) = (x.nrows(), x.ncols());
+    assert_eq!(n, p.n, "spmm: X must have one row per row of A");
+    assert_eq!((y.nrows(), y.ncols()), (n, b), "spmm: Y must have the shape of X");
+    assert_eq!(values.len(), p.nnz(), "spmm: one value per stored entry of A");
+    let nb = n.checked_mul(b).expect("spmm: n × b block too large");
     // Row i at offset i·b, entries contiguous: (column stride 1 or one column) and (row stride b or one row).
     let row_major = |rs: isize, cs: isize| (b == 1 || cs == 1) && (n == 1 || rs == b as isize);
     if row_major(x.row_stride(), x.col_stride()) && row_major(y.row_stride(), y.col_stride()) {
         // Both blocks already row-major (the eigensolver's layout): no transposes.
-        // SAFETY: by the stride check the n·b entries of each block are one contiguous run from its pointer;
-        // `y` is borrowed mutably for this call and cannot alias `x`.
-        let xr = unsafe { std::slice::from_raw_parts(x.as_ptr(), n * b) };
-        let yr = unsafe { std::slice::from_raw_parts_mut(y.rb_mut().as_ptr_mut(), n * b) };
+        // SAFETY: X is n × b, and the `row_major` check (column stride 1 or one column, row stride b or one row)
+        // puts its entry (i, c) at offset i·b + c: the n·b values from the pointer are exactly its entries.
+        let xr = unsafe { std::slice::from_raw_parts(x.as_ptr(), nb) };
+        // SAFETY: as for X, Y being n × b by the `assert_eq!` on its shape above; `y` is borrowed mutably for this
+        // call, so no other reference (`x` included) reaches its entries.
+        let yr = unsafe { std::slice::from_raw_parts_mut(y.rb_mut().as_ptr_mut(), nb) };
         spmm_row_major(p, values, xr, yr, b);
         return;
     }
-    if scratch.len() < 2 * n * b {
-        scratch.resize(2 * n * b, 0.0);
+    let both = nb.checked_mul(2).expect("spmm: n × b block too large");
+    if scratch.len() < both {
+        scratch.resize(both, 0.0);
     }
-    let (xr, yr) = scratch[..2 * n * b].split_at_mut(n * b);
+    let (xr, yr) = scratch[..both].split_at_mut(nb);
     // Transposes in tiles of 64 rows: each column's run is read contiguously and each row-major row written
     // whole (column by column over all n rows wrote one value per cache line: most of the product's time).
     for i0 in (0..n).step_by(64) {

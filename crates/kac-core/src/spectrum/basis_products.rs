@@ -19,15 +19,21 @@ use faer::{Accum, Mat, MatRef, Par};
 /// (measured best of 256, 512, 1024 and 2048 at 10k–164k rows).
 const ROWS: usize = 1024;
 
-/// Whether the kernels apply: a width they cover, a column-major V, a CPU with AVX2 and FMA at least.
+/// The kernels' view of V when they apply: a width they cover, a non-empty V whose columns run forward in memory
+/// (see [`Columns::new`]; reversed and row-strided views go to faer), a CPU with AVX2 and FMA at least.
 #[cfg(target_arch = "x86_64")]
-fn kernel_applies(v: MatRef<'_, f64>, b: usize, isa: Isa) -> bool {
-    matches!(b, 4 | 8 | 16)
-        && v.nrows() > 0
-        && v.ncols() > 0
-        && v.try_as_col_major().is_some()
-        && isa != Isa::Scalar
-        && isa.supported()
+fn kernel_columns(v: MatRef<'_, f64>, b: usize, isa: Isa) -> Option<Columns<'_>> {
+    let applies = matches!(b, 4 | 8 | 16) && v.nrows() > 0 && v.ncols() > 0 && isa != Isa::Scalar && isa.supported();
+    if applies {
+        Columns::new(v)
+    } else {
+        None
+    }
+}
+
+/// n·b, the length of a row-major n × b block; panics (rather than wrapping) when it overflows.
+fn block_len(n: usize, b: usize) -> usize {
+    n.checked_mul(b).expect("n × b block too large")
 }
 
 /// C = Vᵀ Y for V (n × m) and Y row-major n × b; C is m × b.
@@ -41,16 +47,19 @@ pub fn update(w: &mut [f64], b: usize, v: MatRef<'_, f64>, c: MatRef<'_, f64>, a
 }
 
 /// [`gram`] with the kernels of a given instruction set (widths 8 and 16 use AVX-512 where given; `Scalar` means
-/// faer's product).
+/// faer's product). V may be any view (strided, reversed, transposed); the kernels take forward column-major ones.
+///
+/// # Panics
+/// If `y.len()` is not n·b.
 pub fn gram_with(v: MatRef<'_, f64>, y: &[f64], b: usize, isa: Isa) -> Mat<f64> {
     let (n, m) = (v.nrows(), v.ncols());
-    assert_eq!(y.len(), n * b, "Y must be n × b row-major");
+    assert_eq!(y.len(), block_len(n, b), "Y must be n × b row-major");
     #[cfg(target_arch = "x86_64")]
-    if kernel_applies(v, b, isa) {
-        let cols = Columns::new(v);
-        let mut c = vec![0.0f64; m * b];
-        // SAFETY: `kernel_applies` checked that the CPU has `isa`'s instructions; the kernel reads V within
-        // `Columns`' bounds and Y and C within the lengths it asserts.
+    if let Some(cols) = kernel_columns(v, b, isa) {
+        let mut c = vec![0.0f64; block_len(m, b)];
+        // SAFETY: `kernel_columns` checked that the CPU has `isa`'s instructions (`isa.supported()`; AVX-512 CPUs
+        // have AVX2 + FMA too) and built `cols` with `Columns::new`'s stride checks; the `match` gives each width
+        // b its kernel with R·LANES = b; the kernel asserts the lengths of Y and C against n·b and m·b.
         unsafe {
             match (isa, b) {
                 (Isa::Avx512, 8) => kernels::gram_avx512::<1, 8>(&cols, y, &mut c),
@@ -67,17 +76,20 @@ pub fn gram_with(v: MatRef<'_, f64>, y: &[f64], b: usize, isa: Isa) -> Mat<f64> 
     out
 }
 
-/// [`update`] with the kernels of a given instruction set.
+/// [`update`] with the kernels of a given instruction set. V and C may be any views.
+///
+/// # Panics
+/// If `w.len()` is not n·b or C is not m × b.
 pub fn update_with(w: &mut [f64], b: usize, v: MatRef<'_, f64>, c: MatRef<'_, f64>, alpha: f64, isa: Isa) {
     let (n, m) = (v.nrows(), v.ncols());
-    assert_eq!(w.len(), n * b, "W must be n × b row-major");
+    assert_eq!(w.len(), block_len(n, b), "W must be n × b row-major");
     assert_eq!((c.nrows(), c.ncols()), (m, b), "C must be m × b");
     #[cfg(target_arch = "x86_64")]
-    if kernel_applies(v, b, isa) {
-        let cols = Columns::new(v);
+    if let Some(cols) = kernel_columns(v, b, isa) {
         // α folded into a row-major copy of C (m × b values, small).
         let ac: Vec<f64> = (0..m * b).map(|p| alpha * c[(p / b, p % b)]).collect();
-        // SAFETY: as in `gram_with`.
+        // SAFETY: as in `gram_with`: `kernel_columns` checked the CPU and V's strides; the kernel asserts the
+        // lengths of C and W against m·b and n·b.
         unsafe {
             match (isa, b) {
                 (Isa::Avx512, 8) => kernels::update_avx512::<1, 8>(&cols, &ac, w),
@@ -92,27 +104,30 @@ pub fn update_with(w: &mut [f64], b: usize, v: MatRef<'_, f64>, c: MatRef<'_, f6
     matmul(faer::MatMut::from_row_major_slice_mut(w, n, b), Accum::Add, v, c, alpha, Par::Seq);
 }
 
-/// The columns of a column-major V as one slice and a column stride.
+/// A borrowed V (n × m) whose entry (i, j) is at `ptr + j·stride + i`: a pointer, not a slice, because the gaps
+/// between the columns of a view into a taller matrix are memory V does not borrow. Built only by
+/// [`Columns::new`], which checks the strides; the kernels rely on that.
 #[cfg(target_arch = "x86_64")]
 struct Columns<'a> {
-    data: &'a [f64],
+    ptr: *const f64,
     stride: usize,
     n: usize,
     m: usize,
+    _borrow: std::marker::PhantomData<MatRef<'a, f64>>,
 }
 
 #[cfg(target_arch = "x86_64")]
 impl<'a> Columns<'a> {
-    fn new(v: MatRef<'a, f64>) -> Self {
+    /// `None` unless entry (i, j) of V is at `ptr + j·stride + i` with a non-negative `stride`: row stride 1 (or
+    /// at most one row) and a non-negative column stride (or at most one column). faer's `try_as_col_major` checks
+    /// only the row stride, so a reversed-column view (negative column stride) would pass it.
+    fn new(v: MatRef<'a, f64>) -> Option<Self> {
         let (n, m) = (v.nrows(), v.ncols());
-        let stride = if m > 1 { v.col_stride() as usize } else { n };
-        assert!(v.row_stride() == 1 || n <= 1, "V must be column-major");
-        assert!(m <= 1 || stride >= n, "columns of V must not overlap");
-        let len = (m - 1) * stride + n;
-        // SAFETY: a column-major view with row stride 1 and column stride `stride` ≥ n covers exactly the
-        // `(m − 1)·stride + n` values from its pointer (the gaps between columns belong to the same allocation).
-        let data = unsafe { std::slice::from_raw_parts(v.as_ptr(), len) };
-        Columns { data, stride, n, m }
+        if n > 1 && v.row_stride() != 1 {
+            return None;
+        }
+        let stride = if m > 1 { usize::try_from(v.col_stride()).ok()? } else { 0 };
+        Some(Columns { ptr: v.as_ptr(), stride, n, m, _borrow: std::marker::PhantomData })
     }
 }
 
@@ -127,125 +142,162 @@ mod kernels {
     use std::arch::x86_64::{__m256d, __m512d};
 
     /// C[j] += Σ_i V[i, j] Y[i] (C row-major m × B, Y row-major n × B).
+    ///
+    /// # Safety
+    /// The CPU has `S`'s instruction set (the caller checks `Isa::supported`). Lengths are asserted here; V's
+    /// layout is `Columns`' invariant.
     #[inline(always)]
     unsafe fn gram<S: F64s, const R: usize, const G: usize>(v: &Columns<'_>, y: &[f64], c: &mut [f64]) {
         let b = S::LANES * R;
         let (n, m) = (v.n, v.m);
-        assert!(y.len() >= n * b && c.len() >= m * b);
-        let (vp, yp, cp) = (v.data.as_ptr(), y.as_ptr(), c.as_mut_ptr());
-        for r0 in (0..n).step_by(ROWS) {
-            let len = ROWS.min(n - r0);
-            let mut j = 0;
-            while j < m {
-                let g = if j + G <= m { G } else { 1 };
-                let mut cols = [vp; G];
-                let mut acc = [[S::zero(); R]; G];
-                for u in 0..g {
-                    cols[u] = vp.add((j + u) * v.stride + r0);
-                    for q in 0..R {
-                        acc[u][q] = S::load(cp.add((j + u) * b + S::LANES * q));
-                    }
-                }
-                if g == G {
-                    for i in 0..len {
-                        let row = yp.add((r0 + i) * b);
-                        let mut yi = [S::zero(); R];
+        assert!(y.len() >= n * b && c.len() >= m * b, "Y must hold n × b values and C m × b");
+        let (vp, yp, cp) = (v.ptr, y.as_ptr(), c.as_mut_ptr());
+        // SAFETY: V is read at `vp + (j + u)·stride + r0 + i` for j + u < m, r0 + i < n: entry (r0 + i, j + u),
+        // which V borrows (`Columns::new` checked the strides that place it there). Y is read at rows r0 + i < n
+        // and C at rows j + u < m, b values each, inside the lengths asserted above. The register operations need
+        // the instruction set of this function's contract.
+        unsafe {
+            for r0 in (0..n).step_by(ROWS) {
+                let len = ROWS.min(n - r0);
+                let mut j = 0;
+                while j < m {
+                    let g = if j + G <= m { G } else { 1 };
+                    let mut cols = [vp; G];
+                    let mut acc = [[S::zero(); R]; G];
+                    for u in 0..g {
+                        cols[u] = vp.add((j + u) * v.stride + r0);
                         for q in 0..R {
-                            yi[q] = S::load(row.add(S::LANES * q));
+                            acc[u][q] = S::load(cp.add((j + u) * b + S::LANES * q));
                         }
-                        for u in 0..G {
-                            let s = S::splat(cols[u].add(i));
+                    }
+                    if g == G {
+                        for i in 0..len {
+                            let row = yp.add((r0 + i) * b);
+                            let mut yi = [S::zero(); R];
                             for q in 0..R {
-                                acc[u][q] = s.mul_add(yi[q], acc[u][q]);
+                                yi[q] = S::load(row.add(S::LANES * q));
+                            }
+                            for u in 0..G {
+                                let s = S::splat(cols[u].add(i));
+                                for q in 0..R {
+                                    acc[u][q] = s.mul_add(yi[q], acc[u][q]);
+                                }
+                            }
+                        }
+                    } else {
+                        for i in 0..len {
+                            let row = yp.add((r0 + i) * b);
+                            let s = S::splat(cols[0].add(i));
+                            for q in 0..R {
+                                acc[0][q] = s.mul_add(S::load(row.add(S::LANES * q)), acc[0][q]);
                             }
                         }
                     }
-                } else {
-                    for i in 0..len {
-                        let row = yp.add((r0 + i) * b);
-                        let s = S::splat(cols[0].add(i));
+                    for u in 0..g {
                         for q in 0..R {
-                            acc[0][q] = s.mul_add(S::load(row.add(S::LANES * q)), acc[0][q]);
+                            acc[u][q].store(cp.add((j + u) * b + S::LANES * q));
                         }
                     }
+                    j += g;
                 }
-                for u in 0..g {
-                    for q in 0..R {
-                        acc[u][q].store(cp.add((j + u) * b + S::LANES * q));
-                    }
-                }
-                j += g;
             }
         }
     }
 
     /// W[i] += Σ_j V[i, j] C[j] (C row-major m × B, already scaled; W row-major n × B).
+    ///
+    /// # Safety
+    /// As [`gram`]: the CPU has `S`'s instruction set.
     #[inline(always)]
     unsafe fn update<S: F64s, const R: usize, const G: usize>(v: &Columns<'_>, c: &[f64], w: &mut [f64]) {
         let b = S::LANES * R;
         let (n, m) = (v.n, v.m);
-        assert!(w.len() >= n * b && c.len() >= m * b);
-        let (vp, cp, wp) = (v.data.as_ptr(), c.as_ptr(), w.as_mut_ptr());
-        for r0 in (0..n).step_by(ROWS) {
-            let len = ROWS.min(n - r0);
-            let mut j = 0;
-            while j < m {
-                let g = if j + G <= m { G } else { 1 };
-                let mut cols = [vp; G];
-                let mut coef = [[S::zero(); R]; G];
-                for u in 0..g {
-                    cols[u] = vp.add((j + u) * v.stride + r0);
-                    for q in 0..R {
-                        coef[u][q] = S::load(cp.add((j + u) * b + S::LANES * q));
-                    }
-                }
-                if g == G {
-                    for i in 0..len {
-                        let row = wp.add((r0 + i) * b);
-                        let mut wi = [S::zero(); R];
+        assert!(w.len() >= n * b && c.len() >= m * b, "W must hold n × b values and C m × b");
+        let (vp, cp, wp) = (v.ptr, c.as_ptr(), w.as_mut_ptr());
+        // SAFETY: as in `gram`: V entries (r0 + i, j + u) through `Columns`' checked strides, C rows j + u < m and
+        // W rows r0 + i < n inside the lengths asserted above; the instruction set is this function's contract.
+        unsafe {
+            for r0 in (0..n).step_by(ROWS) {
+                let len = ROWS.min(n - r0);
+                let mut j = 0;
+                while j < m {
+                    let g = if j + G <= m { G } else { 1 };
+                    let mut cols = [vp; G];
+                    let mut coef = [[S::zero(); R]; G];
+                    for u in 0..g {
+                        cols[u] = vp.add((j + u) * v.stride + r0);
                         for q in 0..R {
-                            wi[q] = S::load(row.add(S::LANES * q));
+                            coef[u][q] = S::load(cp.add((j + u) * b + S::LANES * q));
                         }
-                        for u in 0..G {
-                            let s = S::splat(cols[u].add(i));
+                    }
+                    if g == G {
+                        for i in 0..len {
+                            let row = wp.add((r0 + i) * b);
+                            let mut wi = [S::zero(); R];
                             for q in 0..R {
-                                wi[q] = s.mul_add(coef[u][q], wi[q]);
+                                wi[q] = S::load(row.add(S::LANES * q));
+                            }
+                            for u in 0..G {
+                                let s = S::splat(cols[u].add(i));
+                                for q in 0..R {
+                                    wi[q] = s.mul_add(coef[u][q], wi[q]);
+                                }
+                            }
+                            for q in 0..R {
+                                wi[q].store(row.add(S::LANES * q));
                             }
                         }
-                        for q in 0..R {
-                            wi[q].store(row.add(S::LANES * q));
+                    } else {
+                        for i in 0..len {
+                            let row = wp.add((r0 + i) * b);
+                            let s = S::splat(cols[0].add(i));
+                            for q in 0..R {
+                                let x = S::load(row.add(S::LANES * q));
+                                s.mul_add(coef[0][q], x).store(row.add(S::LANES * q));
+                            }
                         }
                     }
-                } else {
-                    for i in 0..len {
-                        let row = wp.add((r0 + i) * b);
-                        let s = S::splat(cols[0].add(i));
-                        for q in 0..R {
-                            let x = S::load(row.add(S::LANES * q));
-                            s.mul_add(coef[0][q], x).store(row.add(S::LANES * q));
-                        }
-                    }
+                    j += g;
                 }
-                j += g;
             }
         }
     }
 
+    /// [`gram`] with AVX2 + FMA registers (B = 4·R).
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn gram_avx2<const R: usize, const G: usize>(v: &Columns<'_>, y: &[f64], c: &mut [f64]) {
-        gram::<__m256d, R, G>(v, y, c)
+        // SAFETY: this function's contract is the kernel's.
+        unsafe { gram::<__m256d, R, G>(v, y, c) }
     }
+    /// [`gram`] with AVX-512 registers (B = 8·R).
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F.
     #[target_feature(enable = "avx512f")]
     pub(super) unsafe fn gram_avx512<const R: usize, const G: usize>(v: &Columns<'_>, y: &[f64], c: &mut [f64]) {
-        gram::<__m512d, R, G>(v, y, c)
+        // SAFETY: this function's contract is the kernel's.
+        unsafe { gram::<__m512d, R, G>(v, y, c) }
     }
+    /// [`update`] with AVX2 + FMA registers (B = 4·R).
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn update_avx2<const R: usize, const G: usize>(v: &Columns<'_>, c: &[f64], w: &mut [f64]) {
-        update::<__m256d, R, G>(v, c, w)
+        // SAFETY: this function's contract is the kernel's.
+        unsafe { update::<__m256d, R, G>(v, c, w) }
     }
+    /// [`update`] with AVX-512 registers (B = 8·R).
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F.
     #[target_feature(enable = "avx512f")]
     pub(super) unsafe fn update_avx512<const R: usize, const G: usize>(v: &Columns<'_>, c: &[f64], w: &mut [f64]) {
-        update::<__m512d, R, G>(v, c, w)
+        // SAFETY: this function's contract is the kernel's.
+        unsafe { update::<__m512d, R, G>(v, c, w) }
     }
 }
 

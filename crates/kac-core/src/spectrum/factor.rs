@@ -95,7 +95,7 @@ impl Cholesky {
             Default::default(),
         )
         .map_err(|e| format!("the matrix is not positive definite ({e:?})"))?;
-        Ok(Cholesky { symbolic: symbolic.clone(), values: l, ldlt: false })
+        Ok(Cholesky::checked(symbolic, l, false))
     }
     /// Factors the (possibly indefinite) matrix with `values` as LDLᵀ without pivoting, and counts the negative
     /// entries of D: by Sylvester's law of inertia, the number of negative eigenvalues of the matrix. `Err` on an
@@ -118,7 +118,17 @@ impl Cholesky {
         )
         .map_err(|e| format!("zero pivot ({e:?})"))?;
         let negative = factor_diagonal(s, &l).iter().filter(|&&d| d < 0.0).count();
-        Ok((Cholesky { symbolic: symbolic.clone(), values: l, ldlt: true }, negative))
+        Ok((Cholesky::checked(symbolic, l, true), negative))
+    }
+    /// The one constructor: checks, once per factor, the supernodal structure the intrinsic solve kernels take on
+    /// trust (`assert_supernodes_fit` against the matrix's n rows). A `Cholesky` is never changed afterwards
+    /// (private fields, no `&mut self` method), so every solve with it may rely on the check.
+    fn checked(symbolic: &Symbolic, values: Vec<f64>, ldlt: bool) -> Self {
+        use faer::sparse::linalg::cholesky::{supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
+        if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.inner.raw() {
+            assert_supernodes_fit(&SupernodalLltRef::<'_, usize, f64>::new(sn, &values), symbolic.inner.nrows());
+        }
+        Cholesky { symbolic: symbolic.clone(), values, ldlt }
     }
     /// Whether this is an LDLᵀ factor (else Cholesky).
     pub fn is_ldlt(&self) -> bool {
@@ -134,22 +144,29 @@ impl Cholesky {
     }
     /// [`Cholesky::solve_in_place`] with the block-solve kernels of a given instruction set (`Isa::Scalar`: the
     /// portable code); the tests run every set the CPU has.
+    ///
+    /// # Panics
+    /// If `rhs` does not have as many rows as the factored matrix (any column count, stride or view is accepted).
     pub fn solve_in_place_with(&self, mut rhs: MatMut<'_, f64>, par: Par, isa: Isa) {
         use faer::sparse::linalg::cholesky::{supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
         let s = &self.symbolic.inner;
+        let n = s.nrows();
+        assert_eq!(rhs.nrows(), n, "Cholesky::solve_in_place: the right-hand side must have one row per unknown");
         if let SymbolicCholeskyRaw::Supernodal(sn) = s.raw() {
             let f = SupernodalLltRef::<'_, usize, f64>::new(sn, &self.values);
             let perm = s.perm();
             let fwd = |i: usize| perm.map_or(i, |p| p.arrays().0[i]);
             macro_rules! run {
                 ($b:literal) => {{
-                    let n = rhs.nrows();
                     let mut x = vec![[0.0f64; $b]; n];
                     // Row-major right-hand sides (the eigensolver's blocks) are permuted a whole row at a time.
                     let row_major = rhs.col_stride() == 1 && (n <= 1 || rhs.row_stride() == $b);
                     if row_major {
-                        // SAFETY: by the stride check the n·b values are one contiguous run from the pointer, seen as
-                        // n rows of b (`[f64; b]` has the alignment of f64); `rhs` is borrowed mutably for this call.
+                        // SAFETY: `rhs` is n × b (the `assert_eq!` on its rows above, the `match` on its columns
+                        // below), and the `row_major` check (column stride 1, row stride b or a single row) puts
+                        // entry (i, c) at offset i·b + c: the n·b values from the pointer are exactly its entries,
+                        // seen as n rows of b (`[f64; b]` has the alignment of f64). `rhs` is borrowed mutably for
+                        // this call and not used while `rows` lives.
                         let rows = unsafe { std::slice::from_raw_parts_mut(rhs.as_ptr_mut().cast::<[f64; $b]>(), n) };
                         for (i, row) in x.iter_mut().enumerate() {
                             *row = rows[fwd(i)];
@@ -228,9 +245,32 @@ impl Cholesky {
 
 type SupernodalFactor<'a> = faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef<'a, usize, f64>;
 
+/// Asserts what the intrinsic kernels take on trust from faer's supernodal structure, for a block X of `n` rows:
+/// every supernode's columns `start..start + nc` and pattern rows are rows of X (< n), and its value block is
+/// `ld × nc` column-major with column stride `ld = nc + pattern length`, so that entry (i, j) is at `j·ld + i`.
+/// One pass over the supernodes' patterns, run once per factor by `Cholesky::checked` (run before every solve it
+/// cost 6% of the solves at 41k vertices, k = 200).
+fn assert_supernodes_fit(f: &SupernodalFactor<'_>, n: usize) {
+    for s in 0..f.symbolic().n_supernodes() {
+        let sn = f.supernode(s);
+        let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
+        let nc = l.ncols();
+        let ld = nc.checked_add(rows.len()).expect("supernode size");
+        assert!(c0 <= n && nc <= n - c0, "supernode {s}: columns {c0}..{c0}+{nc} outside {n} rows");
+        assert!(rows.iter().copied().max().is_none_or(|r| r < n), "supernode {s}: a pattern row outside {n} rows");
+        assert!(
+            l.nrows() == ld && l.row_stride() == 1 && (nc <= 1 || l.col_stride() == ld as isize),
+            "supernode {s}: values not a column-major {ld} × {nc} block"
+        );
+    }
+}
+
 /// Runs the block solve with intrinsics for 4, 8 or 16 right-hand sides when `isa` is AVX2 + FMA or AVX-512 and
 /// the CPU has it (detected at run time by the caller, as faer's own kernels do), else the portable
 /// `supernodal_solve` (compiled for AVX2 + FMA where available).
+///
+/// `f` must be the factor of a `Cholesky` (whose constructor ran `assert_supernodes_fit` on it against its n rows);
+/// the length of `x` is asserted equal to that n here.
 fn supernodal_solve_with<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]], ldlt: bool, isa: Isa) {
     #[cfg(target_arch = "x86_64")]
     {
@@ -239,23 +279,33 @@ fn supernodal_solve_with<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64
             supernodal_solve::<B, true, UNIT>(f, x)
         }
         if isa != Isa::Scalar && isa.supported() {
-            let xs = x.as_flattened_mut();
-            // SAFETY: the CPU supports the instruction set of the kernel called (checked just above; AVX-512 CPUs
-            // have AVX2 + FMA too); the kernels touch rows of `x` named by the factor's structure (all < n =
-            // x.len()) and entries of its supernodes' value blocks.
-            unsafe {
-                match (isa, B, ldlt) {
-                    (Isa::Avx512, 8, false) => kernels::solve_avx512::<1, false>(f, xs),
-                    (Isa::Avx512, 8, true) => kernels::solve_avx512::<1, true>(f, xs),
-                    (Isa::Avx512, 16, false) => kernels::solve_avx512::<2, false>(f, xs),
-                    (Isa::Avx512, 16, true) => kernels::solve_avx512::<2, true>(f, xs),
-                    (_, 4, false) => kernels::solve_avx2::<1, false>(f, xs),
-                    (_, 4, true) => kernels::solve_avx2::<1, true>(f, xs),
-                    (_, 8, false) => kernels::solve_avx2::<2, false>(f, xs),
-                    (_, 8, true) => kernels::solve_avx2::<2, true>(f, xs),
-                    (_, _, false) => portable_avx2::<B, false>(f, x),
-                    (_, _, true) => portable_avx2::<B, true>(f, x),
+            type Kernel = unsafe fn(&SupernodalFactor<'_>, &mut [f64]);
+            // Each kernel's width R·LANES is B: AVX-512 has 8 lanes, AVX2 4.
+            let kernel: Option<Kernel> = match (isa, B, ldlt) {
+                (Isa::Avx512, 8, false) => Some(kernels::solve_avx512::<1, false>),
+                (Isa::Avx512, 8, true) => Some(kernels::solve_avx512::<1, true>),
+                (Isa::Avx512, 16, false) => Some(kernels::solve_avx512::<2, false>),
+                (Isa::Avx512, 16, true) => Some(kernels::solve_avx512::<2, true>),
+                (_, 4, false) => Some(kernels::solve_avx2::<1, false>),
+                (_, 4, true) => Some(kernels::solve_avx2::<1, true>),
+                (_, 8, false) => Some(kernels::solve_avx2::<2, false>),
+                (_, 8, true) => Some(kernels::solve_avx2::<2, true>),
+                _ => None,
+            };
+            match kernel {
+                Some(kernel) => {
+                    assert_eq!(x.len(), f.symbolic().nrows(), "the block must have one row per unknown");
+                    // SAFETY: the CPU has the kernel's instruction set (`isa.supported()` above; an AVX-512 CPU
+                    // counts as such only with AVX2 + FMA too); the flattened block is x.len() rows of B = R·LANES
+                    // values (the `match` pairs each width with its kernel), x.len() is the factor's n (the
+                    // `assert_eq!` just above), and `Cholesky::checked` ran `assert_supernodes_fit` on this factor
+                    // against n when it was built: the kernel's `# Safety`.
+                    unsafe { kernel(f, x.as_flattened_mut()) };
                 }
+                // SAFETY: the CPU has AVX2 + FMA (`isa.supported()` above); the portable body indexes with checks.
+                None if ldlt => unsafe { portable_avx2::<B, true>(f, x) },
+                // SAFETY: as in the arm above.
+                None => unsafe { portable_avx2::<B, false>(f, x) },
             }
             return;
         }
@@ -277,196 +327,222 @@ mod kernels {
     use crate::simd::F64s;
     use std::arch::x86_64::{__m256d, __m512d};
 
+    /// [`supernodal_solve`] with AVX2 + FMA registers (B = 4·R right-hand sides).
+    ///
+    /// # Safety
+    /// As [`supernodal_solve`] with `S = __m256d`: the CPU has AVX2 and FMA, `x.len()` is a multiple of 4·R, and
+    /// `assert_supernodes_fit(f, x.len() / (4·R))` holds.
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn solve_avx2<const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
-        supernodal_solve::<__m256d, R, UNIT>(f, x)
+        // SAFETY: this function's contract is the kernel's.
+        unsafe { supernodal_solve::<__m256d, R, UNIT>(f, x) }
     }
 
+    /// [`supernodal_solve`] with AVX-512 registers (B = 8·R right-hand sides).
+    ///
+    /// # Safety
+    /// As [`supernodal_solve`] with `S = __m512d`: the CPU has AVX-512F, `x.len()` is a multiple of 8·R, and
+    /// `assert_supernodes_fit(f, x.len() / (8·R))` holds.
     #[target_feature(enable = "avx512f")]
     pub(super) unsafe fn solve_avx512<const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
-        supernodal_solve::<__m512d, R, UNIT>(f, x)
+        // SAFETY: this function's contract is the kernel's.
+        unsafe { supernodal_solve::<__m512d, R, UNIT>(f, x) }
     }
 
+    /// The block solve on X row-major (row r at `x[r·b..(r + 1)·b]`, b = R·LANES), through raw pointers.
+    ///
+    /// # Safety
+    /// - The CPU has `S`'s instruction set (the caller checks `Isa::supported`).
+    /// - `x.len()` is a multiple of b; with n = x.len() / b, `assert_supernodes_fit(f, n)` holds: every row the
+    ///   structure names is < n (so `row!` stays in `x`), and each supernode's values are a column-major `ld × nc`
+    ///   block with column stride `ld` (so `lp + j·ld + i`, i < ld, j < nc, stays in the block).
     #[inline(always)]
     unsafe fn supernodal_solve<S: F64s, const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
-        let b = S::LANES * R;
-        let n = x.len() / b;
-        let xp = x.as_mut_ptr();
-        macro_rules! row {
-            ($r:expr) => {{
-                let r: usize = $r;
-                debug_assert!(r < n);
-                xp.add(r * b)
-            }};
-        }
-        macro_rules! load {
-            ($p:expr) => {{
-                let p: *mut f64 = $p;
-                let mut v = [S::zero(); R];
-                for q in 0..R {
-                    v[q] = S::load(p.add(S::LANES * q));
+        // SAFETY: the contract above. Every pointer below is `row!(r)` (then up to b values from it) for a row
+        // r the structure names, or `lp.add(j·ld + i)` with j < nc, i < ld inside a supernode's value block: both
+        // in bounds by `assert_supernodes_fit`, which `Cholesky::checked` ran on the factor. The register operations
+        // need the instruction set the caller checked with `Isa::supported`.
+        unsafe {
+            let b = S::LANES * R;
+            let xp = x.as_mut_ptr();
+            macro_rules! row {
+                ($r:expr) => {{
+                    let r: usize = $r;
+                    xp.add(r * b)
+                }};
+            }
+            macro_rules! load {
+                ($p:expr) => {{
+                    let p: *mut f64 = $p;
+                    let mut v = [S::zero(); R];
+                    for q in 0..R {
+                        v[q] = S::load(p.add(S::LANES * q));
+                    }
+                    v
+                }};
+            }
+            macro_rules! store {
+                ($p:expr, $v:expr) => {{
+                    let (p, v): (*mut f64, [S; R]) = ($p, $v);
+                    for q in 0..R {
+                        v[q].store(p.add(S::LANES * q));
+                    }
+                }};
+            }
+            macro_rules! scale {
+                ($v:expr, $d:expr) => {{
+                    let d = S::splat(&(1.0 / $d));
+                    for q in 0..R {
+                        $v[q] = $v[q].mul(d);
+                    }
+                }};
+            }
+            // x ← x − a·g for one broadcast factor entry a.
+            macro_rules! axpy {
+                ($x:expr, $a:expr, $g:expr) => {{
+                    let a = S::splat($a);
+                    for q in 0..R {
+                        $x[q] = a.neg_mul_add($g[q], $x[q]);
+                    }
+                }};
+            }
+            let ns = f.symbolic().n_supernodes();
+            for s in 0..ns {
+                let sn = f.supernode(s);
+                let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
+                let nc = l.ncols();
+                let ld = nc + rows.len();
+                let lp = l.as_ptr();
+                let lead = nc % 4;
+                for j in 0..lead {
+                    let cj = lp.add(j * ld);
+                    let mut g = load!(row!(c0 + j));
+                    if UNIT {
+                        let mut stored = g;
+                        scale!(stored, *cj.add(j));
+                        store!(row!(c0 + j), stored);
+                    } else {
+                        scale!(g, *cj.add(j));
+                        store!(row!(c0 + j), g);
+                    }
+                    for i in j + 1..nc {
+                        let p = row!(c0 + i);
+                        let mut xi = load!(p);
+                        axpy!(xi, cj.add(i), g);
+                        store!(p, xi);
+                    }
+                    for (t, &r) in rows.iter().enumerate() {
+                        let p = row!(r);
+                        let mut xi = load!(p);
+                        axpy!(xi, cj.add(nc + t), g);
+                        store!(p, xi);
+                    }
                 }
-                v
-            }};
-        }
-        macro_rules! store {
-            ($p:expr, $v:expr) => {{
-                let (p, v): (*mut f64, [S; R]) = ($p, $v);
-                for q in 0..R {
-                    v[q].store(p.add(S::LANES * q));
-                }
-            }};
-        }
-        macro_rules! scale {
-            ($v:expr, $d:expr) => {{
-                let d = S::splat(&(1.0 / $d));
-                for q in 0..R {
-                    $v[q] = $v[q].mul(d);
-                }
-            }};
-        }
-        // x ← x − a·g for one broadcast factor entry a.
-        macro_rules! axpy {
-            ($x:expr, $a:expr, $g:expr) => {{
-                let a = S::splat($a);
-                for q in 0..R {
-                    $x[q] = a.neg_mul_add($g[q], $x[q]);
-                }
-            }};
-        }
-        let ns = f.symbolic().n_supernodes();
-        for s in 0..ns {
-            let sn = f.supernode(s);
-            let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
-            let nc = l.ncols();
-            let ld = nc + rows.len();
-            debug_assert!(l.row_stride() == 1 && (nc <= 1 || l.col_stride() as usize == ld));
-            let lp = l.as_ptr();
-            let lead = nc % 4;
-            for j in 0..lead {
-                let cj = lp.add(j * ld);
-                let mut g = load!(row!(c0 + j));
-                if UNIT {
-                    let mut stored = g;
-                    scale!(stored, *cj.add(j));
-                    store!(row!(c0 + j), stored);
-                } else {
-                    scale!(g, *cj.add(j));
-                    store!(row!(c0 + j), g);
-                }
-                for i in j + 1..nc {
-                    let p = row!(c0 + i);
-                    let mut xi = load!(p);
-                    axpy!(xi, cj.add(i), g);
-                    store!(p, xi);
-                }
-                for (t, &r) in rows.iter().enumerate() {
-                    let p = row!(r);
-                    let mut xi = load!(p);
-                    axpy!(xi, cj.add(nc + t), g);
-                    store!(p, xi);
+                for j in (lead..nc).step_by(4) {
+                    let c = [lp.add(j * ld), lp.add((j + 1) * ld), lp.add((j + 2) * ld), lp.add((j + 3) * ld)];
+                    // The group's triangle: g_u = (x_u − Σ_{v<u} L[j+u, j+v] g_v) / L[j+u, j+u].
+                    let mut g = [[S::zero(); R]; 4];
+                    for u in 0..4 {
+                        let mut xu = load!(row!(c0 + j + u));
+                        for v in 0..u {
+                            axpy!(xu, c[v].add(j + u), g[v]);
+                        }
+                        if UNIT {
+                            let mut stored = xu;
+                            scale!(stored, *c[u].add(j + u));
+                            store!(row!(c0 + j + u), stored);
+                        } else {
+                            scale!(xu, *c[u].add(j + u));
+                            store!(row!(c0 + j + u), xu);
+                        }
+                        g[u] = xu;
+                    }
+                    // Every row below (diagonal block, then pattern) once with all four: two independent pairs.
+                    macro_rules! update4 {
+                        ($p:expr, $o:expr) => {{
+                            let (p, o): (*mut f64, usize) = ($p, $o);
+                            let a0 = S::splat(c[0].add(o));
+                            let a1 = S::splat(c[1].add(o));
+                            let a2 = S::splat(c[2].add(o));
+                            let a3 = S::splat(c[3].add(o));
+                            let mut xi = load!(p);
+                            for q in 0..R {
+                                let t = a1.neg_mul_add(g[1][q], a0.neg_mul_add(g[0][q], xi[q]));
+                                let u = a3.mul_add(g[3][q], a2.mul(g[2][q]));
+                                xi[q] = t.sub(u);
+                            }
+                            store!(p, xi);
+                        }};
+                    }
+                    for i in j + 4..nc {
+                        update4!(row!(c0 + i), i);
+                    }
+                    for (t, &r) in rows.iter().enumerate() {
+                        update4!(row!(r), nc + t);
+                    }
                 }
             }
-            for j in (lead..nc).step_by(4) {
-                let c = [lp.add(j * ld), lp.add((j + 1) * ld), lp.add((j + 2) * ld), lp.add((j + 3) * ld)];
-                // The group's triangle: g_u = (x_u − Σ_{v<u} L[j+u, j+v] g_v) / L[j+u, j+u].
-                let mut g = [[S::zero(); R]; 4];
-                for u in 0..4 {
-                    let mut xu = load!(row!(c0 + j + u));
-                    for v in 0..u {
-                        axpy!(xu, c[v].add(j + u), g[v]);
+            for s in (0..ns).rev() {
+                let sn = f.supernode(s);
+                let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
+                let nc = l.ncols();
+                let ld = nc + rows.len();
+                let lp = l.as_ptr();
+                let lead = nc % 4;
+                for j in (lead..nc).step_by(4).rev() {
+                    let c = [lp.add(j * ld), lp.add((j + 1) * ld), lp.add((j + 2) * ld), lp.add((j + 3) * ld)];
+                    let mut acc = [
+                        load!(row!(c0 + j)),
+                        load!(row!(c0 + j + 1)),
+                        load!(row!(c0 + j + 2)),
+                        load!(row!(c0 + j + 3)),
+                    ];
+                    // Each row below gathered once into the four accumulators (independent FMA chains).
+                    macro_rules! gather4 {
+                        ($p:expr, $o:expr) => {{
+                            let (p, o): (*mut f64, usize) = ($p, $o);
+                            let xr = load!(p);
+                            for u in 0..4 {
+                                axpy!(acc[u], c[u].add(o), xr);
+                            }
+                        }};
                     }
-                    if UNIT {
-                        let mut stored = xu;
-                        scale!(stored, *c[u].add(j + u));
-                        store!(row!(c0 + j + u), stored);
-                    } else {
-                        scale!(xu, *c[u].add(j + u));
+                    for (t, &r) in rows.iter().enumerate() {
+                        gather4!(row!(r), nc + t);
+                    }
+                    for i in j + 4..nc {
+                        gather4!(row!(c0 + i), i);
+                    }
+                    // The group's triangle, last column first: x_u = (acc_u − Σ_{v>u} L[j+v, j+u] x_v) / L[j+u, j+u].
+                    let mut xs = [[S::zero(); R]; 4];
+                    for u in (0..4).rev() {
+                        let mut xu = acc[u];
+                        for v in u + 1..4 {
+                            axpy!(xu, c[u].add(j + v), xs[v]);
+                        }
+                        if !UNIT {
+                            scale!(xu, *c[u].add(j + u));
+                        }
+                        xs[u] = xu;
                         store!(row!(c0 + j + u), xu);
                     }
-                    g[u] = xu;
                 }
-                // Every row below (diagonal block, then pattern) once with all four: two independent pairs.
-                macro_rules! update4 {
-                    ($p:expr, $o:expr) => {{
-                        let (p, o): (*mut f64, usize) = ($p, $o);
-                        let a0 = S::splat(c[0].add(o));
-                        let a1 = S::splat(c[1].add(o));
-                        let a2 = S::splat(c[2].add(o));
-                        let a3 = S::splat(c[3].add(o));
-                        let mut xi = load!(p);
-                        for q in 0..R {
-                            let t = a1.neg_mul_add(g[1][q], a0.neg_mul_add(g[0][q], xi[q]));
-                            let u = a3.mul_add(g[3][q], a2.mul(g[2][q]));
-                            xi[q] = t.sub(u);
-                        }
-                        store!(p, xi);
-                    }};
-                }
-                for i in j + 4..nc {
-                    update4!(row!(c0 + i), i);
-                }
-                for (t, &r) in rows.iter().enumerate() {
-                    update4!(row!(r), nc + t);
-                }
-            }
-        }
-        for s in (0..ns).rev() {
-            let sn = f.supernode(s);
-            let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
-            let nc = l.ncols();
-            let ld = nc + rows.len();
-            let lp = l.as_ptr();
-            let lead = nc % 4;
-            for j in (lead..nc).step_by(4).rev() {
-                let c = [lp.add(j * ld), lp.add((j + 1) * ld), lp.add((j + 2) * ld), lp.add((j + 3) * ld)];
-                let mut acc =
-                    [load!(row!(c0 + j)), load!(row!(c0 + j + 1)), load!(row!(c0 + j + 2)), load!(row!(c0 + j + 3))];
-                // Each row below gathered once into the four accumulators (independent FMA chains).
-                macro_rules! gather4 {
-                    ($p:expr, $o:expr) => {{
-                        let (p, o): (*mut f64, usize) = ($p, $o);
-                        let xr = load!(p);
-                        for u in 0..4 {
-                            axpy!(acc[u], c[u].add(o), xr);
-                        }
-                    }};
-                }
-                for (t, &r) in rows.iter().enumerate() {
-                    gather4!(row!(r), nc + t);
-                }
-                for i in j + 4..nc {
-                    gather4!(row!(c0 + i), i);
-                }
-                // The group's triangle, last column first: x_u = (acc_u − Σ_{v>u} L[j+v, j+u] x_v) / L[j+u, j+u].
-                let mut xs = [[S::zero(); R]; 4];
-                for u in (0..4).rev() {
-                    let mut xu = acc[u];
-                    for v in u + 1..4 {
-                        axpy!(xu, c[u].add(j + v), xs[v]);
+                for j in (0..lead).rev() {
+                    let cj = lp.add(j * ld);
+                    let mut acc = load!(row!(c0 + j));
+                    for (t, &r) in rows.iter().enumerate() {
+                        let xr = load!(row!(r));
+                        axpy!(acc, cj.add(nc + t), xr);
+                    }
+                    for i in j + 1..nc {
+                        let xr = load!(row!(c0 + i));
+                        axpy!(acc, cj.add(i), xr);
                     }
                     if !UNIT {
-                        scale!(xu, *c[u].add(j + u));
+                        scale!(acc, *cj.add(j));
                     }
-                    xs[u] = xu;
-                    store!(row!(c0 + j + u), xu);
+                    store!(row!(c0 + j), acc);
                 }
-            }
-            for j in (0..lead).rev() {
-                let cj = lp.add(j * ld);
-                let mut acc = load!(row!(c0 + j));
-                for (t, &r) in rows.iter().enumerate() {
-                    let xr = load!(row!(r));
-                    axpy!(acc, cj.add(nc + t), xr);
-                }
-                for i in j + 1..nc {
-                    let xr = load!(row!(c0 + i));
-                    axpy!(acc, cj.add(i), xr);
-                }
-                if !UNIT {
-                    scale!(acc, *cj.add(j));
-                }
-                store!(row!(c0 + j), acc);
             }
         }
     }
