@@ -579,3 +579,69 @@ fn results_and_shapes_outlive_the_memory_caches() {
     let g = reply(agent().get(&s.url(&format!("/v1/shapes/{id}"))).call());
     assert_eq!(g.body["summary"]["vertices"], 162);
 }
+
+/// Strict requests: a misspelt field in every analysis is a 422 `invalid-request` naming its JSON pointer and the
+/// closest valid name; a field one level too high says where it belongs; a top-level `boundary` on a spectrum job no
+/// longer yields the Neumann spectrum under the same job id; compare requests, the analysis of `/v1/analyze` and
+/// query parameters are checked the same way.
+#[test]
+fn misspelt_and_misplaced_fields_are_refused_with_a_suggestion() {
+    let s = Server::start(&[]);
+    let id = upload(&s, &icosphere_off(1), "?format=off").body["id"].as_str().unwrap().to_string();
+    let analyses = [
+        "spectrum",
+        "hks",
+        "si-hks",
+        "wks",
+        "gps",
+        "shape-dna",
+        "heat",
+        "geodesic",
+        "trees",
+        "embed",
+        "smooth",
+        "interpolate",
+    ];
+    for a in analyses {
+        let r = submit(&s, json!({ "shape_id": id, "analysis": a, "operatr": {} }));
+        assert_problem(&r, 422, "invalid-request");
+        assert_eq!(r.body["pointer"], "/operatr", "{a}: {}", r.body);
+        let expected = if ["geodesic", "trees"].contains(&a) { Value::Null } else { json!("operator") };
+        assert_eq!(r.body["suggestion"], expected, "{a}: {}", r.body);
+    }
+    let r = submit(&s, json!({ "shape_id": id, "analysis": "shape-dna", "options": { "normalisation": "area" } }));
+    assert_problem(&r, 422, "invalid-request");
+    assert_eq!(
+        (r.body["pointer"].as_str(), r.body["suggestion"].as_str()),
+        (Some("/options/normalisation"), Some("normalization"))
+    );
+    assert!(r.body["detail"].as_str().unwrap().contains("did you mean `normalization`?"), "{}", r.body);
+    let r = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "boundary": "dirichlet" }));
+    assert_problem(&r, 422, "invalid-request");
+    assert_eq!(r.body["belongs_in"], "operator", "{}", r.body);
+    assert!(r.body["detail"].as_str().unwrap().contains("`boundary` belongs in `operator`"), "{}", r.body);
+    let r = submit(&s, json!({ "shape_id": id, "analysis": "hks", "scale_invariant": true }));
+    assert_problem(&r, 422, "invalid-request");
+    let r = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "solver": { "verfy": false } }));
+    assert_eq!((r.status, r.body["pointer"].as_str()), (422, Some("/solver/verfy")), "{}", r.body);
+    // Compare, the analysis of /v1/analyze, and query parameters.
+    let r = reply(agent().post(&s.url("/v1/compare")).send_json(json!({ "shape_ids": [id], "normalisation": "area" })));
+    assert_problem(&r, 422, "invalid-request");
+    assert_eq!(r.body["suggestion"], "normalization");
+    let r = reply(
+        agent()
+            .post(&s.url("/v1/analyze?format=off&analysis=%7B%22analysis%22%3A%22spectrum%22%2C%22kk%22%3A3%7D"))
+            .send_bytes(&icosphere_off(1)),
+    );
+    assert_problem(&r, 422, "invalid-request");
+    assert_eq!((r.body["pointer"].as_str(), r.body["suggestion"].as_str()), (Some("/kk"), Some("k")));
+    let r = reply(agent().post(&s.url("/v1/analyze?wiat=1&format=off")).send_bytes(&icosphere_off(1)));
+    assert_problem(&r, 422, "invalid-request");
+    assert_eq!((r.body["pointer"].as_str(), r.body["suggestion"].as_str()), (Some("?wiat"), Some("wait")));
+    let r = reply(agent().get(&s.url("/v1/shapes?limt=5")).call());
+    assert_problem(&r, 422, "invalid-request");
+    // The valid forms still work.
+    let r =
+        submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 3, "operator": { "boundary": "neumann" } }));
+    assert_eq!(r.status, 202, "{}", r.body);
+}

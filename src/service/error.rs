@@ -28,19 +28,46 @@ pub struct Problem {
 pub enum ApiError {
     Shape(ShapeError),
     Analysis(crate::analysis::AnalysisError),
-    NotFound { what: &'static str, id: String },
-    RouteNotFound { path: String },
+    NotFound {
+        what: &'static str,
+        id: String,
+    },
+    RouteNotFound {
+        path: String,
+    },
     MethodNotAllowed,
-    BodyTooLarge { limit: usize },
-    BadRequest { code: &'static str, detail: String },
-    UnsupportedMediaType { detail: String },
-    QueueFull { capacity: usize, retry_after_s: u64 },
-    Limit { code: &'static str, detail: String },
-    NotReady { detail: String },
+    BodyTooLarge {
+        limit: usize,
+    },
+    BadRequest {
+        code: &'static str,
+        detail: String,
+    },
+    /// A field or query parameter the OpenAPI document does not declare where it was sent (422).
+    UnknownField(super::strict::Unknown),
+    UnsupportedMediaType {
+        detail: String,
+    },
+    QueueFull {
+        capacity: usize,
+        retry_after_s: u64,
+    },
+    Limit {
+        code: &'static str,
+        detail: String,
+    },
+    NotReady {
+        detail: String,
+    },
     Unauthorized,
     Forbidden,
-    RateLimited { retry_after_s: u64, per_minute: u32 },
-    Internal { detail: String },
+    RateLimited {
+        retry_after_s: u64,
+        per_minute: u32,
+    },
+    Internal {
+        detail: String,
+    },
 }
 
 impl ApiError {
@@ -97,6 +124,14 @@ impl ApiError {
                 )
             }
             ApiError::BadRequest { code, detail } => (StatusCode::BAD_REQUEST, code, "Bad request", detail.clone()),
+            ApiError::UnknownField(u) => {
+                extra.insert("pointer".into(), u.pointer.clone().into());
+                extra.insert("field".into(), u.name.clone().into());
+                extra.insert("suggestion".into(), u.suggestion.clone().into());
+                extra.insert("belongs_in".into(), u.belongs_in.clone().into());
+                extra.insert("accepted".into(), u.allowed.clone().into());
+                (StatusCode::UNPROCESSABLE_ENTITY, "invalid-request", "Unknown field", u.detail())
+            }
             ApiError::UnsupportedMediaType { detail } => {
                 (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported-media-type", "Unsupported media type", detail.clone())
             }
@@ -198,7 +233,11 @@ pub const CODES: &[(&str, &str)] = &[
     ("method-not-allowed", "The method is not allowed on this resource."),
     ("body-too-large", "The request body exceeds --max-body-bytes."),
     ("invalid-json", "The request body is not valid JSON for this endpoint."),
-    ("invalid-request", "A parameter is missing or malformed."),
+    (
+        "invalid-request",
+        "A parameter is missing or malformed (400), or a field or query parameter is not one this request takes \
+         (422, with `pointer`, `field`, `suggestion`, `belongs_in` and `accepted`).",
+    ),
     ("unsupported-media-type", "The Content-Type cannot be used here."),
     ("queue-full", "The job queue is at capacity; retry after Retry-After seconds."),
     ("k-too-large", "k exceeds the configured limit (--max-k)."),

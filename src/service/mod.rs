@@ -9,6 +9,7 @@ pub mod openapi;
 pub mod ops;
 pub mod routes;
 pub mod store;
+pub mod strict;
 
 use config::Config;
 use std::sync::atomic::AtomicBool;

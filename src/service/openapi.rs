@@ -55,7 +55,99 @@ pub struct ApiDoc;
 
 /// The document as pretty JSON (what `kac openapi` prints and `/openapi.json` serves).
 pub fn document() -> String {
-    ApiDoc::openapi().to_pretty_json().unwrap_or_default()
+    let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
+    close_request_schemas(&mut doc);
+    serde_json::to_string_pretty(&doc).unwrap_or_default()
+}
+
+/// Says in the document what [`super::strict`] enforces: an object schema with declared properties that a JSON
+/// request body reaches takes no other field. A plain one gets `additionalProperties: false`. One composed with
+/// `allOf` (a flattened struct such as `JobRequest`, whose members' fields are valid together) says so in its
+/// description: its members, and the `oneOf` branches inside them, stay open, since `additionalProperties` would
+/// make each member refuse the others' fields, and the keyword that states it for the whole
+/// (`unevaluatedProperties: false`, JSON Schema 2020-12) stops schemathesis 4.32 from generating any case for the
+/// operation. Free-form objects (no declared properties) stay free-form, as the check leaves them.
+fn close_request_schemas(doc: &mut serde_json::Value) {
+    use serde_json::Value;
+    fn walk(
+        doc: &Value,
+        schema: &Value,
+        composed: bool,
+        out: &mut Vec<(String, &'static str)>,
+        seen: &mut Vec<String>,
+    ) {
+        if let Some(name) =
+            schema.get("$ref").and_then(Value::as_str).and_then(|r| r.strip_prefix("#/components/schemas/"))
+        {
+            let key = format!("{name}:{composed}");
+            if seen.contains(&key) {
+                return;
+            }
+            seen.push(key);
+            if let Some(target) = doc.pointer(&format!("/components/schemas/{name}")) {
+                walk_named(doc, target, Some(name), composed, out, seen);
+            }
+            return;
+        }
+        walk_named(doc, schema, None, composed, out, seen);
+    }
+    fn walk_named(
+        doc: &Value,
+        schema: &Value,
+        name: Option<&str>,
+        composed: bool,
+        out: &mut Vec<(String, &'static str)>,
+        seen: &mut Vec<String>,
+    ) {
+        if let Some(members) = schema.get("allOf").and_then(Value::as_array) {
+            if let (Some(n), false) = (name, composed) {
+                out.push((n.to_string(), "description"));
+            }
+            for m in members {
+                walk(doc, m, true, out, seen);
+            }
+        }
+        for key in ["oneOf", "anyOf"] {
+            for b in schema.get(key).and_then(Value::as_array).into_iter().flatten() {
+                walk(doc, b, composed, out, seen);
+            }
+        }
+        if let Some(props) = schema.get("properties").and_then(Value::as_object) {
+            if let (Some(n), false) = (name, composed) {
+                out.push((n.to_string(), "additionalProperties"));
+            }
+            for p in props.values() {
+                walk(doc, p, false, out, seen);
+            }
+        }
+        if let Some(items) = schema.get("items") {
+            walk(doc, items, false, out, seen);
+        }
+    }
+    let mut marks = vec![];
+    let mut seen = vec![];
+    let bodies: Vec<Value> = doc
+        .pointer("/paths")
+        .and_then(Value::as_object)
+        .into_iter()
+        .flat_map(|paths| paths.values())
+        .flat_map(|item| item.as_object().into_iter().flat_map(|ops| ops.values()))
+        .filter_map(|op| op.pointer("/requestBody/content/application~1json/schema").cloned())
+        .collect();
+    for body in &bodies {
+        walk(doc, body, false, &mut marks, &mut seen);
+    }
+    for (name, key) in marks {
+        if let Some(Value::Object(s)) = doc.pointer_mut(&format!("/components/schemas/{name}")) {
+            if key == "description" {
+                let d = s.get(key).and_then(Value::as_str).unwrap_or("").trim_end().to_string();
+                let closed = "No field other than those of its parts is accepted (422 `invalid-request`).";
+                s.insert(key.to_string(), Value::String(format!("{d} {closed}").trim_start().to_string()));
+            } else {
+                s.insert(key.to_string(), Value::Bool(false));
+            }
+        }
+    }
 }
 
 /// Responses every operation can give, added where an operation does not list them itself: 400 (malformed
@@ -81,7 +173,14 @@ impl utoipa::Modify for CommonResponses {
                 [item.get.as_mut(), item.post.as_mut(), item.put.as_mut(), item.delete.as_mut(), item.patch.as_mut()];
             for op in ops.into_iter().flatten() {
                 let has_body = op.request_body.is_some();
-                let mut add = vec![("400", "malformed parameters (invalid-request)"), ("500", "internal error")];
+                let mut add = vec![
+                    ("400", "malformed parameters (invalid-request)"),
+                    (
+                        "422",
+                        "a field or query parameter this request does not take (invalid-request, with a suggestion)",
+                    ),
+                    ("500", "internal error"),
+                ];
                 if v1 {
                     add.push(("401", "an API key is required (unauthorized)"));
                     add.push(("403", "the API key is not accepted (forbidden)"));

@@ -43,6 +43,7 @@ pub fn router(state: AppState) -> Router {
         .merge(SwaggerUi::new("/docs").url("/openapi.json", ApiDoc::openapi()))
         .route("/metrics", get(metrics))
         .fallback(not_found)
+        .route_layer(axum::middleware::from_fn(strict_query))
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::authorize))
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::observe))
         .layer(DefaultBodyLimit::max(limit))
@@ -74,6 +75,30 @@ fn json_error(state: &AppState, e: JsonRejection) -> ApiError {
         }
         other => ApiError::bad("invalid-json", other.body_text()),
     }
+}
+
+/// A JSON body checked against its OpenAPI schema (no field the document does not declare at its place, see
+/// [`super::strict`]), then deserialized.
+fn strict_body<T: serde::de::DeserializeOwned>(
+    st: &AppState,
+    body: Result<Json<Value>, JsonRejection>,
+    schema: &str,
+) -> Result<T, ApiError> {
+    let Json(v) = body.map_err(|e| json_error(st, e))?;
+    super::strict::check_body(&v, schema).map_err(ApiError::UnknownField)?;
+    serde_json::from_value(v).map_err(|e| ApiError::bad("invalid-json", e.to_string()))
+}
+
+/// Every query parameter must be one the document declares for the routed operation.
+async fn strict_query(
+    matched: Option<axum::extract::MatchedPath>,
+    req: Request,
+    next: axum::middleware::Next,
+) -> Result<Response, ApiError> {
+    if let (Some(path), Some(query)) = (matched.as_ref(), req.uri().query()) {
+        super::strict::check_query(path.as_str(), req.method().as_str(), query).map_err(ApiError::UnknownField)?;
+    }
+    Ok(next.run(req).await)
 }
 
 /// Query parameters whose rejection is a problem document (400 `invalid-request`), not axum's plain text.
@@ -427,9 +452,9 @@ fn job_json(v: &JobView) -> Value {
         (status = 503, description = "queue full", body = super::error::Problem, content_type = "application/problem+json", headers(("Retry-After" = u64)))))]
 async fn create_job(
     State(st): State<AppState>,
-    body: Result<Json<JobRequest>, JsonRejection>,
+    body: Result<Json<Value>, JsonRejection>,
 ) -> Result<Response, ApiError> {
-    let Json(req) = body.map_err(|e| json_error(&st, e))?;
+    let req: JobRequest = strict_body(&st, body, "JobRequest")?;
     let shape = st.shapes.get(&req.shape_id).ok_or(ApiError::NotFound { what: "shape", id: req.shape_id.clone() })?;
     let (job, created) = jobs::submit(&st, shape, req.analysis)?;
     Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job.snapshot()))
@@ -695,8 +720,11 @@ async fn analyze(
         .ok_or_else(|| {
         ApiError::bad("invalid-request", "give the analysis as a multipart part or ?analysis=JSON")
     })?;
-    let analysis: Analysis =
+    let value: Value =
         serde_json::from_str(&text).map_err(|e| ApiError::bad("invalid-json", format!("analysis: {e}")))?;
+    super::strict::check_body(&value, "Analysis").map_err(ApiError::UnknownField)?;
+    let analysis: Analysis =
+        serde_json::from_value(value).map_err(|e| ApiError::bad("invalid-json", format!("analysis: {e}")))?;
     up.fields.clear();
     let (_, shape) = ingest(&st, up).await?;
     let (job, _) = jobs::submit(&st, shape, analysis)?;
@@ -767,9 +795,9 @@ fn default_neighbours() -> usize {
               (status = 422, body = super::error::Problem, content_type = "application/problem+json")))]
 async fn compare(
     State(st): State<AppState>,
-    body: Result<Json<CompareRequest>, JsonRejection>,
+    body: Result<Json<Value>, JsonRejection>,
 ) -> Result<Json<Value>, ApiError> {
-    let Json(req) = body.map_err(|e| json_error(&st, e))?;
+    let req: CompareRequest = strict_body(&st, body, "CompareRequest")?;
     if req.k > st.config.max_k {
         return Err(ApiError::Limit {
             code: "k-too-large",

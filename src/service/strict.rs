@@ -1,0 +1,321 @@
+//! Strict requests: every field of a request body, at every level, and every query parameter must be one that the
+//! OpenAPI document declares at that place. Anything else is a 422 `invalid-request` problem that names the
+//! field's JSON pointer, the closest valid name ("did you mean `normalization`?") and, for a field that belongs
+//! one level down, where it goes ("`boundary` belongs in `operator`"). The check walks the document served at
+//! `/openapi.json`, so what the server enforces and what it documents are one thing.
+//!
+//! Walking a schema: `$ref` is followed; `allOf` members add their properties (a flattened struct); of a `oneOf`
+//! whose branches are objects tagged by a one-value `enum` property (an internally tagged enum such as
+//! `Analysis`), the branch named by the value's tag is taken; a `oneOf` that wraps one object schema (`Option<T>`,
+//! a documented default) is that schema. An object schema without declared properties (free-form JSON, maps) is
+//! not checked. Depends on the OpenAPI document only; no HTTP types.
+
+use serde_json::{Map, Value};
+use std::collections::BTreeSet;
+use std::sync::OnceLock;
+
+/// A field or parameter the document does not declare where it was sent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unknown {
+    /// JSON pointer of the field (RFC 6901), or `?name` for a query parameter.
+    pub pointer: String,
+    pub name: String,
+    /// The closest declared name at that place, when one is close.
+    pub suggestion: Option<String>,
+    /// The object field (one level down) that declares this name, when one does.
+    pub belongs_in: Option<String>,
+    /// Every name declared at that place.
+    pub allowed: Vec<String>,
+}
+
+impl Unknown {
+    pub fn detail(&self) -> String {
+        let what = if self.pointer.starts_with('?') { "query parameter" } else { "field" };
+        let mut d = format!("unknown {what} `{}` at {}", self.name, self.pointer);
+        if let Some(parent) = &self.belongs_in {
+            d.push_str(&format!(": `{}` belongs in `{parent}`", self.name));
+        } else if let Some(s) = &self.suggestion {
+            d.push_str(&format!(": did you mean `{s}`?"));
+        }
+        if self.allowed.is_empty() {
+            d.push_str(" (none are accepted here)");
+        } else {
+            d.push_str(&format!(" (accepted: {})", self.allowed.join(", ")));
+        }
+        d
+    }
+}
+
+/// The served OpenAPI document as JSON (built once).
+fn document() -> &'static Value {
+    static DOC: OnceLock<Value> = OnceLock::new();
+    DOC.get_or_init(|| serde_json::from_str(&super::openapi::document()).unwrap_or(Value::Null))
+}
+
+fn resolve<'a>(doc: &'a Value, schema: &'a Value) -> &'a Value {
+    let mut s = schema;
+    for _ in 0..16 {
+        match s.get("$ref").and_then(Value::as_str).and_then(|r| r.strip_prefix("#/components/schemas/")) {
+            Some(name) => match doc.pointer(&format!("/components/schemas/{name}")) {
+                Some(next) => s = next,
+                None => break,
+            },
+            None => break,
+        }
+    }
+    s
+}
+
+/// The one-value `enum` of a tag property of an object schema: `Some((property, value))`.
+fn tag_of<'a>(doc: &'a Value, branch: &'a Value) -> Option<(&'a str, &'a str)> {
+    let b = resolve(doc, branch);
+    b.get("properties")?.as_object()?.iter().find_map(|(name, p)| {
+        let e = resolve(doc, p).get("enum")?.as_array()?;
+        (e.len() == 1).then(|| e[0].as_str().map(|v| (name.as_str(), v))).flatten()
+    })
+}
+
+/// The object schemas that together describe `value` at this place (several for `allOf`), or `None` when the place
+/// is not checked (free-form, or a tagged union whose tag matches no branch: the deserializer names that error).
+fn object_parts<'a>(doc: &'a Value, schema: &'a Value, value: &Map<String, Value>, out: &mut Vec<&'a Value>) -> bool {
+    let s = resolve(doc, schema);
+    let mut any = false;
+    if s.get("properties").is_some_and(Value::is_object) {
+        out.push(s);
+        any = true;
+    }
+    if let Some(all) = s.get("allOf").and_then(Value::as_array) {
+        for member in all {
+            if !object_parts(doc, member, value, out) {
+                return false;
+            }
+            any = true;
+        }
+    }
+    for key in ["oneOf", "anyOf"] {
+        let Some(branches) = s.get(key).and_then(Value::as_array) else { continue };
+        let objects: Vec<&Value> = branches
+            .iter()
+            .filter(|b| {
+                let r = resolve(doc, b);
+                r.get("properties").is_some() || r.get("allOf").is_some() || r.get("oneOf").is_some()
+            })
+            .collect();
+        let tagged: Vec<(&Value, (&str, &str))> =
+            objects.iter().filter_map(|b| tag_of(doc, b).map(|t| (*b, t))).collect();
+        let chosen = if objects.len() == 1 {
+            objects[0]
+        } else if !tagged.is_empty() && tagged.len() == objects.len() {
+            let (prop, _) = tagged[0].1;
+            match tagged.iter().find(|(_, (p, v))| *p == prop && value.get(prop).and_then(Value::as_str) == Some(*v)) {
+                Some((b, _)) => b,
+                None => return false,
+            }
+        } else {
+            return false;
+        };
+        if !object_parts(doc, chosen, value, out) {
+            return false;
+        }
+        any = true;
+    }
+    any
+}
+
+/// The schema of the items of an array schema (through `$ref` and one-object `oneOf` wrappers).
+fn items_of<'a>(doc: &'a Value, schema: &'a Value) -> Option<&'a Value> {
+    let s = resolve(doc, schema);
+    if let Some(items) = s.get("items") {
+        return Some(items);
+    }
+    let branches = s.get("oneOf").or_else(|| s.get("anyOf"))?.as_array()?;
+    branches.iter().find_map(|b| items_of(doc, b))
+}
+
+fn escape(name: &str) -> String {
+    name.replace('~', "~0").replace('/', "~1")
+}
+
+/// Levenshtein distance (names are short).
+fn distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for j in 0..b.len() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != b[j])).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
+}
+
+/// The closest of `allowed` to `name`: within a third of the name's length (at least 2 edits), or the same with
+/// `-`/`_` and case ignored.
+fn closest(name: &str, allowed: &[String]) -> Option<String> {
+    let norm = |s: &str| s.to_ascii_lowercase().replace('-', "_");
+    if let Some(a) = allowed.iter().find(|a| norm(a) == norm(name)) {
+        return Some(a.clone());
+    }
+    let limit = (name.chars().count() / 3).max(2);
+    allowed
+        .iter()
+        .map(|a| (distance(&norm(name), &norm(a)), a))
+        .filter(|(d, _)| *d <= limit)
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, a)| a.clone())
+}
+
+fn check_object(doc: &Value, schema: &Value, value: &Map<String, Value>, pointer: &str) -> Result<(), Unknown> {
+    let mut parts = Vec::new();
+    if !object_parts(doc, schema, value, &mut parts) {
+        return Ok(());
+    }
+    let mut properties: Vec<(&String, &Value)> = Vec::new();
+    for p in &parts {
+        if let Some(props) = p.get("properties").and_then(Value::as_object) {
+            properties.extend(props.iter());
+        }
+    }
+    let allowed: Vec<String> =
+        properties.iter().map(|(n, _)| (*n).clone()).collect::<BTreeSet<_>>().into_iter().collect();
+    for (key, v) in value {
+        let here = format!("{pointer}/{}", escape(key));
+        match properties.iter().find(|(n, _)| *n == key) {
+            Some((_, sub)) => check_value(doc, sub, v, &here)?,
+            None => {
+                // A name declared one level down (in an object-valued field) is a misplaced field.
+                let belongs_in = properties.iter().find_map(|(n, sub)| {
+                    let mut inner = Vec::new();
+                    object_parts(doc, sub, &Map::new(), &mut inner);
+                    inner.iter().any(|p| p.get("properties").and_then(|x| x.get(key)).is_some()).then(|| (*n).clone())
+                });
+                return Err(Unknown {
+                    pointer: here,
+                    name: key.clone(),
+                    suggestion: closest(key, &allowed),
+                    belongs_in,
+                    allowed,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+fn check_value(doc: &Value, schema: &Value, value: &Value, pointer: &str) -> Result<(), Unknown> {
+    match value {
+        Value::Object(map) => check_object(doc, schema, map, pointer),
+        Value::Array(items) => match items_of(doc, schema) {
+            Some(item_schema) => {
+                for (i, v) in items.iter().enumerate() {
+                    check_value(doc, item_schema, v, &format!("{pointer}/{i}"))?;
+                }
+                Ok(())
+            }
+            None => Ok(()),
+        },
+        _ => Ok(()),
+    }
+}
+
+/// Checks a request body against the named component schema of the served document.
+pub fn check_body(value: &Value, schema: &str) -> Result<(), Unknown> {
+    let doc = document();
+    let schema = serde_json::json!({ "$ref": format!("#/components/schemas/{schema}") });
+    check_value(doc, &schema, value, "")
+}
+
+/// Checks query parameter names against those the document declares for the operation (`path` as routed, e.g.
+/// `/v1/jobs/{id}`).
+pub fn check_query(path: &str, method: &str, query: &str) -> Result<(), Unknown> {
+    let doc = document();
+    let Some(op) = doc.get("paths").and_then(|p| p.get(path)).and_then(|p| p.get(method.to_ascii_lowercase())) else {
+        return Ok(());
+    };
+    let allowed: Vec<String> = op
+        .get("parameters")
+        .and_then(Value::as_array)
+        .map(|ps| {
+            ps.iter()
+                .filter(|p| p.get("in").and_then(Value::as_str) == Some("query"))
+                .filter_map(|p| p.get("name").and_then(Value::as_str).map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    for (name, _) in form_urlencoded::parse(query.as_bytes()) {
+        if !allowed.iter().any(|a| *a == name) {
+            return Err(Unknown {
+                pointer: format!("?{name}"),
+                name: name.to_string(),
+                suggestion: closest(&name, &allowed),
+                belongs_in: None,
+                allowed: allowed.clone(),
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn misspelt_fields_get_the_closest_name() {
+        let e = check_body(
+            &json!({"shape_id": "x", "analysis": "shape-dna", "options": {"normalisation": "area"}}),
+            "JobRequest",
+        )
+        .unwrap_err();
+        assert_eq!(e.pointer, "/options/normalisation");
+        assert_eq!(e.suggestion.as_deref(), Some("normalization"));
+    }
+
+    #[test]
+    fn misplaced_fields_say_where_they_belong() {
+        let e = check_body(&json!({"shape_id": "x", "analysis": "spectrum", "boundary": "dirichlet"}), "JobRequest")
+            .unwrap_err();
+        assert_eq!((e.pointer.as_str(), e.belongs_in.as_deref()), ("/boundary", Some("operator")));
+        assert!(e.detail().contains("`boundary` belongs in `operator`"), "{}", e.detail());
+    }
+
+    #[test]
+    fn a_field_of_another_analysis_is_unknown_here() {
+        // `scale_invariant` is no field of `hks` (the scale-invariant form is the `si-hks` analysis).
+        let e = check_body(&json!({"shape_id": "x", "analysis": "hks", "scale_invariant": true}), "JobRequest")
+            .unwrap_err();
+        assert_eq!(e.pointer, "/scale_invariant");
+    }
+
+    #[test]
+    fn valid_requests_pass_at_every_level() {
+        for body in [
+            json!({"shape_id": "x", "analysis": "spectrum", "k": 5, "operator": {"boundary": "dirichlet"},
+                   "solver": {"tol": 1e-9, "verify": false}}),
+            json!({"shape_id": "x", "analysis": "hks", "options": {"count": 10, "scale": true}}),
+            json!({"shape_id": "x", "analysis": "interpolate", "values": [[0, 1.0], [3, 2.0]]}),
+            json!({"shape_id": "x", "analysis": "no-such-analysis"}),
+        ] {
+            check_body(&body, "JobRequest").unwrap_or_else(|e| panic!("{body}: {}", e.detail()));
+        }
+    }
+
+    #[test]
+    fn query_parameters_are_checked_against_the_operation() {
+        assert!(check_query("/v1/analyze", "POST", "wait=1&format=off").is_ok());
+        let e = check_query("/v1/analyze", "POST", "wiat=1").unwrap_err();
+        assert_eq!((e.pointer.as_str(), e.suggestion.as_deref()), ("?wiat", Some("wait")));
+    }
+
+    #[test]
+    fn edit_distance() {
+        assert_eq!(distance("normalisation", "normalization"), 1);
+        assert_eq!(distance("", "abc"), 3);
+        assert_eq!(closest("K", &["k".into(), "operator".into()]).as_deref(), Some("k"));
+        assert_eq!(closest("zzzzzz", &["k".into()]), None);
+    }
+}
