@@ -645,3 +645,90 @@ fn misspelt_and_misplaced_fields_are_refused_with_a_suggestion() {
         submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 3, "operator": { "boundary": "neumann" } }));
     assert_eq!(r.status, 202, "{}", r.body);
 }
+
+/// Issue 15: sixteen simultaneous uploads of one new shape, fifty rounds, a SIGKILL after every round (in every
+/// other round while the uploads are still arriving). Every answer that came back is 201 for exactly one caller
+/// and 200 for the rest, all naming one id and one stored format; in rounds with two formats of one mesh (OFF and
+/// PLY) the stored file is the winner's. After each restart every listed shape is readable and every shape a
+/// caller was told about is listed, so no accepted upload is lost and the file and the record never disagree.
+#[test]
+fn simultaneous_uploads_store_one_shape_and_survive_kill_9() {
+    const UPLOADERS: usize = 16;
+    let mut dir = tempfile::tempdir().unwrap();
+    let mut accepted: Vec<String> = vec![];
+    for round in 0..50 {
+        let (s, _) = Server::start_in(dir, &[]);
+        // What the last round left: every shape a caller was told about, each listed one readable.
+        let listed = reply(agent().get(&s.url("/v1/shapes?limit=1000")).call());
+        let items = listed.body["items"].as_array().unwrap_or_else(|| panic!("{}", listed.body)).clone();
+        for id in &accepted {
+            assert!(items.iter().any(|i| i["id"] == id.as_str()), "round {round}: accepted shape {id} is not listed");
+        }
+        for item in &items {
+            let g = reply(agent().get(&s.url(&format!("/v1/shapes/{}", item["id"].as_str().unwrap()))).call());
+            assert_eq!(g.status, 200, "round {round}: listed shape {item} is not readable: {}", g.body);
+            assert_eq!(g.body["format"], item["format"], "round {round}");
+        }
+        let mut mesh = kac_core::geometry::generate::icosphere(2);
+        for p in &mut mesh.vertices {
+            p[0] += round as f64;
+        }
+        let off = kac_core::io::write::off(&mesh).into_bytes();
+        let ply = kac_core::io::write::ply(&kac_core::Shape::TriangleMesh(mesh), round % 4 == 1, None);
+        let two_formats = round % 2 == 1;
+        let kill_midway = round % 2 == 0 && round > 0;
+        let barrier = std::sync::Arc::new(std::sync::Barrier::new(UPLOADERS));
+        let url = s.url("/v1/shapes");
+        let threads: Vec<_> = (0..UPLOADERS)
+            .map(|i| {
+                let (barrier, url) = (barrier.clone(), url.clone());
+                let (bytes, format) =
+                    if two_formats && i % 2 == 1 { (ply.clone(), "ply") } else { (off.clone(), "off") };
+                std::thread::spawn(move || {
+                    barrier.wait();
+                    match agent().post(&format!("{url}?format={format}")).send_bytes(&bytes) {
+                        Ok(r) => Some((r.status(), r.into_json::<Value>().unwrap())),
+                        Err(ureq::Error::Status(c, r)) => Some((c, r.into_json::<Value>().unwrap_or(Value::Null))),
+                        Err(_) if kill_midway => None,
+                        Err(e) => panic!("transport error: {e}"),
+                    }
+                })
+            })
+            .collect();
+        let mut server = Some(s);
+        let mut killed = None;
+        if kill_midway {
+            std::thread::sleep(Duration::from_millis(2 * (round as u64 % 7)));
+            killed = server.take().map(|s| s.stop(false).0);
+        }
+        let answers: Vec<(u16, Value)> = threads.into_iter().filter_map(|t| t.join().unwrap()).collect();
+        for (code, body) in &answers {
+            assert!(*code == 200 || *code == 201, "round {round}: {code} {body}");
+        }
+        let created = answers.iter().filter(|(c, _)| *c == 201).count();
+        if !kill_midway {
+            assert_eq!(answers.len(), UPLOADERS);
+            assert_eq!(created, 1, "round {round}: exactly one caller creates the shape");
+        } else {
+            assert!(created <= 1, "round {round}: {created} callers were told they created the shape");
+        }
+        if let Some((_, first)) = answers.first() {
+            for (_, body) in &answers {
+                assert_eq!((&body["id"], &body["format"]), (&first["id"], &first["format"]), "round {round}");
+            }
+            accepted.push(first["id"].as_str().unwrap().to_string());
+        }
+        dir = match (killed, server) {
+            (Some(d), _) => d,
+            (None, Some(s)) => s.stop(false).0,
+            (None, None) => unreachable!("the server is killed midway or stopped here"),
+        };
+    }
+    assert!(accepted.len() >= 25, "most rounds were answered: {}", accepted.len());
+    // The last one once more, through a job: the stored file parses as its record says.
+    let (s, _) = Server::start_in(dir, &[]);
+    let last = accepted.last().unwrap();
+    let r = submit(&s, json!({ "shape_id": last, "analysis": "spectrum", "k": 4 }));
+    assert_eq!(r.status, 202, "{}", r.body);
+    assert_eq!(wait_done(&s, r.body["id"].as_str().unwrap())["status"], "succeeded");
+}

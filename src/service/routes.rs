@@ -350,8 +350,11 @@ async fn ingest(st: &AppState, up: Upload) -> Result<(bool, Arc<StoredShape>), A
         summary,
     };
     let stored = StoredShape { record, validated: v };
-    st.shapes
-        .insert(stored, &up.bytes)
+    // Storing writes and fsyncs a file and a record: on the blocking pool, off the request threads.
+    let shapes = st.shapes.clone();
+    tokio::task::spawn_blocking(move || shapes.insert(stored, &up.bytes))
+        .await
+        .map_err(|e| ApiError::Internal { detail: format!("storing panicked: {e}") })?
         .map_err(|e| ApiError::Internal { detail: format!("the shape could not be stored: {e}") })
 }
 

@@ -104,6 +104,9 @@ pub trait JobStore: Send + Sync {
 pub struct Database {
     conn: Mutex<rusqlite::Connection>,
     shape_dir: PathBuf,
+    /// Locks striped by shape id: an insert or removal of one id (its file and its record together) runs alone, so
+    /// simultaneous uploads of one shape, in one format or several, store one file and one record that agree.
+    id_locks: [Mutex<()>; ID_LOCKS],
     /// Parsed shapes in memory, bounded by (about) their size.
     parsed: Mutex<ByteLru<StoredShape>>,
     max_vertices: usize,
@@ -113,6 +116,8 @@ pub struct Database {
 fn shape_size(s: &StoredShape) -> usize {
     2 * s.bytes + 48 * s.validated.shape.vertex_count()
 }
+
+const ID_LOCKS: usize = 64;
 
 fn db_err(e: rusqlite::Error) -> std::io::Error {
     std::io::Error::other(format!("sqlite: {e}"))
@@ -134,10 +139,21 @@ impl Database {
                  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, view TEXT NOT NULL);",
         )
         .map_err(db_err)?;
-        Ok(Database { conn: Mutex::new(conn), shape_dir, parsed: Mutex::new(ByteLru::new(cache_bytes)), max_vertices })
+        Ok(Database {
+            conn: Mutex::new(conn),
+            shape_dir,
+            id_locks: std::array::from_fn(|_| Mutex::new(())),
+            parsed: Mutex::new(ByteLru::new(cache_bytes)),
+            max_vertices,
+        })
     }
     fn conn(&self) -> std::sync::MutexGuard<'_, rusqlite::Connection> {
         self.conn.lock().unwrap_or_else(|e| e.into_inner())
+    }
+    /// The lock of `id`'s stripe (ids are hex digests: their first bytes are uniform).
+    fn id_lock(&self, id: &str) -> std::sync::MutexGuard<'_, ()> {
+        let h = id.bytes().take(8).fold(0usize, |h, b| h.wrapping_mul(31).wrapping_add(b as usize));
+        self.id_locks[h % ID_LOCKS].lock().unwrap_or_else(|e| e.into_inner())
     }
     fn record(&self, id: &str) -> Option<ShapeRecord> {
         let c = self.conn();
@@ -158,22 +174,25 @@ fn row_record(r: &rusqlite::Row<'_>) -> rusqlite::Result<ShapeRecord> {
 
 impl ShapeStore for Database {
     fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)> {
+        // One writer per id from the check to the record: the first upload's file and record win together, and
+        // every other caller gets the stored shape (in the first one's format) back.
+        let _id = self.id_lock(&shape.id);
         if let Some(existing) = self.get(&shape.id) {
             return Ok((false, existing));
         }
-        // The upload first (atomically), then its record: a crash between leaves an unreferenced file only.
+        // The upload first (atomically), then its record: a crash between leaves an unreferenced file only, which
+        // the next upload of that id replaces.
         write_atomic(&self.shape_dir.join(&shape.id), original)?;
         let r = &shape.record;
-        let inserted = self
-            .conn()
+        self.conn()
             .execute(
-                "INSERT OR IGNORE INTO shapes (id, format, created_at, bytes, summary) VALUES (?1, ?2, ?3, ?4, ?5)",
+                "INSERT INTO shapes (id, format, created_at, bytes, summary) VALUES (?1, ?2, ?3, ?4, ?5)",
                 rusqlite::params![r.id, r.format, r.created_at, r.bytes as i64, r.summary.to_string()],
             )
             .map_err(db_err)?;
         let s = Arc::new(shape);
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(&s.id, s.clone(), shape_size(&s));
-        Ok((inserted == 1, s))
+        Ok((true, s))
     }
     fn get(&self, id: &str) -> Option<Arc<StoredShape>> {
         if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
@@ -202,6 +221,7 @@ impl ShapeStore for Database {
         (out, total as usize)
     }
     fn remove(&self, id: &str) -> bool {
+        let _id = self.id_lock(id);
         let n = self.conn().execute("DELETE FROM shapes WHERE id = ?1", [id]).unwrap_or(0);
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
         let _ = std::fs::remove_file(self.shape_dir.join(id));
@@ -281,15 +301,30 @@ fn result_size(r: &StoredResult) -> usize {
     r.body.len() + r.summary_body.len() + r.arrays.iter().map(|a| 8 * a.data.len()).sum::<usize>()
 }
 
-/// Writes a file atomically: a temporary file beside it, fsync, rename.
+/// Writes a file atomically: a temporary file beside it (named uniquely, so simultaneous writers of one path never
+/// share one), fsync, rename, fsync of the directory. Readers see the old file or the whole new one, never a part,
+/// and a crash at any moment leaves one of the two.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let tmp = path.with_extension(format!("tmp.{}", std::process::id()));
-    {
+    static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = path.with_extension(format!("tmp.{}.{seq}", std::process::id()));
+    let written = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
         f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
     }
-    std::fs::rename(&tmp, path)
+    written?;
+    if let Some(dir) = path.parent() {
+        // The rename itself made durable (where the platform allows opening a directory).
+        if let Ok(d) = std::fs::File::open(dir) {
+            let _ = d.sync_all();
+        }
+    }
+    Ok(())
 }
 
 impl ResultStore for FileResults {
