@@ -303,7 +303,7 @@ impl From<spectrum::EigenError> for AnalysisError {
     }
 }
 
-fn bad(code: &'static str, message: impl Into<String>) -> AnalysisError {
+pub(crate) fn bad(code: &'static str, message: impl Into<String>) -> AnalysisError {
     AnalysisError { code, message: message.into(), client: true }
 }
 
@@ -440,6 +440,10 @@ pub fn eigenpairs(
     hooks: Hooks<'_>,
     reused: &std::cell::Cell<bool>,
 ) -> Result<Arc<Eigen>, AnalysisError> {
+    if k == 0 {
+        // Before the cache, which holds at least as many pairs as any k and would answer k = 0 with none.
+        return Err(bad("invalid-k", "k = 0: ask for at least one eigenpair (1 ≤ k ≤ the number of unknowns)"));
+    }
     let key = format!("{}:{}", v.id.hex(), spectrum_key(spec, solver));
     if let Some(e) = hooks.cache.and_then(|c| c.get(&key, k)) {
         reused.set(true);

@@ -732,3 +732,134 @@ fn simultaneous_uploads_store_one_shape_and_survive_kill_9() {
     assert_eq!(r.status, 202, "{}", r.body);
     assert_eq!(wait_done(&s, r.body["id"].as_str().unwrap())["status"], "succeeded");
 }
+
+/// Issue 15, item 7: what a hostile client sends gets a 4xx with a useful detail, never a 5xx, a hang or a crash.
+#[test]
+fn hostile_requests_get_a_4xx_that_says_what_is_wrong() {
+    let s = Server::start(&[]);
+    let off = icosphere_off(1);
+    let id = upload(&s, &off, "?format=off").body["id"].as_str().unwrap().to_string();
+    // wait=NaN (and infinities) is refused before any job is queued; the server keeps answering.
+    for w in ["NaN", "inf", "-inf"] {
+        let r = reply(
+            agent()
+                .post(
+                    &s.url(&format!("/v1/analyze?format=off&wait={w}&analysis=%7B%22analysis%22%3A%22spectrum%22%7D")),
+                )
+                .send_bytes(&off),
+        );
+        assert_problem(&r, 400, "invalid-request");
+        assert!(r.body["detail"].as_str().unwrap().contains("finite"), "{}", r.body);
+    }
+    assert_eq!(reply(agent().get(&s.url("/v1/jobs")).call()).body["total"], 0, "no job was queued");
+    // k = 0: one answer on every path, also once a spectrum of the shape is cached.
+    let done = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 5 }));
+    wait_done(&s, done.body["id"].as_str().unwrap());
+    assert_problem(&submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 0 })), 422, "invalid-k");
+    assert_problem(&submit(&s, json!({ "shape_id": id, "analysis": "hks", "k": 0 })), 422, "invalid-k");
+    assert_problem(
+        &submit(&s, json!({ "shape_id": id, "analysis": "shape-dna", "options": { "k": 0 } })),
+        422,
+        "invalid-k",
+    );
+    let r = reply(
+        agent()
+            .post(&s.url("/v1/analyze?format=off&analysis=%7B%22analysis%22%3A%22spectrum%22%2C%22k%22%3A0%7D"))
+            .send_bytes(&off),
+    );
+    assert_problem(&r, 422, "invalid-k");
+    // A compressed body is refused as such, not sniffed as some format.
+    let r = reply(agent().post(&s.url("/v1/shapes")).set("content-encoding", "gzip").send_bytes(&[0x1f, 0x8b, 8, 0]));
+    assert_problem(&r, 415, "unsupported-media-type");
+    assert!(r.body["detail"].as_str().unwrap().contains("gzip"), "{}", r.body);
+    let r = reply(
+        agent()
+            .post(&s.url("/v1/jobs"))
+            .set("content-encoding", "br")
+            .set("content-type", "application/json")
+            .send_string("{}"),
+    );
+    assert_problem(&r, 415, "unsupported-media-type");
+    // OFF bytes declared as STL: the format tried, what the bytes look like, how they begin (was 413
+    // "element count 856307232").
+    let r = reply(agent().post(&s.url("/v1/shapes")).set("content-type", "model/stl").send_bytes(&off));
+    assert_problem(&r, 415, "format-mismatch");
+    let detail = r.body["detail"].as_str().unwrap();
+    assert!(detail.contains("not stl") && detail.contains("look like off") && detail.contains("OFF"), "{detail}");
+    // A PLY declared as OBJ, likewise.
+    let ply = kac_core::io::write::ply(
+        &kac_core::Shape::TriangleMesh(kac_core::geometry::generate::icosphere(1)),
+        true,
+        None,
+    );
+    let r = upload(&s, &ply, "?format=obj");
+    assert_problem(&r, 415, "format-mismatch");
+    assert_eq!(r.body["error"]["looks_like"], "ply", "{}", r.body);
+    assert_eq!(reply(agent().get(&s.url("/livez")).call()).status, 200);
+}
+
+/// Issue 15, item 4: the job clock counts running time only. One worker, jobs of 0.7 s each, a 1 s limit: the
+/// fourth waits 2 s in the queue and still runs to the end.
+#[test]
+fn a_job_queued_longer_than_the_time_limit_still_runs() {
+    let s = Server::start(&["--workers", "1", "--job-timeout-s", "1", "--test-job-delay-ms", "700"]);
+    let id = upload(&s, &icosphere_off(1), "?format=off").body["id"].as_str().unwrap().to_string();
+    let jobs: Vec<String> = (3..7)
+        .map(|k| {
+            let r = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": k }));
+            assert_eq!(r.status, 202, "{}", r.body);
+            r.body["id"].as_str().unwrap().to_string()
+        })
+        .collect();
+    for j in &jobs {
+        let done = wait_done(&s, j);
+        assert_eq!(done["status"], "succeeded", "{done}");
+        assert!(done["started_at"].is_string(), "{done}");
+    }
+    let last = wait_done(&s, &jobs[3]);
+    let (created, started) = (last["created_at"].as_str().unwrap(), last["started_at"].as_str().unwrap());
+    assert!(started > created, "the last job waited in the queue: {last}");
+}
+
+/// Issue 15, item 3: every descriptor size is checked against its limit before anything is allocated (one request
+/// grew the process to 7.6 GB before), and the problem names the field and the flag that raises the limit.
+#[test]
+fn descriptor_sizes_and_outputs_are_bounded_at_submission() {
+    let s = Server::start(&["--max-samples", "1000", "--max-output-values", "100000"]);
+    let id = upload(&s, &icosphere_off(3), "?format=off").body["id"].as_str().unwrap().to_string();
+    let refused = [
+        (
+            json!({ "analysis": "si-hks", "options": { "samples": 1_000_000_000u64 } }),
+            "too-many-samples",
+            "options.samples",
+        ),
+        (json!({ "analysis": "hks", "options": { "count": 10_000_000 } }), "too-many-samples", "options.count"),
+        (
+            json!({ "analysis": "wks", "options": { "energies": vec![0.5; 1001] } }),
+            "too-many-samples",
+            "options.energies",
+        ),
+        (json!({ "analysis": "heat", "sources": [0], "times": vec![0.1; 1001] }), "too-many-samples", "times"),
+        (json!({ "analysis": "geodesic", "sources": vec![0; 1001] }), "too-many-samples", "sources"),
+        // 642 vertices × 200 eigenvectors = 128,400 values > 100,000.
+        (json!({ "analysis": "spectrum", "k": 200 }), "output-too-large", "642 vertices × 200 columns"),
+        (
+            json!({ "analysis": "heat", "k": 20, "sources": vec![0; 20], "times": vec![0.1; 10] }),
+            "output-too-large",
+            "× 200 columns",
+        ),
+    ];
+    for (mut req, code, names) in refused {
+        req["shape_id"] = json!(id);
+        let r = submit(&s, req.clone());
+        assert_problem(&r, 413, code);
+        let detail = r.body["detail"].as_str().unwrap();
+        let flag = if code == "too-many-samples" { "--max-samples" } else { "--max-output-values" };
+        assert!(detail.contains(names) && detail.contains(flag), "{req}: {detail}");
+    }
+    assert_eq!(reply(agent().get(&s.url("/v1/jobs")).call()).body["total"], 0, "nothing was queued");
+    // Within the limits the same analyses run.
+    let ok = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 100 }));
+    assert_eq!(ok.status, 202, "{}", ok.body);
+    assert_eq!(wait_done(&s, ok.body["id"].as_str().unwrap())["status"], "succeeded");
+}

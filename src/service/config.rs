@@ -27,6 +27,14 @@ pub struct Config {
     /// Largest number of eigenpairs an analysis may ask for.
     #[arg(long, env = "KAC_MAX_K", default_value_t = 1000)]
     pub max_k: usize,
+    /// Largest count of any list or grid a descriptor takes (times, energies, τ samples, frequencies, sources,
+    /// implicit steps, interpolation values); beyond it, 413 `too-many-samples` before anything is allocated.
+    #[arg(long, env = "KAC_MAX_SAMPLES", default_value_t = 10_000)]
+    pub max_samples: usize,
+    /// Largest number of values (vertices × columns) of any per-vertex array an analysis holds or returns,
+    /// eigenvectors included (k × vertices); beyond it, 413 `output-too-large` at submission.
+    #[arg(long, env = "KAC_MAX_OUTPUT_VALUES", default_value_t = 200_000_000)]
+    pub max_output_values: usize,
     /// Seconds a job may run before it is stopped and failed.
     #[arg(long, env = "KAC_JOB_TIMEOUT_S", default_value_t = 600)]
     pub job_timeout_s: u64,

@@ -81,7 +81,9 @@ impl ApiError {
         let (status, code, title, detail): (StatusCode, &str, &str, String) = match self {
             ApiError::Shape(e) => {
                 let status = match e {
-                    ShapeError::UnknownFormat { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                    ShapeError::UnknownFormat { .. } | ShapeError::FormatMismatch { .. } => {
+                        StatusCode::UNSUPPORTED_MEDIA_TYPE
+                    }
                     ShapeError::LimitExceeded { .. } => StatusCode::PAYLOAD_TOO_LARGE,
                     ShapeError::Io { .. } => StatusCode::INTERNAL_SERVER_ERROR,
                     ShapeError::Syntax { .. }
@@ -225,6 +227,11 @@ pub const CODES: &[(&str, &str)] = &[
     ("invalid-element", "An element breaks a rule (too few vertices, repeated index, …); the detail names it."),
     ("empty-shape", "Nothing usable is left after validation."),
     ("unsupported-content", "The file uses a feature of its format that kac does not read."),
+    (
+        "format-mismatch",
+        "The bytes could not be read as the format given (by ?format=, the media type or the file name) and look like \
+         another format; the problem names both and how the bytes begin. Send the right format name.",
+    ),
     ("unknown-format", "No format was given and none could be recognized."),
     ("limit-exceeded", "The shape is larger than the configured limit (--max-vertices)."),
     ("io-error", "The server could not read or write its storage."),
@@ -241,6 +248,16 @@ pub const CODES: &[(&str, &str)] = &[
     ("unsupported-media-type", "The Content-Type cannot be used here."),
     ("queue-full", "The job queue is at capacity; retry after Retry-After seconds."),
     ("k-too-large", "k exceeds the configured limit (--max-k)."),
+    (
+        "too-many-samples",
+        "A list or grid of the request (times, energies, τ samples, frequencies, sources, steps, values) is longer \
+         than --max-samples; the detail names the field.",
+    ),
+    (
+        "output-too-large",
+        "The analysis would hold a per-vertex array (eigenvectors included) of more than --max-output-values \
+         values (vertices × columns); the detail gives both.",
+    ),
     ("unauthorized", "The service requires an API key (Authorization: Bearer KEY) and none was sent."),
     ("forbidden", "The API key sent is not one the service accepts."),
     ("rate-limited", "The key exceeded its requests per minute; retry after Retry-After seconds."),

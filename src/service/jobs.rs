@@ -158,6 +158,7 @@ impl Jobs {
 /// Submits a job, or returns the existing one for the same request (true: newly enqueued).
 pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(Arc<Job>, bool), ApiError> {
     check_limits(state, &analysis)?;
+    check_work(state, &analysis, shape.validated.shape.vertex_count())?;
     let canonical = serde_json::to_value(&analysis).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
     let id = job_id(&shape.id, &canonical);
     let jobs = &state.jobs;
@@ -203,12 +204,26 @@ pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> 
     Ok((job, true))
 }
 
-/// Runs a job on the pool, with a timer that stops it when it runs too long.
+/// Runs a job on the pool, with a timer that stops it when it runs too long. The clock starts when the job starts
+/// running (status `processing`): time spent waiting in the queue does not count against `--job-timeout-s`.
 fn start(state: &AppState, job: Arc<Job>, shape: Arc<StoredShape>) {
     let (st, j) = (state.clone(), job.clone());
     state.jobs.pool.spawn_fifo(move || execute(&st, &j, &shape));
     let timeout = std::time::Duration::from_secs(state.config.job_timeout_s);
     tokio::spawn(async move {
+        let mut rx = job.view.subscribe();
+        loop {
+            let status = rx.borrow_and_update().status;
+            if status.terminal() {
+                return;
+            }
+            if status == Status::Processing {
+                break;
+            }
+            if rx.changed().await.is_err() {
+                return;
+            }
+        }
         tokio::time::sleep(timeout).await;
         if !job.snapshot().status.terminal() {
             job.timed_out.store(true, Ordering::SeqCst);
@@ -289,21 +304,93 @@ pub fn recover(state: &AppState) -> std::io::Result<usize> {
 }
 
 fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
-    let k = match a {
+    // Every analysis says whether it asks for eigenpairs, and how many (no default arm: a new one must say).
+    let asked = match a {
         Analysis::Spectrum { k, .. }
         | Analysis::Hks { k, .. }
         | Analysis::SiHks { k, .. }
         | Analysis::Wks { k, .. }
         | Analysis::Gps { k, .. }
-        | Analysis::Heat { k, .. } => *k,
-        Analysis::ShapeDna { options, .. } => options.k,
-        Analysis::Embed { dimensions, .. } => *dimensions,
-        _ => 0,
+        | Analysis::Heat { k, .. } => Some(("k", *k)),
+        Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
+        Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
+        Analysis::Geodesic { .. } | Analysis::Trees { .. } | Analysis::Smooth { .. } | Analysis::Interpolate { .. } => {
+            None
+        }
     };
+    let Some((what, k)) = asked else { return Ok(()) };
+    if k == 0 {
+        // Refused at submission: the same answer on every path (a job, /v1/analyze, a cached spectrum).
+        return Err(ApiError::Analysis(crate::analysis::bad(
+            "invalid-k",
+            format!("{what} = 0: ask for at least one eigenpair (1 ≤ {what} ≤ the number of unknowns)"),
+        )));
+    }
     if k > state.config.max_k {
         return Err(ApiError::Limit {
             code: "k-too-large",
             detail: format!("k = {k} is above the limit of {} (--max-k)", state.config.max_k),
+        });
+    }
+    Ok(())
+}
+
+/// Bounded work: every list or grid of the request against `--max-samples`, and the widest per-vertex array the
+/// analysis will hold (eigenvectors included) against `--max-output-values`, before anything is allocated.
+fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(), ApiError> {
+    let len = |v: &Option<Vec<f64>>| v.as_ref().map(Vec::len);
+    // (name of the field, its count) for every list or grid; and the columns of the widest per-vertex array.
+    let (counts, columns): (Vec<(&str, usize)>, usize) = match a {
+        // The k eigenvectors are held (and cached) whether or not they are returned.
+        Analysis::Spectrum { k, .. } => (vec![], *k),
+        Analysis::Hks { k, options, .. } => {
+            let t = len(&options.times).unwrap_or(options.count);
+            (vec![("options.count", options.count), ("options.times", t)], t.max(*k))
+        }
+        Analysis::SiHks { k, options, .. } => (
+            vec![("options.samples", options.samples), ("options.frequencies", options.frequencies)],
+            options.samples.max(options.frequencies).max(*k),
+        ),
+        Analysis::Wks { k, options, .. } => {
+            let e = len(&options.energies).unwrap_or(options.count);
+            (vec![("options.count", options.count), ("options.energies", e)], e.max(*k))
+        }
+        Analysis::Gps { k, dimensions, .. } => (vec![], dimensions.unwrap_or(*k).max(*k)),
+        Analysis::ShapeDna { options, .. } => (vec![], options.k),
+        Analysis::Heat { k, times, sources, steps, .. } => {
+            let t = len(times).unwrap_or(10);
+            (
+                vec![("times", t), ("sources", sources.len()), ("steps", *steps)],
+                t.saturating_mul(sources.len().max(1)).max(*k),
+            )
+        }
+        Analysis::Geodesic { sources, options } => {
+            (vec![("sources", sources.len()), ("options.varadhan_steps", options.varadhan_steps)], 2)
+        }
+        Analysis::Trees {} => (vec![], 1),
+        Analysis::Embed { dimensions, .. } => (vec![], dimensions.saturating_add(1)),
+        Analysis::Smooth { .. } => (vec![], 3),
+        Analysis::Interpolate { values, labels, .. } => {
+            let classes = labels.iter().map(|l| l.1 as usize + 1).max().unwrap_or(1);
+            (vec![("values", values.len()), ("labels", labels.len()), ("classes in labels", classes)], classes)
+        }
+    };
+    let max = state.config.max_samples;
+    if let Some((name, n)) = counts.into_iter().find(|&(_, n)| n > max) {
+        return Err(ApiError::Limit {
+            code: "too-many-samples",
+            detail: format!("{name} = {n} is above the limit of {max} (--max-samples, KAC_MAX_SAMPLES)"),
+        });
+    }
+    let values = vertices.saturating_mul(columns);
+    let max = state.config.max_output_values;
+    if values > max {
+        return Err(ApiError::Limit {
+            code: "output-too-large",
+            detail: format!(
+                "this analysis holds a per-vertex array of {vertices} vertices × {columns} columns = {values} values, \
+                 above the limit of {max} (--max-output-values, KAC_MAX_OUTPUT_VALUES)"
+            ),
         });
     }
     Ok(())

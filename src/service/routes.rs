@@ -2,7 +2,6 @@
 
 use super::error::{problem_response, ApiError, CODES};
 use super::jobs::{self, JobView, Status};
-use super::openapi::ApiDoc;
 use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis, Hooks, OperatorSpec, SolverSpec};
@@ -21,7 +20,6 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use utoipa::OpenApi;
 use utoipa_swagger_ui::SwaggerUi;
 
 pub fn router(state: AppState) -> Router {
@@ -40,16 +38,25 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/analyze", post(analyze))
         .route("/v1/compare", post(compare))
         .route("/problems/{code}", get(problem_doc))
-        .merge(SwaggerUi::new("/docs").url("/openapi.json", ApiDoc::openapi()))
+        .route("/openapi.json", get(openapi_json))
+        .merge(SwaggerUi::new("/docs").config(utoipa_swagger_ui::Config::from("/openapi.json")))
         .route("/metrics", get(metrics))
         .fallback(not_found)
         .route_layer(axum::middleware::from_fn(strict_query))
+        .route_layer(axum::middleware::from_fn(identity_encoding_only))
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::authorize))
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::observe))
         .layer(DefaultBodyLimit::max(limit))
         .with_state(state);
     // Outside the method routers, where 405 responses already carry their Allow header.
     Router::new().fallback_service(api).layer(axum::middleware::map_response(problem_405))
+}
+
+/// The document `kac openapi` prints (with the request schemas closed, see `openapi::document`), built once.
+async fn openapi_json() -> Response {
+    static DOC: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    let body = DOC.get_or_init(super::openapi::document).clone();
+    ([(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
 async fn not_found(uri: Uri) -> ApiError {
@@ -97,6 +104,23 @@ async fn strict_query(
 ) -> Result<Response, ApiError> {
     if let (Some(path), Some(query)) = (matched.as_ref(), req.uri().query()) {
         super::strict::check_query(path.as_str(), req.method().as_str(), query).map_err(ApiError::UnknownField)?;
+    }
+    Ok(next.run(req).await)
+}
+
+/// The service reads request bodies as sent: a `Content-Encoding` other than `identity` (a gzip-compressed
+/// upload, say) is 415 `unsupported-media-type`, rather than bytes sniffed as some format and refused with a
+/// misleading parse error.
+async fn identity_encoding_only(req: Request, next: axum::middleware::Next) -> Result<Response, ApiError> {
+    if let Some(enc) = req.headers().get(header::CONTENT_ENCODING) {
+        let enc = enc.to_str().unwrap_or("(not text)").trim();
+        if !enc.eq_ignore_ascii_case("identity") && !enc.is_empty() {
+            return Err(ApiError::UnsupportedMediaType {
+                detail: format!(
+                    "Content-Encoding '{enc}' is not decoded here: send the body uncompressed (identity encoding)"
+                ),
+            });
+        }
     }
     Ok(next.run(req).await)
 }
@@ -714,6 +738,10 @@ async fn analyze(
     Query(q): Query<AnalyzeQuery>,
     req: Request,
 ) -> Result<Response, ApiError> {
+    if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
+        // Before the upload is read or a job submitted (a NaN wait panicked the timer after the job was queued).
+        return Err(ApiError::bad("invalid-request", format!("wait = {w}: give a finite number of seconds")));
+    }
     let headers = req.headers().clone();
     let mut up = read_upload(&st, q.format.clone(), req).await?;
     let text = q

@@ -98,6 +98,10 @@ pub enum ShapeError {
     /// A configured limit was exceeded.
     #[error("{what} is {value}, above the limit of {limit}")]
     LimitExceeded { what: String, value: u64, limit: u64 },
+    /// The bytes could not be read as the format given (by name, media type or extension), and they look like
+    /// another format: what was tried, what the bytes look like, and how they begin.
+    #[error("the bytes are not {tried} (read as {tried}: {reason}); they look like {looks_like}, beginning {head}")]
+    FormatMismatch { tried: &'static str, looks_like: &'static str, head: String, reason: String },
     /// The file could not be read from disk.
     #[error("cannot read {path}: {message}")]
     Io { path: String, message: String },
@@ -115,6 +119,7 @@ impl ShapeError {
             ShapeError::Empty { .. } => "empty-shape",
             ShapeError::Unsupported { .. } => "unsupported-content",
             ShapeError::UnknownFormat { .. } => "unknown-format",
+            ShapeError::FormatMismatch { .. } => "format-mismatch",
             ShapeError::LimitExceeded { .. } => "limit-exceeded",
             ShapeError::Io { .. } => "io-error",
         }

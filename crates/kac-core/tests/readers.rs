@@ -231,3 +231,32 @@ fn results_return_in_input_numbering() {
     let codes: Vec<&str> = v.report.repairs.iter().map(|r| r.code).collect();
     assert_eq!(codes, ["welded_vertices", "duplicate_faces", "unreferenced_vertices"]);
 }
+
+/// Bytes of one format read as another: the error names the format tried, what the bytes look like and how they
+/// begin, instead of the wrong reader's complaint (OFF read as binary STL declared 856 million triangles).
+#[test]
+fn a_format_mismatch_names_both_formats() {
+    use kac_core::io::{read_bytes, write, Format, ReadOptions};
+    let mesh = kac_core::geometry::generate::icosphere(1);
+    let off = write::off(&mesh).into_bytes();
+    let ply = write::ply(&kac_core::Shape::TriangleMesh(mesh), true, None);
+    for (bytes, tried, looks_like) in
+        [(&off, Format::Stl, "off"), (&off, Format::Ply, "off"), (&ply, Format::Obj, "ply")]
+    {
+        match read_bytes(bytes, tried, &ReadOptions::default()) {
+            Err(kac_core::ShapeError::FormatMismatch { tried: t, looks_like: l, head, reason }) => {
+                assert_eq!((t, l), (tried.name(), looks_like));
+                assert!(!reason.is_empty() && !head.is_empty());
+                if looks_like == "off" {
+                    assert!(head.starts_with("\"OFF"), "{head}");
+                } else {
+                    assert!(head.starts_with("\"ply"), "{head}");
+                }
+            }
+            other => panic!("{tried:?}: {other:?}"),
+        }
+    }
+    // Bytes of the format given keep the reader's own error.
+    let err = read_bytes(b"OFF\n3 1 0\n0 0 0\n", Format::Off, &ReadOptions::default()).unwrap_err();
+    assert_eq!(err.code(), "truncated-input");
+}

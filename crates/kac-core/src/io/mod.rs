@@ -246,6 +246,39 @@ pub fn choose_format(explicit: Option<Format>, path: Option<&Path>, bytes: &[u8]
 
 /// Reads bytes in the given format.
 pub fn read_bytes(bytes: &[u8], format: Format, options: &ReadOptions) -> Result<RawShape> {
+    read_as(bytes, format, options).map_err(|e| match Format::sniff(bytes) {
+        // The reader's error is about the wrong grammar when the bytes are plainly another format (OFF sent as
+        // STL read a text line as a triangle count of 856 million): say which format was tried and what the
+        // bytes look like instead.
+        Some(other) if other != format && !same_reader(format, other) => ShapeError::FormatMismatch {
+            tried: format.name(),
+            looks_like: other.name(),
+            head: head_of(bytes),
+            reason: e.to_string(),
+        },
+        _ => e,
+    })
+}
+
+/// Formats one reader takes, whose content sniffing cannot tell apart.
+fn same_reader(a: Format, b: Format) -> bool {
+    use Format::*;
+    matches!((a, b), (Gltf, Glb) | (Glb, Gltf) | (Xyz, Csv) | (Csv, Xyz))
+}
+
+/// How the bytes begin, for error messages: up to 24 characters of text (escaped), or the first bytes in hex.
+pub fn head_of(bytes: &[u8]) -> String {
+    let head = &bytes[..bytes.len().min(24)];
+    let text = head.iter().all(|&b| b.is_ascii_graphic() || b.is_ascii_whitespace());
+    if text {
+        format!("{:?}", String::from_utf8_lossy(head))
+    } else {
+        let hex: Vec<String> = bytes.iter().take(12).map(|b| format!("{b:02x}")).collect();
+        format!("with the bytes {}", hex.join(" "))
+    }
+}
+
+fn read_as(bytes: &[u8], format: Format, options: &ReadOptions) -> Result<RawShape> {
     match format {
         Format::Obj => obj::read(bytes, options),
         Format::Off => off::read(bytes, options),
