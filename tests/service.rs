@@ -863,3 +863,76 @@ fn descriptor_sizes_and_outputs_are_bounded_at_submission() {
     assert_eq!(ok.status, 202, "{}", ok.body);
     assert_eq!(wait_done(&s, ok.body["id"].as_str().unwrap())["status"], "succeeded");
 }
+
+/// Reads what the server sends on a raw socket until it closes the connection or `limit` passes.
+fn read_until_closed(s: &mut std::net::TcpStream, limit: Duration) -> (String, bool) {
+    use std::io::Read;
+    s.set_read_timeout(Some(limit)).unwrap();
+    let mut got = vec![];
+    let mut buf = [0u8; 4096];
+    loop {
+        match s.read(&mut buf) {
+            Ok(0) => return (String::from_utf8_lossy(&got).into_owned(), true),
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => {
+                return (String::from_utf8_lossy(&got).into_owned(), true)
+            }
+            Err(_) => return (String::from_utf8_lossy(&got).into_owned(), false),
+        }
+    }
+}
+
+/// Issue 15, item 3: a header that never completes and a body that stalls are cut off, idle sockets cannot hold
+/// more than --max-connections, and the connection over the limit gets a problem, not silence.
+#[test]
+fn slow_and_idle_connections_are_bounded() {
+    use std::io::Write;
+    let s = Server::start(&["--header-read-timeout-s", "1", "--body-read-timeout-s", "1", "--max-connections", "6"]);
+    let addr = s.base.trim_start_matches("http://").to_string();
+    // Half a header: closed after about a second, nothing answered.
+    let t = Instant::now();
+    let mut half = std::net::TcpStream::connect(&addr).unwrap();
+    half.write_all(b"POST /v1/shapes HTTP/1.1\r\nHost: kac\r\n").unwrap();
+    let (_, closed) = read_until_closed(&mut half, Duration::from_secs(5));
+    assert!(closed && t.elapsed() < Duration::from_secs(4), "half a header held for {:?}", t.elapsed());
+    // A body that stalls after 10 of 1000 bytes: 408 body-timeout.
+    let mut slow = std::net::TcpStream::connect(&addr).unwrap();
+    slow.write_all(b"POST /v1/shapes?format=off HTTP/1.1\r\nHost: kac\r\nContent-Length: 1000\r\n\r\nOFF\n3 1 0\n")
+        .unwrap();
+    let (answer, _) = read_until_closed(&mut slow, Duration::from_secs(5));
+    assert!(answer.starts_with("HTTP/1.1 408"), "{answer}");
+    assert!(answer.contains("body-timeout") && answer.contains("--body-read-timeout-s"), "{answer}");
+    // Six idle sockets fill the limit: the seventh connection is answered 503 and closed ...
+    let idle: Vec<_> = (0..6).map(|_| std::net::TcpStream::connect(&addr).unwrap()).collect();
+    std::thread::sleep(Duration::from_millis(200));
+    let over = reply(agent().get(&s.url("/livez")).call());
+    assert_problem(&over, 503, "too-many-connections");
+    assert_eq!(over.retry_after.as_deref(), Some("1"));
+    // ... and once the idle ones are dropped by the header timeout, the server answers again.
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(reply(agent().get(&s.url("/livez")).call()).status, 200);
+    drop(idle);
+    let m = String::from_utf8(reply(agent().get(&s.url("/metrics")).call()).raw).unwrap();
+    assert!(m.lines().any(|l| l.starts_with("kac_connections_refused_total ") && !l.ends_with(" 0")), "{m}");
+}
+
+/// Issue 15, item 3: wrong API keys from one address are throttled after --auth-failures-per-minute: 429 with
+/// Retry-After for the rest of the minute, whatever key it sends.
+#[test]
+fn repeated_wrong_api_keys_are_throttled_per_address() {
+    let s = Server::start(&["--api-keys", "right-key", "--auth-failures-per-minute", "3"]);
+    let call =
+        |key: &str| reply(agent().get(&s.url("/v1/shapes")).set("authorization", &format!("Bearer {key}")).call());
+    assert_eq!(call("right-key").status, 200);
+    for _ in 0..3 {
+        assert_problem(&call("guess"), 403, "forbidden");
+    }
+    let r = call("guess");
+    assert_problem(&r, 429, "rate-limited");
+    assert!(r.body["detail"].as_str().unwrap().contains("--auth-failures-per-minute"), "{}", r.body);
+    let wait: u64 = r.retry_after.as_deref().unwrap().parse().unwrap();
+    assert!((1..=60).contains(&wait), "{wait}");
+    assert_problem(&call("right-key"), 429, "rate-limited");
+    // Health stays public.
+    assert_eq!(reply(agent().get(&s.url("/livez")).call()).status, 200);
+}

@@ -35,6 +35,20 @@ pub struct Config {
     /// eigenvectors included (k × vertices); beyond it, 413 `output-too-large` at submission.
     #[arg(long, env = "KAC_MAX_OUTPUT_VALUES", default_value_t = 200_000_000)]
     pub max_output_values: usize,
+    /// Seconds a client has to send a request's whole header (also the longest idle time of a kept-alive
+    /// connection between requests); then the connection is closed.
+    #[arg(long, env = "KAC_HEADER_READ_TIMEOUT_S", default_value_t = 10.0)]
+    pub header_read_timeout_s: f64,
+    /// Longest pause, in seconds, while a request body is being sent; then 408 `body-timeout`.
+    #[arg(long, env = "KAC_BODY_READ_TIMEOUT_S", default_value_t = 30.0)]
+    pub body_read_timeout_s: f64,
+    /// Connections served at once; one more is answered 503 `too-many-connections` and closed.
+    #[arg(long, env = "KAC_MAX_CONNECTIONS", default_value_t = 1024)]
+    pub max_connections: usize,
+    /// Failed API-key attempts (missing or wrong key) one client address may make per minute; beyond it, 429
+    /// `rate-limited` for that address until the minute is over (0: no throttling).
+    #[arg(long, env = "KAC_AUTH_FAILURES_PER_MINUTE", default_value_t = 10)]
+    pub auth_failures_per_minute: u32,
     /// Seconds a job may run before it is stopped and failed.
     #[arg(long, env = "KAC_JOB_TIMEOUT_S", default_value_t = 600)]
     pub job_timeout_s: u64,

@@ -65,6 +65,15 @@ pub enum ApiError {
         retry_after_s: u64,
         per_minute: u32,
     },
+    /// Too many wrong API keys from one client address this minute.
+    AuthThrottled {
+        retry_after_s: u64,
+        per_minute: u32,
+    },
+    /// A request body paused longer than --body-read-timeout-s.
+    BodyTimeout {
+        seconds: f64,
+    },
     Internal {
         detail: String,
     },
@@ -171,6 +180,24 @@ impl ApiError {
                     format!("this key may make {per_minute} requests per minute; retry after {retry_after_s} s"),
                 )
             }
+            ApiError::AuthThrottled { retry_after_s, per_minute } => {
+                extra.insert("retry_after_s".into(), (*retry_after_s).into());
+                (
+                    StatusCode::TOO_MANY_REQUESTS,
+                    "rate-limited",
+                    "Too many failed API keys",
+                    format!(
+                        "this address sent {per_minute} wrong API keys within a minute (--auth-failures-per-minute); \
+                         retry after {retry_after_s} s"
+                    ),
+                )
+            }
+            ApiError::BodyTimeout { seconds } => (
+                StatusCode::REQUEST_TIMEOUT,
+                "body-timeout",
+                "Request body too slow",
+                format!("the request body paused for more than {seconds} s (--body-read-timeout-s)"),
+            ),
             ApiError::Internal { detail } => {
                 (StatusCode::INTERNAL_SERVER_ERROR, "internal-error", "Internal error", detail.clone())
             }
@@ -199,7 +226,10 @@ impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let (status, p) = self.problem();
         let mut r = problem_response(status, &p);
-        if let ApiError::QueueFull { retry_after_s, .. } | ApiError::RateLimited { retry_after_s, .. } = self {
+        if let ApiError::QueueFull { retry_after_s, .. }
+        | ApiError::RateLimited { retry_after_s, .. }
+        | ApiError::AuthThrottled { retry_after_s, .. } = self
+        {
             r.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(retry_after_s));
         }
         r
@@ -248,6 +278,11 @@ pub const CODES: &[(&str, &str)] = &[
     ("unsupported-media-type", "The Content-Type cannot be used here."),
     ("queue-full", "The job queue is at capacity; retry after Retry-After seconds."),
     ("k-too-large", "k exceeds the configured limit (--max-k)."),
+    ("body-timeout", "The request body paused for longer than --body-read-timeout-s."),
+    (
+        "too-many-connections",
+        "The server holds --max-connections open connections; this one was answered and closed. Retry shortly.",
+    ),
     (
         "too-many-samples",
         "A list or grid of the request (times, energies, τ samples, frequencies, sources, steps, values) is longer \

@@ -5,6 +5,7 @@
 pub mod config;
 pub mod error;
 pub mod jobs;
+pub mod listener;
 pub mod openapi;
 pub mod ops;
 pub mod routes;
@@ -46,7 +47,7 @@ impl Inner {
             cache: Arc::new(EigenCache::new(config.cache_bytes)),
             jobs: jobs::Jobs::new(workers, config.queue_capacity.max(1)),
             metrics: ops::Metrics::default(),
-            access: ops::Access::new(&config.api_keys(), config.rate_limit_per_minute),
+            access: ops::Access::new(&config.api_keys(), config.rate_limit_per_minute, config.auth_failures_per_minute),
             draining: AtomicBool::new(false),
             config,
         }))
@@ -72,14 +73,13 @@ pub fn serve(config: Config) -> Result<(), String> {
         use std::io::Write;
         let _ = std::io::stdout().flush();
         let st = state.clone();
-        axum::serve(listener, app)
-            .with_graceful_shutdown(async move {
-                shutdown_signal().await;
-                tracing::info!("shutting down: no new connections, no new jobs");
-                st.draining.store(true, std::sync::atomic::Ordering::SeqCst);
-            })
-            .await
-            .map_err(|e| format!("server error: {e}"))?;
+        let grace = std::time::Duration::from_secs(state.config.shutdown_grace_s);
+        let shutdown = async move {
+            shutdown_signal().await;
+            tracing::info!("shutting down: no new connections, no new jobs");
+            st.draining.store(true, std::sync::atomic::Ordering::SeqCst);
+        };
+        listener::serve(listener, app, state.clone(), shutdown, grace).await;
         // Let running jobs finish within the grace period; enqueued ones stay in the store for the next start.
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(state.config.shutdown_grace_s);
         while state.jobs.running() > 0 && std::time::Instant::now() < deadline {

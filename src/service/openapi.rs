@@ -151,8 +151,8 @@ fn close_request_schemas(doc: &mut serde_json::Value) {
 }
 
 /// Responses every operation can give, added where an operation does not list them itself: 400 (malformed
-/// parameters), 401/403/429 (API keys and rate limits, when configured), 500; and 413/415 on operations with a
-/// request body.
+/// parameters), 422 (unknown fields), 401/403/429 (API keys and rate limits, when configured), 500, 503 (too many
+/// connections); and 408/413/415 on operations with a request body.
 struct CommonResponses;
 
 impl utoipa::Modify for CommonResponses {
@@ -180,6 +180,7 @@ impl utoipa::Modify for CommonResponses {
                         "a field or query parameter this request does not take (invalid-request, with a suggestion)",
                     ),
                     ("500", "internal error"),
+                    ("503", "too many connections (too-many-connections), with Retry-After"),
                 ];
                 if v1 {
                     add.push(("401", "an API key is required (unauthorized)"));
@@ -189,6 +190,7 @@ impl utoipa::Modify for CommonResponses {
                 if has_body {
                     add.push(("413", "body or limit exceeded"));
                     add.push(("415", "unsupported media type or format"));
+                    add.push(("408", "the request body paused too long (body-timeout)"));
                 }
                 for (code, desc) in add {
                     op.responses.responses.entry(code.to_string()).or_insert_with(|| problem(desc).into());

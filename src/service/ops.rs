@@ -51,6 +51,11 @@ pub struct Metrics {
     pub solves: AtomicU64,
     pub restarts: AtomicU64,
     next_request: AtomicU64,
+    /// Connections open now, and refused at --max-connections.
+    pub connections_open: AtomicU64,
+    pub connections_refused: AtomicU64,
+    /// Requests refused because their address failed too many API-key checks.
+    pub auth_throttled: AtomicU64,
 }
 
 impl Metrics {
@@ -107,6 +112,9 @@ pub fn render(state: &AppState) -> String {
         let _ = writeln!(out, "kac_http_request_duration_seconds_sum{{route=\"{r}\"}} {}", h.sum);
         let _ = writeln!(out, "kac_http_request_duration_seconds_count{{route=\"{r}\"}} {}", h.count);
     }
+    let _ = writeln!(out, "# HELP kac_connections_open HTTP connections open.");
+    let _ = writeln!(out, "# TYPE kac_connections_open gauge");
+    let _ = writeln!(out, "kac_connections_open {}", m.connections_open.load(Ordering::Relaxed));
     let _ = writeln!(out, "# HELP kac_queue_depth Jobs enqueued or processing.");
     let _ = writeln!(out, "# TYPE kac_queue_depth gauge");
     let _ = writeln!(out, "kac_queue_depth {}", state.jobs.active.load(Ordering::SeqCst));
@@ -144,6 +152,16 @@ pub fn render(state: &AppState) -> String {
         ),
         ("kac_eigenpair_cache_misses_total", "Analyses that had to solve.", state.cache.misses.load(Ordering::Relaxed)),
         ("kac_eigensolves_total", "Eigensolver runs.", m.eigensolves.load(Ordering::Relaxed)),
+        (
+            "kac_connections_refused_total",
+            "Connections answered 503 at --max-connections.",
+            m.connections_refused.load(Ordering::Relaxed),
+        ),
+        (
+            "kac_auth_throttled_total",
+            "Requests refused (429) after too many failed API-key checks from their address.",
+            m.auth_throttled.load(Ordering::Relaxed),
+        ),
         ("kac_eigensolver_block_steps_total", "Block Lanczos expansion steps.", m.block_steps.load(Ordering::Relaxed)),
         (
             "kac_eigensolver_solves_total",
@@ -201,21 +219,54 @@ fn startup_salt() -> u64 {
     })
 }
 
-/// API keys (off unless configured), compared in constant time through their SHA-256 digests, and an optional
-/// per-key token bucket.
+/// API keys (off unless configured), compared in constant time through their SHA-256 digests, an optional
+/// per-key token bucket, and a per-address count of wrong keys (guessing is throttled).
 pub struct Access {
     digests: Vec<[u8; 32]>,
     per_minute: u32,
     buckets: Mutex<HashMap<usize, (f64, Instant)>>,
+    failures_per_minute: u32,
+    /// Client address → (wrong keys in the current minute, when that minute began).
+    failures: Mutex<HashMap<std::net::IpAddr, (u32, Instant)>>,
 }
 
+/// The window of the wrong-key count.
+const FAILURE_WINDOW: std::time::Duration = std::time::Duration::from_secs(60);
+
 impl Access {
-    pub fn new(keys: &[String], per_minute: u32) -> Self {
+    pub fn new(keys: &[String], per_minute: u32, failures_per_minute: u32) -> Self {
         Access {
             digests: keys.iter().filter(|k| !k.is_empty()).map(|k| Sha256::digest(k.as_bytes()).into()).collect(),
             per_minute,
             buckets: Mutex::new(HashMap::new()),
+            failures_per_minute,
+            failures: Mutex::new(HashMap::new()),
         }
+    }
+    /// Seconds until `ip` may try a key again, when it has used up its wrong keys for this minute.
+    fn throttled(&self, ip: std::net::IpAddr) -> Option<u64> {
+        if self.failures_per_minute == 0 {
+            return None;
+        }
+        let f = self.failures.lock().unwrap_or_else(|e| e.into_inner());
+        let &(n, since) = f.get(&ip)?;
+        let left = FAILURE_WINDOW.saturating_sub(since.elapsed());
+        (n >= self.failures_per_minute && !left.is_zero()).then(|| left.as_secs().max(1))
+    }
+    /// Counts one wrong key from `ip` (a new minute starts the count again; old entries are dropped as they go).
+    fn failed(&self, ip: std::net::IpAddr) {
+        if self.failures_per_minute == 0 {
+            return;
+        }
+        let mut f = self.failures.lock().unwrap_or_else(|e| e.into_inner());
+        if f.len() > 100_000 {
+            f.retain(|_, (_, since)| since.elapsed() < FAILURE_WINDOW);
+        }
+        let e = f.entry(ip).or_insert((0, Instant::now()));
+        if e.1.elapsed() >= FAILURE_WINDOW {
+            *e = (0, Instant::now());
+        }
+        e.0 = e.0.saturating_add(1);
     }
     pub fn enabled(&self) -> bool {
         !self.digests.is_empty()
@@ -275,7 +326,16 @@ pub async fn authorize(State(state): State<AppState>, req: Request, next: Next) 
         r.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer realm=\"kac\""));
         return r;
     };
+    let ip = super::listener::client_addr(&req).map(|a| a.ip());
+    if let Some(wait) = ip.and_then(|ip| access.throttled(ip)) {
+        // Checked before the key, so a guesser learns nothing more until the minute is over.
+        state.metrics.auth_throttled.fetch_add(1, Ordering::Relaxed);
+        return ApiError::AuthThrottled { retry_after_s: wait, per_minute: access.failures_per_minute }.into_response();
+    }
     let Some(key) = access.find(token) else {
+        if let Some(ip) = ip {
+            access.failed(ip);
+        }
         return ApiError::Forbidden.into_response();
     };
     if let Err(wait) = access.take(key) {

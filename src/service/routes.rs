@@ -47,6 +47,9 @@ pub fn router(state: AppState) -> Router {
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::authorize))
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::observe))
         .layer(DefaultBodyLimit::max(limit))
+        .layer(tower_http::timeout::RequestBodyTimeoutLayer::new(std::time::Duration::from_secs_f64(
+            state.config.body_read_timeout_s.max(0.001),
+        )))
         .with_state(state);
     // Outside the method routers, where 405 responses already carry their Allow header.
     Router::new().fallback_service(api).layer(axum::middleware::map_response(problem_405))
@@ -63,9 +66,23 @@ async fn not_found(uri: Uri) -> ApiError {
     ApiError::RouteNotFound { path: uri.path().to_string() }
 }
 
+/// Whether a body error comes from the body read timeout (`tower_http`'s `TimeoutError` in its source chain).
+fn timed_out(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cur = Some(e);
+    while let Some(err) = cur {
+        if err.is::<tower_http::timeout::TimeoutError>() {
+            return true;
+        }
+        cur = err.source();
+    }
+    false
+}
+
 fn body_error(state: &AppState, e: BytesRejection) -> ApiError {
     if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
         ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
+    } else if timed_out(&e) {
+        ApiError::BodyTimeout { seconds: state.config.body_read_timeout_s }
     } else {
         ApiError::bad("invalid-request", e.body_text())
     }
