@@ -42,7 +42,9 @@ impl Status {
 
 #[derive(Debug, Clone, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct JobProgress {
-    /// `queued`, `operator`, `factorization`, `iteration`, `descriptor`, `done`.
+    /// `queued`, then `operator` (assembly), the eigensolver's `null-space`, `symbolic`, `factorization`,
+    /// `iterating`, `ritz-vectors`, `converged`, `verifying` (or `dense`), then `descriptor`, `storing`, `done`.
+    /// A cancel or a timeout is checked at every phase and within the long ones.
     pub phase: String,
     /// Converged eigenpairs so far, of `wanted` (spectral analyses).
     pub converged: usize,

@@ -112,7 +112,12 @@ pub struct Progress {
     pub wanted: usize,
 }
 
-/// Hooks for a long solve: progress reports and a stop flag checked between block steps.
+/// Hooks for a long solve: progress reports and a stop flag. The flag is checked after every phase (null space,
+/// symbolic analysis, each factorization, each dense block, each completeness count) and within the iteration
+/// before every block step, every Rayleigh–Ritz solve and every row chunk of the Ritz vectors, so that a stop
+/// takes effect within a fraction of a second of work (`bench/cancel.py` measures it). Each phase is reported
+/// to `progress` as it starts: `null-space`, `symbolic`, `factorization`, `iterating`, `ritz-vectors`,
+/// `converged`, `verifying`, `dense`.
 #[derive(Default, Clone, Copy)]
 pub struct Control<'a> {
     pub progress: Option<&'a (dyn Fn(Progress) + Sync)>,
@@ -127,6 +132,19 @@ impl Control<'_> {
     }
     pub(crate) fn stopped(&self) -> bool {
         self.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed))
+    }
+    /// `Err(Canceled)` once the stop flag is set.
+    pub fn check(&self) -> Result<(), EigenError> {
+        if self.stopped() {
+            Err(EigenError::Canceled)
+        } else {
+            Ok(())
+        }
+    }
+    /// Reports the start of a phase, then checks the flag.
+    pub fn phase(&self, phase: &'static str, converged: usize, wanted: usize) -> Result<(), EigenError> {
+        self.report(phase, converged, wanted);
+        self.check()
     }
 }
 
@@ -336,9 +354,11 @@ pub fn eigs(
     if !(options.tol > 0.0 && options.tol < 1.0) {
         return Err(EigenError::InvalidOption { name: "tol", message: format!("{} is not in (0, 1)", options.tol) });
     }
+    control.phase("null-space", 0, k)?;
     let zeros = if options.deflate_null_space { null_space::zero_modes(pair) } else { ZeroModes::default() };
     let z = zeros.len();
     let blocks = Blocks::of(pair);
+    control.check()?;
     let dense = use_dense(options.method, blocks.as_ref().map_or(n, |b| b.largest), n - z, k.saturating_sub(z));
     let max = if dense { n } else { n.saturating_sub(1) };
     if k == 0 || k > max {
@@ -354,8 +374,9 @@ pub fn eigs(
         // Every pair asked for is a known zero mode.
         zero_mode_spectrum(pair, &zeros, k)
     } else if dense {
-        dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k)?
+        dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, control)?
     } else {
+        control.phase("symbolic", 0, k)?;
         let symbolic_t = Instant::now();
         let owned;
         let (sym, reused) = match symbolic {
@@ -372,19 +393,20 @@ pub fn eigs(
         let run = lanczos::Run { deflation: &deflation, deflated_values: &zero_values, interior_shift: true };
         let o = EigenOptions { k: k - z, ..options.clone() };
         let mut s = match lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)? {
-            Some(s) => prepend_zero_modes(pair, &zeros, s),
-            None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k)?,
+            Some(s) => prepend_zero_modes(pair, &zeros, s, &control)?,
+            None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, control)?,
         };
+        control.check()?;
         s.stats.symbolic_reused = reused;
         s.stats.timings.symbolic_s = symbolic_s;
-        finish(pair, &mut s, z);
+        finish(pair, &mut s, z, control)?;
         if options.verify && s.stats.method == "block-lanczos" {
             verify_and_repair(pair, sym, options, control, (&zeros, blocks.as_ref()), &mut s, k)?;
         }
         s
     };
     if s.stats.method != "block-lanczos" {
-        finish(pair, &mut s, z.min(k));
+        finish(pair, &mut s, z.min(k), control)?;
         if options.verify {
             s.stats.completeness =
                 Some(Completeness::by(if s.stats.method == "dense" { "dense" } else { "null-space" }));
@@ -419,21 +441,44 @@ fn zero_mode_spectrum(pair: &SparsePair, zeros: &ZeroModes, k: usize) -> Spectru
     }
 }
 
+/// An n × m matrix of zeros, filled 64 columns at a time with a stop check between: a basis or a set of
+/// eigenvectors of a large problem is gigabytes, whose first touch takes about a second.
+pub(crate) fn zeros_checked(n: usize, m: usize, control: &Control<'_>) -> Result<Mat<f64>, EigenError> {
+    let mut out = Mat::<f64>::with_capacity(n, m);
+    for c in (0..m).step_by(64) {
+        control.check()?;
+        out.resize_with(n, (c + 64).min(m), |_, _| 0.0);
+    }
+    if m == 0 {
+        out.resize_with(n, 0, |_, _| 0.0);
+    }
+    Ok(out)
+}
+
 /// The known zero modes (eigenvalue 0) followed by the pairs of a deflated solve.
-fn prepend_zero_modes(pair: &SparsePair, zeros: &ZeroModes, s: Spectrum) -> Spectrum {
+fn prepend_zero_modes(
+    pair: &SparsePair,
+    zeros: &ZeroModes,
+    s: Spectrum,
+    control: &Control<'_>,
+) -> Result<Spectrum, EigenError> {
     let z = zeros.len();
     if z == 0 {
-        return s;
+        return Ok(s);
     }
     let n = pair.n();
     let head = zero_mode_spectrum(pair, zeros, z);
     let k = s.values.len();
-    let mut vectors = Mat::<f64>::zeros(n, z + k);
+    let mut vectors = zeros_checked(n, z + k, control)?;
     vectors.as_mut().subcols_mut(0, z).copy_from(head.vectors.as_ref());
-    vectors.as_mut().subcols_mut(z, k).copy_from(s.vectors.as_ref());
+    for c in (0..k).step_by(64) {
+        control.check()?;
+        let w = 64.min(k - c);
+        vectors.as_mut().subcols_mut(z + c, w).copy_from(s.vectors.as_ref().subcols(c, w));
+    }
     let mut values = head.values;
     values.extend_from_slice(&s.values);
-    Spectrum { values, vectors, residuals: vec![], stats: s.stats }
+    Ok(Spectrum { values, vectors, residuals: vec![], stats: s.stats })
 }
 
 /// The dense solve (every eigenvalue is computed, so nothing can be missed), block by block where the pencil is
@@ -444,11 +489,14 @@ fn dense_with_zero_modes(
     zeros: &ZeroModes,
     blocks: Option<&Blocks>,
     k: usize,
+    control: Control<'_>,
 ) -> Result<Spectrum, EigenError> {
+    control.phase("dense", 0, k)?;
     let mut s = match blocks {
-        Some(b) => dense_by_blocks(pair, b, k)?,
-        None => dense::eigs_dense(pair, k)?,
+        Some(b) => dense_by_blocks(pair, b, k, control)?,
+        None => dense_stoppable(pair, k, &control)?,
     };
+    control.check()?;
     let z = zeros.len().min(k);
     let scale = crate::spectrum::lanczos::default_sigma(pair).abs() * pair.n() as f64;
     // The dense solver's first z eigenvalues are zeros to rounding (10⁻¹⁴ of the operator's scale); its (z + 1)-th
@@ -463,12 +511,41 @@ fn dense_with_zero_modes(
     Ok(s)
 }
 
+/// [`dense::eigs_dense`], which is one decomposition that cannot stop inside (96 s at 7,921 unknowns, 2.7 s at
+/// 2,562 on one core): with a stop flag it runs on a thread of its own while this one watches the flag every
+/// 50 ms, and a stop returns `Canceled` at once. The abandoned decomposition then finishes on its thread and
+/// its result is dropped (its core stays busy until then; the caller's worker is free).
+fn dense_stoppable(pair: &SparsePair, k: usize, control: &Control<'_>) -> Result<Spectrum, EigenError> {
+    if control.stop.is_none() || pair.n() <= 1500 {
+        // No flag, or at most about half a second of work.
+        return dense::eigs_dense(pair, k);
+    }
+    let owned = pair.clone();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::Builder::new()
+        .name("kac-dense".into())
+        .spawn(move || {
+            let _ = tx.send(dense::eigs_dense(&owned, k));
+        })
+        .map_err(|e| EigenError::Factorization { message: format!("cannot start the dense solve: {e}") })?;
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+            Ok(result) => return result,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => control.check()?,
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                return Err(EigenError::Factorization { message: "the dense solve stopped without a result".into() })
+            }
+        }
+    }
+}
+
 /// Every eigenpair of each block, merged: the k smallest of the union, ascending.
-fn dense_by_blocks(pair: &SparsePair, blocks: &Blocks, k: usize) -> Result<Spectrum, EigenError> {
+fn dense_by_blocks(pair: &SparsePair, blocks: &Blocks, k: usize, control: Control<'_>) -> Result<Spectrum, EigenError> {
     let t0 = Instant::now();
     let n = pair.n();
     let mut parts = Vec::with_capacity(blocks.count);
     for rows in blocks.rows() {
+        control.check()?;
         let (pattern, mut values) =
             crate::operators::sparse::submatrix(&pair.pattern, &[&pair.stiffness, &pair.mass], &rows);
         let mass = values.pop().unwrap_or_default();
@@ -482,7 +559,7 @@ fn dense_by_blocks(pair: &SparsePair, blocks: &Blocks, k: usize) -> Result<Spect
             kernel: crate::operators::sparse::Kernel::Unknown,
         };
         let m = rows.len();
-        parts.push((rows, dense::eigs_dense(&sub, m)?));
+        parts.push((rows, dense_stoppable(&sub, m, &control)?));
     }
     let mut order: Vec<(f64, usize, usize)> = parts
         .iter()
@@ -621,8 +698,9 @@ fn verify_and_repair(
                 (v0 - 2.0 * GAP * scale, v0 - GAP * scale, 0)
             }
         };
-        control.report("verifying", k, k);
+        control.phase("verifying", k, k)?;
         let (tau, below) = inertia_in_gap(sym, pair, lo, hi)?;
+        control.check()?;
         let c = Completeness {
             method: "inertia",
             complete: below == found,
@@ -666,12 +744,12 @@ fn verify_and_repair(
                 return Err(EigenError::Incomplete { shift: tau, below, found, repairs });
             }
             let stats = std::mem::take(&mut s.stats);
-            *s = dense_with_zero_modes(pair, zeros, blocks, k)?;
+            *s = dense_with_zero_modes(pair, zeros, blocks, k, control)?;
             s.stats = Stats { completeness: Some(Completeness { repairs, ..Completeness::by("dense") }), ..stats };
-            finish(pair, s, z.min(k));
+            finish(pair, s, z.min(k), control)?;
             break;
         };
-        finish(pair, &mut extra, 0);
+        finish(pair, &mut extra, 0, control)?;
         repaired_pairs += extra.values.len().min(missing);
         merge(s, extra);
     }
@@ -720,7 +798,7 @@ fn merge(s: &mut Spectrum, extra: Spectrum) {
 /// depend on the shift: a solver's λ = σ + 1/θ carries θ's rounding error magnified by (λ − σ)², which with σ
 /// inside the spectrum reached 10⁻¹¹ relative on the lowest eigenvalues of a 41k-vertex sphere (10⁻¹⁴ with the
 /// quotient).
-fn finish(pair: &SparsePair, s: &mut Spectrum, exact: usize) {
+fn finish(pair: &SparsePair, s: &mut Spectrum, exact: usize, control: Control<'_>) -> Result<(), EigenError> {
     let n = pair.n();
     let k = s.values.len();
     let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);
@@ -741,6 +819,7 @@ fn finish(pair: &SparsePair, s: &mut Spectrum, exact: usize) {
     let mut scratch = Vec::new();
     let (mut xr, mut lr, mut mr) = (vec![0.0; n * B], vec![0.0; n * B], vec![0.0; n * B]);
     for j0 in (0..k).step_by(B) {
+        control.check()?;
         let bw = B.min(k - j0);
         for c in 0..bw {
             for (i, &x) in s.vectors.col(j0 + c).iter().enumerate() {
@@ -796,6 +875,7 @@ fn finish(pair: &SparsePair, s: &mut Spectrum, exact: usize) {
         }
         s.vectors = sorted;
     }
+    Ok(())
 }
 
 /// All eigenpairs with λ in [a, b]. This asks for the smallest k pairs with k doubling (from 16) until the
