@@ -268,43 +268,86 @@ impl Analysis {
     }
 }
 
-/// Why an analysis failed, with a stable code and whether the request (not the server) was at fault.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct AnalysisError {
-    pub code: &'static str,
-    pub message: String,
+/// Why an analysis failed: one variant per kind, the core's errors kept whole. Its code and whether the request
+/// was at fault come from exhaustive matches (a new variant anywhere must say both).
+#[derive(Debug, Clone, PartialEq)]
+pub enum AnalysisError {
+    /// A parameter of the request is out of its range (`invalid-parameter`).
+    InvalidParameter(String),
+    /// k = 0, or more eigenpairs than unknowns (`invalid-k`).
+    InvalidK(String),
+    /// The analysis does not apply to this kind of shape (`not-applicable`).
+    NotApplicable(String),
+    Operator(operators::OperatorError),
+    Eigen(spectrum::EigenError),
+    Descriptor(DescriptorError),
+}
+
+impl AnalysisError {
+    pub fn invalid_parameter(message: impl Into<String>) -> Self {
+        AnalysisError::InvalidParameter(message.into())
+    }
+    pub fn invalid_k(message: impl Into<String>) -> Self {
+        AnalysisError::InvalidK(message.into())
+    }
+    pub fn not_applicable(message: impl Into<String>) -> Self {
+        AnalysisError::NotApplicable(message.into())
+    }
+    /// The stable problem code.
+    pub fn code(&self) -> &'static str {
+        match self {
+            AnalysisError::InvalidParameter(_) => "invalid-parameter",
+            AnalysisError::InvalidK(_) => "invalid-k",
+            AnalysisError::NotApplicable(_) => "not-applicable",
+            AnalysisError::Operator(e) => e.code(),
+            AnalysisError::Eigen(e) => e.code(),
+            AnalysisError::Descriptor(e) => e.code(),
+        }
+    }
     /// The request cannot succeed as given (4xx); otherwise a computation failed (5xx / failed job).
-    pub client: bool,
+    pub fn caller_fault(&self) -> bool {
+        match self {
+            AnalysisError::InvalidParameter(_) | AnalysisError::InvalidK(_) | AnalysisError::NotApplicable(_) => true,
+            AnalysisError::Operator(e) => e.caller_fault(),
+            AnalysisError::Eigen(e) => e.caller_fault(),
+            AnalysisError::Descriptor(e) => e.caller_fault(),
+        }
+    }
+    /// Stopped by its stop flag (a cancel or a timeout), not failed.
+    pub fn is_stop(&self) -> bool {
+        matches!(self, AnalysisError::Eigen(spectrum::EigenError::Canceled))
+    }
 }
 
 impl std::fmt::Display for AnalysisError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.message)
+        match self {
+            AnalysisError::InvalidParameter(m) | AnalysisError::InvalidK(m) | AnalysisError::NotApplicable(m) => {
+                f.write_str(m)
+            }
+            AnalysisError::Operator(e) => e.fmt(f),
+            AnalysisError::Eigen(e) => e.fmt(f),
+            AnalysisError::Descriptor(e) => e.fmt(f),
+        }
     }
 }
 
 impl From<DescriptorError> for AnalysisError {
     fn from(e: DescriptorError) -> Self {
-        let client = !matches!(e, DescriptorError::Solve { .. });
-        AnalysisError { code: e.code(), message: e.to_string(), client }
+        AnalysisError::Descriptor(e)
     }
 }
 
 impl From<operators::OperatorError> for AnalysisError {
     fn from(e: operators::OperatorError) -> Self {
-        AnalysisError { code: e.code(), message: e.to_string(), client: true }
+        AnalysisError::Operator(e)
     }
 }
 
 impl From<spectrum::EigenError> for AnalysisError {
     fn from(e: spectrum::EigenError) -> Self {
-        let client = matches!(e, spectrum::EigenError::InvalidK { .. } | spectrum::EigenError::InvalidOption { .. });
-        AnalysisError { code: e.code(), message: e.to_string(), client }
+        AnalysisError::Eigen(e)
     }
-}
-
-pub(crate) fn bad(code: &'static str, message: impl Into<String>) -> AnalysisError {
-    AnalysisError { code, message: message.into(), client: true }
 }
 
 /// Every name a per-vertex array can have.
@@ -395,11 +438,11 @@ fn map_vertices(v: &Validated, list: &[u32], what: &str) -> Result<Vec<usize>, A
     list.iter()
         .map(|&i| match v.vertex_map.get(i as usize) {
             Some(&m) if m != u32::MAX => Ok(m as usize),
-            Some(_) => Err(bad("invalid-parameter", format!("{what}: vertex {i} was dropped by validation"))),
-            None => Err(bad(
-                "invalid-parameter",
-                format!("{what}: vertex {i} does not exist ({} vertices)", v.vertex_map.len()),
-            )),
+            Some(_) => Err(AnalysisError::invalid_parameter(format!("{what}: vertex {i} was dropped by validation"))),
+            None => Err(AnalysisError::invalid_parameter(format!(
+                "{what}: vertex {i} does not exist ({} vertices)",
+                v.vertex_map.len()
+            ))),
         })
         .collect()
 }
@@ -442,7 +485,7 @@ pub fn eigenpairs(
 ) -> Result<Arc<Eigen>, AnalysisError> {
     if k == 0 {
         // Before the cache, which holds at least as many pairs as any k and would answer k = 0 with none.
-        return Err(bad("invalid-k", "k = 0: ask for at least one eigenpair (1 ≤ k ≤ the number of unknowns)"));
+        return Err(AnalysisError::invalid_k("k = 0: ask for at least one eigenpair (1 ≤ k ≤ the number of unknowns)"));
     }
     let key = format!("{}:{}", v.id.hex(), spectrum_key(spec, solver));
     if let Some(e) = hooks.cache.and_then(|c| c.get(&key, k)) {
@@ -454,7 +497,7 @@ pub fn eigenpairs(
     hooks.control.check()?;
     let n = operator.pair.n();
     if k == 0 || k > n {
-        return Err(bad("invalid-k", format!("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {n})")));
+        return Err(AnalysisError::invalid_k(format!("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {n})")));
     }
     let opts = EigenOptions { k, tol: solver.tol, threads: hooks.threads, verify: solver.verify, ..Default::default() };
     let spectrum = spectrum::eigs(&operator.pair, &opts, None, hooks.control)?;
@@ -698,8 +741,9 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 }
                 HeatMethod::Implicit => {
                     let op = build_operator(v, operator)?;
-                    let times =
-                        times.clone().ok_or_else(|| bad("invalid-parameter", "the implicit method needs times"))?;
+                    let times = times
+                        .clone()
+                        .ok_or_else(|| AnalysisError::invalid_parameter("the implicit method needs times"))?;
                     let src_op = to_operator_rows(&op, &src)?;
                     let mut arrays = vec![];
                     for &s in &src_op {
@@ -721,10 +765,10 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
         }
         Analysis::Geodesic { sources, options } => {
             let Shape::TriangleMesh(mesh) = &v.shape else {
-                return Err(bad(
-                    "not-applicable",
-                    format!("geodesics by the heat method need a triangle mesh, not a {}", v.shape.kind().as_str()),
-                ));
+                return Err(AnalysisError::not_applicable(format!(
+                    "geodesics by the heat method need a triangle mesh, not a {}",
+                    v.shape.kind().as_str()
+                )));
             };
             let src = map_vertices(v, sources, "sources")?;
             let g = geodesic::heat_method(mesh, &src, options)?;
@@ -748,7 +792,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
         }
         Analysis::Trees {} => {
             let (edges, weights) = operators::edge_graph(&v.shape)
-                .ok_or_else(|| bad("not-applicable", "a point cloud has no edges; build a graph first"))?;
+                .ok_or_else(|| AnalysisError::not_applicable("a point cloud has no edges; build a graph first"))?;
             let t = spanning_trees(v.shape.vertex_count(), &edges, &weights)?;
             Output { summary: json!({ "trees": t }), arrays: vec![] }
         }
@@ -777,8 +821,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             let op = build_operator(v, operator)?;
             let n = op.pair.n();
             if op.interior.is_some() {
-                return Err(bad(
-                    "invalid-parameter",
+                return Err(AnalysisError::invalid_parameter(
                     "smoothing takes a Neumann operator; use fixed_boundary to clamp",
                 ));
             }
@@ -788,10 +831,9 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                     (faer::Mat::from_fn(n, 1, |i, _| mapped[i]), "function")
                 }
                 None => {
-                    let pos = v
-                        .shape
-                        .positions()
-                        .ok_or_else(|| bad("not-applicable", "the shape has no coordinates; give a function"))?;
+                    let pos = v.shape.positions().ok_or_else(|| {
+                        AnalysisError::not_applicable("the shape has no coordinates; give a function")
+                    })?;
                     (faer::Mat::from_fn(n, 3, |i, j| pos[i][j]), "coordinates")
                 }
             };
@@ -807,7 +849,9 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
         Analysis::Interpolate { values, labels, operator } => {
             let op = build_operator(v, operator)?;
             if op.interior.is_some() {
-                return Err(bad("invalid-parameter", "interpolation fixes its own vertices; use a Neumann operator"));
+                return Err(AnalysisError::invalid_parameter(
+                    "interpolation fixes its own vertices; use a Neumann operator",
+                ));
             }
             match (values.is_empty(), labels.is_empty()) {
                 (false, true) => {
@@ -838,7 +882,11 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                         arrays: vec![a, s],
                     }
                 }
-                _ => return Err(bad("invalid-parameter", "give either values or labels (not both, not neither)")),
+                _ => {
+                    return Err(AnalysisError::invalid_parameter(
+                        "give either values or labels (not both, not neither)",
+                    ))
+                }
             }
         }
     };
@@ -871,7 +919,7 @@ fn to_operator_rows(op: &Operator, list: &[usize]) -> Result<Vec<usize>, Analysi
             .iter()
             .map(|&i| {
                 keep.binary_search(&(i as u32))
-                    .map_err(|_| bad("invalid-parameter", format!("vertex {i} is on the Dirichlet boundary")))
+                    .map_err(|_| AnalysisError::invalid_parameter(format!("vertex {i} is on the Dirichlet boundary")))
             })
             .collect(),
     }
@@ -880,10 +928,11 @@ fn to_operator_rows(op: &Operator, list: &[usize]) -> Result<Vec<usize>, Analysi
 /// A per-vertex function in the input numbering → the validated numbering (welded vertices: the first value).
 fn from_input_rows(v: &Validated, f: &[f64], what: &str) -> Result<Vec<f64>, AnalysisError> {
     if f.len() != v.vertex_map.len() {
-        return Err(bad(
-            "invalid-parameter",
-            format!("{what}: {} values for {} input vertices", f.len(), v.vertex_map.len()),
-        ));
+        return Err(AnalysisError::invalid_parameter(format!(
+            "{what}: {} values for {} input vertices",
+            f.len(),
+            v.vertex_map.len()
+        )));
     }
     let mut out = vec![f64::NAN; v.shape.vertex_count()];
     for (i, &m) in v.vertex_map.iter().enumerate() {
@@ -892,7 +941,7 @@ fn from_input_rows(v: &Validated, f: &[f64], what: &str) -> Result<Vec<f64>, Ana
         }
     }
     if let Some(i) = out.iter().position(|x| !x.is_finite()) {
-        return Err(bad("invalid-parameter", format!("{what}: vertex {i} has no finite value")));
+        return Err(AnalysisError::invalid_parameter(format!("{what}: vertex {i} has no finite value")));
     }
     Ok(out)
 }
@@ -944,6 +993,6 @@ mod tests {
         let stop = std::sync::atomic::AtomicBool::new(true);
         let stopped = Control { progress: None, stop: Some(&stop) };
         let r = by_rows(&b, &stopped, |b| signatures::hks(b, &HksOptions::default()), |h| &mut h.values);
-        assert_eq!(r.err().map(|e| e.code), Some("canceled"));
+        assert_eq!(r.err().map(|e| e.code()), Some("canceled"));
     }
 }

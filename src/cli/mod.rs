@@ -104,7 +104,7 @@ impl OperatorArgs {
 
 impl From<crate::analysis::AnalysisError> for Failure {
     fn from(e: crate::analysis::AnalysisError) -> Self {
-        Failure { code: if e.client { 2 } else { 1 }, message: e.message }
+        Failure { code: if e.caller_fault() { 2 } else { 1 }, message: e.to_string() }
     }
 }
 

@@ -87,10 +87,7 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
         Some(band) => spectrum::eigs_band(&op.pair, band[0], band[1], &opts, Control::default()),
         None => spectrum::eigs(&op.pair, &opts, None, Control::default()),
     };
-    let s = result.map_err(|e| Failure {
-        code: if e.code() == "invalid-k" || e.code() == "invalid-option" { 2 } else { 1 },
-        message: e.to_string(),
-    })?;
+    let s = result.map_err(|e| Failure { code: if e.caller_fault() { 2 } else { 1 }, message: e.to_string() })?;
     if let Some(path) = &a.eigenvectors {
         let rows = v.vertex_map.len();
         let k = s.values.len();

@@ -39,8 +39,12 @@ pub enum ApiError {
     BodyTooLarge {
         limit: usize,
     },
-    BadRequest {
-        code: &'static str,
+    /// A malformed request: parameters, multipart, headers (400 `invalid-request`).
+    InvalidRequest {
+        detail: String,
+    },
+    /// A body that is not the JSON this endpoint takes (400 `invalid-json`).
+    InvalidJson {
         detail: String,
     },
     /// A field or query parameter the OpenAPI document does not declare where it was sent (422).
@@ -52,8 +56,16 @@ pub enum ApiError {
         capacity: usize,
         retry_after_s: u64,
     },
-    Limit {
-        code: &'static str,
+    /// k above --max-k (413 `k-too-large`).
+    KTooLarge {
+        detail: String,
+    },
+    /// A list or grid longer than --max-samples (413 `too-many-samples`).
+    TooManySamples {
+        detail: String,
+    },
+    /// A per-vertex array larger than --max-output-values (413 `output-too-large`).
+    OutputTooLarge {
         detail: String,
     },
     NotReady {
@@ -64,6 +76,16 @@ pub enum ApiError {
     RateLimited {
         retry_after_s: u64,
         per_minute: u32,
+    },
+    /// A job canceled by its client.
+    Canceled,
+    /// A job stopped by --job-timeout-s.
+    JobTimeout {
+        seconds: u64,
+    },
+    /// A job whose computation panicked (caught on the worker).
+    JobPanicked {
+        detail: String,
     },
     /// Too many wrong API keys from one client address this minute.
     AuthThrottled {
@@ -80,8 +102,11 @@ pub enum ApiError {
 }
 
 impl ApiError {
-    pub fn bad(code: &'static str, detail: impl Into<String>) -> Self {
-        ApiError::BadRequest { code, detail: detail.into() }
+    pub fn invalid_request(detail: impl Into<String>) -> Self {
+        ApiError::InvalidRequest { detail: detail.into() }
+    }
+    pub fn invalid_json(detail: impl Into<String>) -> Self {
+        ApiError::InvalidJson { detail: detail.into() }
     }
 
     /// The one mapping from errors to status, code, title and extra members.
@@ -109,10 +134,28 @@ impl ApiError {
                 (status, e.code(), "The shape cannot be read", e.to_string())
             }
             ApiError::Analysis(e) => {
-                let status =
-                    if e.client { StatusCode::UNPROCESSABLE_ENTITY } else { StatusCode::INTERNAL_SERVER_ERROR };
-                (status, e.code, "The analysis cannot be computed", e.message.clone())
+                let status = if e.is_stop() {
+                    StatusCode::CONFLICT
+                } else if e.caller_fault() {
+                    StatusCode::UNPROCESSABLE_ENTITY
+                } else {
+                    StatusCode::INTERNAL_SERVER_ERROR
+                };
+                (status, e.code(), "The analysis cannot be computed", e.to_string())
             }
+            ApiError::Canceled => (StatusCode::CONFLICT, "canceled", "Canceled", "the job was canceled".into()),
+            ApiError::JobTimeout { seconds } => (
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "job-timeout",
+                "Job time limit",
+                format!("the job ran longer than {seconds} s (--job-timeout-s)"),
+            ),
+            ApiError::JobPanicked { detail } => (
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "job-panicked",
+                "Internal error",
+                format!("the computation panicked: {detail}"),
+            ),
             ApiError::NotFound { what, id } => {
                 (StatusCode::NOT_FOUND, "not-found", "Not found", format!("no {what} with id '{id}'"))
             }
@@ -134,7 +177,12 @@ impl ApiError {
                     format!("the request body exceeds the limit of {limit} bytes (--max-body-bytes)"),
                 )
             }
-            ApiError::BadRequest { code, detail } => (StatusCode::BAD_REQUEST, code, "Bad request", detail.clone()),
+            ApiError::InvalidRequest { detail } => {
+                (StatusCode::BAD_REQUEST, "invalid-request", "Bad request", detail.clone())
+            }
+            ApiError::InvalidJson { detail } => {
+                (StatusCode::BAD_REQUEST, "invalid-json", "Bad request", detail.clone())
+            }
             ApiError::UnknownField(u) => {
                 extra.insert("pointer".into(), u.pointer.clone().into());
                 extra.insert("field".into(), u.name.clone().into());
@@ -156,8 +204,14 @@ impl ApiError {
                     format!("{capacity} jobs are queued or running; retry later"),
                 )
             }
-            ApiError::Limit { code, detail } => {
-                (StatusCode::PAYLOAD_TOO_LARGE, code, "A limit was exceeded", detail.clone())
+            ApiError::KTooLarge { detail } => {
+                (StatusCode::PAYLOAD_TOO_LARGE, "k-too-large", "A limit was exceeded", detail.clone())
+            }
+            ApiError::TooManySamples { detail } => {
+                (StatusCode::PAYLOAD_TOO_LARGE, "too-many-samples", "A limit was exceeded", detail.clone())
+            }
+            ApiError::OutputTooLarge { detail } => {
+                (StatusCode::PAYLOAD_TOO_LARGE, "output-too-large", "A limit was exceeded", detail.clone())
             }
             ApiError::NotReady { detail } => {
                 (StatusCode::SERVICE_UNAVAILABLE, "not-ready", "Not ready", detail.clone())
@@ -320,3 +374,152 @@ pub const CODES: &[(&str, &str)] = &[
     ("non-manifold", "The operator needs a manifold mesh; use 'robust'."),
     ("invalid-boundary", "The boundary condition cannot be applied (no boundary, unknown vertex, …)."),
 ];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::AnalysisError;
+    use kac_core::descriptors::DescriptorError;
+    use kac_core::operators::OperatorError;
+    use kac_core::spectrum::EigenError;
+    use kac_core::{Element, Location};
+
+    /// One error of every kind the service can answer with. The `match` below has no wildcard, so a new variant
+    /// of `ApiError` does not compile until it is listed here too.
+    fn every_error() -> Vec<ApiError> {
+        let at = || Location::line(1);
+        let shape = vec![
+            ShapeError::Syntax { format: "off", location: at(), message: "m".into() },
+            ShapeError::Truncated { format: "off", location: at(), message: "m".into() },
+            ShapeError::NonFinite { element: Element::Vertex, index: 0, value: "NaN".into(), location: at() },
+            ShapeError::IndexOutOfRange { element: Element::Face, index: 0, value: 9, vertex_count: 3, location: at() },
+            ShapeError::InvalidElement { element: Element::Face, index: 0, rule: "r".into(), location: at() },
+            ShapeError::Empty { what: "w".into() },
+            ShapeError::Unsupported { format: "off", location: at(), message: "m".into() },
+            ShapeError::UnknownFormat { message: "m".into() },
+            ShapeError::LimitExceeded { what: "w".into(), value: 2, limit: 1 },
+            ShapeError::FormatMismatch { tried: "stl", looks_like: "off", head: "h".into(), reason: "r".into() },
+            ShapeError::Io { path: "p".into(), message: "m".into() },
+        ];
+        let analysis = vec![
+            AnalysisError::invalid_parameter("m"),
+            AnalysisError::invalid_k("m"),
+            AnalysisError::not_applicable("m"),
+            AnalysisError::Operator(OperatorError::NotApplicable { operator: "cotan", kind: "graph" }),
+            AnalysisError::Operator(OperatorError::MassNotApplicable { operator: "graph", mass: "lumped" }),
+            AnalysisError::Operator(OperatorError::DegenerateElement {
+                element: "face",
+                index: 0,
+                message: "m".into(),
+            }),
+            AnalysisError::Operator(OperatorError::NonManifold { operator: "cotan", message: "m".into() }),
+            AnalysisError::Operator(OperatorError::Boundary { message: "m".into() }),
+            AnalysisError::Operator(OperatorError::InvalidParameter { name: "n", message: "m".into() }),
+            AnalysisError::Eigen(EigenError::InvalidK { k: 0, n: 1, max: 1 }),
+            AnalysisError::Eigen(EigenError::Factorization { message: "m".into() }),
+            AnalysisError::Eigen(EigenError::Canceled),
+            AnalysisError::Eigen(EigenError::NoConvergence { converged: 0, wanted: 1, steps: 1 }),
+            AnalysisError::Eigen(EigenError::InvalidOption { name: "tol", message: "m".into() }),
+            AnalysisError::Eigen(EigenError::Incomplete { shift: 1.0, below: 2, found: 1, repairs: 3 }),
+            AnalysisError::Descriptor(DescriptorError::InvalidParameter { name: "n", message: "m".into() }),
+            AnalysisError::Descriptor(DescriptorError::TooFewEigenpairs { message: "m".into() }),
+            AnalysisError::Descriptor(DescriptorError::NotApplicable { message: "m".into() }),
+            AnalysisError::Descriptor(DescriptorError::Solve { message: "m".into() }),
+        ];
+        let unknown = crate::service::strict::Unknown {
+            pointer: "/x".into(),
+            name: "x".into(),
+            suggestion: None,
+            belongs_in: None,
+            allowed: vec![],
+        };
+        let mut all: Vec<ApiError> = shape.into_iter().map(ApiError::Shape).collect();
+        all.extend(analysis.into_iter().map(ApiError::Analysis));
+        all.extend([
+            ApiError::NotFound { what: "shape", id: "x".into() },
+            ApiError::RouteNotFound { path: "/x".into() },
+            ApiError::MethodNotAllowed,
+            ApiError::BodyTooLarge { limit: 1 },
+            ApiError::invalid_request("m"),
+            ApiError::invalid_json("m"),
+            ApiError::UnknownField(unknown),
+            ApiError::UnsupportedMediaType { detail: "m".into() },
+            ApiError::QueueFull { capacity: 1, retry_after_s: 1 },
+            ApiError::KTooLarge { detail: "m".into() },
+            ApiError::TooManySamples { detail: "m".into() },
+            ApiError::OutputTooLarge { detail: "m".into() },
+            ApiError::NotReady { detail: "m".into() },
+            ApiError::Unauthorized,
+            ApiError::Forbidden,
+            ApiError::RateLimited { retry_after_s: 1, per_minute: 1 },
+            ApiError::Canceled,
+            ApiError::JobTimeout { seconds: 1 },
+            ApiError::JobPanicked { detail: "m".into() },
+            ApiError::AuthThrottled { retry_after_s: 1, per_minute: 1 },
+            ApiError::BodyTimeout { seconds: 1.0 },
+            ApiError::Internal { detail: "m".into() },
+        ]);
+        for e in &all {
+            match e {
+                ApiError::Shape(_)
+                | ApiError::Analysis(_)
+                | ApiError::NotFound { .. }
+                | ApiError::RouteNotFound { .. }
+                | ApiError::MethodNotAllowed
+                | ApiError::BodyTooLarge { .. }
+                | ApiError::InvalidRequest { .. }
+                | ApiError::InvalidJson { .. }
+                | ApiError::UnknownField(_)
+                | ApiError::UnsupportedMediaType { .. }
+                | ApiError::QueueFull { .. }
+                | ApiError::KTooLarge { .. }
+                | ApiError::TooManySamples { .. }
+                | ApiError::OutputTooLarge { .. }
+                | ApiError::NotReady { .. }
+                | ApiError::Unauthorized
+                | ApiError::Forbidden
+                | ApiError::RateLimited { .. }
+                | ApiError::Canceled
+                | ApiError::JobTimeout { .. }
+                | ApiError::JobPanicked { .. }
+                | ApiError::AuthThrottled { .. }
+                | ApiError::BodyTimeout { .. }
+                | ApiError::Internal { .. } => {}
+            }
+        }
+        all
+    }
+
+    /// Every problem the service can build has a documented code: listed in `CODES` (so served at
+    /// `/problems/{code}`), in the OpenAPI document's `Problem.code` enum, and in the README; and every listed code
+    /// is one some error produces (plus the connection limit's, written by the listener).
+    #[test]
+    fn every_code_is_served_documented_and_in_the_openapi_document() {
+        let listed: std::collections::BTreeSet<&str> = CODES.iter().map(|(c, _)| *c).collect();
+        let mut produced = std::collections::BTreeSet::new();
+        for e in every_error() {
+            let (status, p) = e.problem();
+            assert!(listed.contains(p.code.as_str()), "{} is not in CODES", p.code);
+            assert_eq!((p.type_.clone(), p.status), (format!("/problems/{}", p.code), status.as_u16()));
+            produced.insert(p.code);
+        }
+        produced.insert("too-many-connections".into());
+        let unused: Vec<_> = listed.iter().filter(|c| !produced.contains(**c)).collect();
+        assert!(unused.is_empty(), "codes no error produces: {unused:?}");
+        let doc: serde_json::Value = serde_json::from_str(&crate::service::openapi::document()).unwrap();
+        let in_doc: Vec<&str> = doc
+            .pointer("/components/schemas/Problem/allOf")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+            .filter_map(|p| p.pointer("/properties/code/enum").and_then(Value::as_array))
+            .flatten()
+            .filter_map(Value::as_str)
+            .collect();
+        let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+        for c in &listed {
+            assert!(in_doc.contains(c), "{c} is not in the OpenAPI document's Problem.code");
+            assert!(readme.contains(&format!("`{c}`")), "{c} has no README line");
+        }
+    }
+}

@@ -323,14 +323,12 @@ fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
     let Some((what, k)) = asked else { return Ok(()) };
     if k == 0 {
         // Refused at submission: the same answer on every path (a job, /v1/analyze, a cached spectrum).
-        return Err(ApiError::Analysis(crate::analysis::bad(
-            "invalid-k",
-            format!("{what} = 0: ask for at least one eigenpair (1 ≤ {what} ≤ the number of unknowns)"),
-        )));
+        return Err(ApiError::Analysis(crate::analysis::AnalysisError::invalid_k(format!(
+            "{what} = 0: ask for at least one eigenpair (1 ≤ {what} ≤ the number of unknowns)"
+        ))));
     }
     if k > state.config.max_k {
-        return Err(ApiError::Limit {
-            code: "k-too-large",
+        return Err(ApiError::KTooLarge {
             detail: format!("k = {k} is above the limit of {} (--max-k)", state.config.max_k),
         });
     }
@@ -379,16 +377,14 @@ fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(), Api
     };
     let max = state.config.max_samples;
     if let Some((name, n)) = counts.into_iter().find(|&(_, n)| n > max) {
-        return Err(ApiError::Limit {
-            code: "too-many-samples",
+        return Err(ApiError::TooManySamples {
             detail: format!("{name} = {n} is above the limit of {max} (--max-samples, KAC_MAX_SAMPLES)"),
         });
     }
     let values = vertices.saturating_mul(columns);
     let max = state.config.max_output_values;
     if values > max {
-        return Err(ApiError::Limit {
-            code: "output-too-large",
+        return Err(ApiError::OutputTooLarge {
             detail: format!(
                 "this analysis holds a per-vertex array of {vertices} vertices × {columns} columns = {values} values, \
                  above the limit of {max} (--max-output-values, KAC_MAX_OUTPUT_VALUES)"
@@ -466,13 +462,11 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
                 .cloned()
                 .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                 .unwrap_or_else(|| "unknown panic".into());
-            let (_, mut p) = ApiError::Internal { detail: format!("the computation panicked: {msg}") }.problem();
-            p.code = "job-panicked".into();
-            p.type_ = "/problems/job-panicked".into();
+            let (_, p) = ApiError::JobPanicked { detail: msg }.problem();
             finish(state, job, Status::Failed, Some(p), None);
             Status::Failed
         }
-        Ok(Err(e)) if e.code == "canceled" => stopped(state, job),
+        Ok(Err(e)) if e.is_stop() => stopped(state, job),
         Ok(Err(e)) => {
             let (_, p) = ApiError::Analysis(e).problem();
             finish(state, job, Status::Failed, Some(p), None);
@@ -500,12 +494,7 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
 /// A job that stopped on its flag: failed with `job-timeout` when the timer set it, canceled otherwise.
 fn stopped(state: &AppState, job: &Job) -> Status {
     if job.timed_out.load(Ordering::SeqCst) {
-        let (_, mut p) = ApiError::Internal {
-            detail: format!("the job ran longer than {} s (--job-timeout-s)", state.config.job_timeout_s),
-        }
-        .problem();
-        p.code = "job-timeout".into();
-        p.type_ = "/problems/job-timeout".into();
+        let (_, p) = ApiError::JobTimeout { seconds: state.config.job_timeout_s }.problem();
         finish(state, job, Status::Failed, Some(p), None);
         Status::Failed
     } else {
@@ -515,10 +504,7 @@ fn stopped(state: &AppState, job: &Job) -> Status {
 }
 
 fn canceled() -> Problem {
-    let (_, mut p) = ApiError::bad("canceled", "the job was canceled").problem();
-    p.status = 409;
-    p.title = "Canceled".into();
-    p
+    ApiError::Canceled.problem().1
 }
 
 /// Serializes a result (summary with every array inline) and stores it with its strong ETag.

@@ -57,7 +57,21 @@ pub struct ApiDoc;
 pub fn document() -> String {
     let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
     close_request_schemas(&mut doc);
+    list_problem_codes(&mut doc);
     serde_json::to_string_pretty(&doc).unwrap_or_default()
+}
+
+/// Every problem code the service can answer with, as the `enum` of `Problem.code` (each is described at
+/// `/problems/{code}`): the contract a client can switch on, and schemathesis checks every problem against it.
+fn list_problem_codes(doc: &mut serde_json::Value) {
+    let codes: Vec<serde_json::Value> = super::error::CODES.iter().map(|(c, _)| (*c).into()).collect();
+    if let Some(serde_json::Value::Array(parts)) = doc.pointer_mut("/components/schemas/Problem/allOf") {
+        for p in parts {
+            if let Some(serde_json::Value::Object(code)) = p.pointer_mut("/properties/code") {
+                code.insert("enum".into(), serde_json::Value::Array(codes.clone()));
+            }
+        }
+    }
 }
 
 /// Says in the document what [`super::strict`] enforces: an object schema with declared properties that a JSON

@@ -84,7 +84,7 @@ fn body_error(state: &AppState, e: BytesRejection) -> ApiError {
     } else if timed_out(&e) {
         ApiError::BodyTimeout { seconds: state.config.body_read_timeout_s }
     } else {
-        ApiError::bad("invalid-request", e.body_text())
+        ApiError::invalid_request(e.body_text())
     }
 }
 
@@ -97,7 +97,7 @@ fn json_error(state: &AppState, e: JsonRejection) -> ApiError {
         other if other.status() == StatusCode::PAYLOAD_TOO_LARGE => {
             ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
         }
-        other => ApiError::bad("invalid-json", other.body_text()),
+        other => ApiError::invalid_json(other.body_text()),
     }
 }
 
@@ -110,7 +110,7 @@ fn strict_body<T: serde::de::DeserializeOwned>(
 ) -> Result<T, ApiError> {
     let Json(v) = body.map_err(|e| json_error(st, e))?;
     super::strict::check_body(&v, schema).map_err(ApiError::UnknownField)?;
-    serde_json::from_value(v).map_err(|e| ApiError::bad("invalid-json", e.to_string()))
+    serde_json::from_value(v).map_err(|e| ApiError::invalid_json(e.to_string()))
 }
 
 /// Every query parameter must be one the document declares for the routed operation.
@@ -151,7 +151,7 @@ impl<T: serde::de::DeserializeOwned, S: Send + Sync> FromRequestParts<S> for Que
         axum::extract::Query::<T>::from_request_parts(parts, state)
             .await
             .map(|q| Query(q.0))
-            .map_err(|e| ApiError::bad("invalid-request", e.body_text()))
+            .map_err(|e| ApiError::invalid_request(e.body_text()))
     }
 }
 
@@ -278,12 +278,9 @@ struct Upload {
 
 fn parse_format(name: &str) -> Result<Format, ApiError> {
     Format::from_name(name).ok_or_else(|| {
-        ApiError::bad(
-            "invalid-request",
-            format!(
-                "unknown format '{name}'; one of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx"
-            ),
-        )
+        ApiError::invalid_request(format!(
+            "unknown format '{name}'; one of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx"
+        ))
     })
 }
 
@@ -299,7 +296,7 @@ async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> R
     if ct.to_ascii_lowercase().starts_with("multipart/form-data") {
         let mut mp = Multipart::from_request(req, st)
             .await
-            .map_err(|e| ApiError::bad("invalid-request", format!("multipart: {}", e.body_text())))?;
+            .map_err(|e| ApiError::invalid_request(format!("multipart: {}", e.body_text())))?;
         let mut got = false;
         loop {
             let field = match mp.next_field().await {
@@ -308,7 +305,7 @@ async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> R
                 Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
                     return Err(ApiError::BodyTooLarge { limit: st.config.max_body_bytes })
                 }
-                Err(e) => return Err(ApiError::bad("invalid-request", format!("multipart: {}", e.body_text()))),
+                Err(e) => return Err(ApiError::invalid_request(format!("multipart: {}", e.body_text()))),
             };
             let name = field.name().unwrap_or("").to_string();
             let filename = field.file_name().map(str::to_string);
@@ -317,7 +314,7 @@ async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> R
                 if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
                     ApiError::BodyTooLarge { limit: st.config.max_body_bytes }
                 } else {
-                    ApiError::bad("invalid-request", format!("multipart: {}", e.body_text()))
+                    ApiError::invalid_request(format!("multipart: {}", e.body_text()))
                 }
             })?;
             if !got && (filename.is_some() || name == "file" || name == "shape") {
@@ -333,7 +330,7 @@ async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> R
             }
         }
         if !got {
-            return Err(ApiError::bad("invalid-request", "the multipart body has no file part (name it 'file')"));
+            return Err(ApiError::invalid_request("the multipart body has no file part (name it 'file')"));
         }
     } else {
         up.media_type = (!ct.is_empty()).then_some(ct);
@@ -345,7 +342,7 @@ async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> R
 /// Parses and validates an upload (on the blocking pool) and stores it: (created, shape).
 async fn ingest(st: &AppState, up: Upload) -> Result<(bool, Arc<StoredShape>), ApiError> {
     if up.bytes.is_empty() {
-        return Err(ApiError::bad("invalid-request", "the request body is empty; send the shape file"));
+        return Err(ApiError::invalid_request("the request body is empty; send the shape file"));
     }
     let format = match up.format {
         Some(f) => f,
@@ -679,10 +676,7 @@ async fn get_array(
         ),
         "ply" => {
             if col >= a.cols {
-                return Err(ApiError::bad(
-                    "invalid-request",
-                    format!("column {col} does not exist ({} columns)", a.cols),
-                ));
+                return Err(ApiError::invalid_request(format!("column {col} does not exist ({} columns)", a.cols)));
             }
             let shape_id = r.summary["shape_id"].as_str().unwrap_or("").to_string();
             let shape = st.shapes.get(&shape_id).ok_or(ApiError::NotFound { what: "shape", id: shape_id })?;
@@ -757,7 +751,7 @@ async fn analyze(
 ) -> Result<Response, ApiError> {
     if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
         // Before the upload is read or a job submitted (a NaN wait panicked the timer after the job was queued).
-        return Err(ApiError::bad("invalid-request", format!("wait = {w}: give a finite number of seconds")));
+        return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
     }
     let headers = req.headers().clone();
     let mut up = read_upload(&st, q.format.clone(), req).await?;
@@ -765,14 +759,11 @@ async fn analyze(
         .analysis
         .clone()
         .or_else(|| up.fields.iter().find(|(n, _)| n == "analysis").map(|(_, v)| v.clone()))
-        .ok_or_else(|| {
-        ApiError::bad("invalid-request", "give the analysis as a multipart part or ?analysis=JSON")
-    })?;
-    let value: Value =
-        serde_json::from_str(&text).map_err(|e| ApiError::bad("invalid-json", format!("analysis: {e}")))?;
+        .ok_or_else(|| ApiError::invalid_request("give the analysis as a multipart part or ?analysis=JSON"))?;
+    let value: Value = serde_json::from_str(&text).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
     super::strict::check_body(&value, "Analysis").map_err(ApiError::UnknownField)?;
     let analysis: Analysis =
-        serde_json::from_value(value).map_err(|e| ApiError::bad("invalid-json", format!("analysis: {e}")))?;
+        serde_json::from_value(value).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
     up.fields.clear();
     let (_, shape) = ingest(&st, up).await?;
     let (job, _) = jobs::submit(&st, shape, analysis)?;
@@ -847,10 +838,7 @@ async fn compare(
 ) -> Result<Json<Value>, ApiError> {
     let req: CompareRequest = strict_body(&st, body, "CompareRequest")?;
     if req.k > st.config.max_k {
-        return Err(ApiError::Limit {
-            code: "k-too-large",
-            detail: format!("k = {} is above --max-k {}", req.k, st.config.max_k),
-        });
+        return Err(ApiError::KTooLarge { detail: format!("k = {} is above --max-k {}", req.k, st.config.max_k) });
     }
     let shapes: Vec<Arc<StoredShape>> = match &req.shape_ids {
         Some(ids) => ids
@@ -860,7 +848,7 @@ async fn compare(
         None => st.shapes.list(0, 500).0.iter().filter_map(|r| st.shapes.get(&r.id)).collect(),
     };
     if shapes.len() > 500 {
-        return Err(ApiError::bad("invalid-request", "at most 500 shapes per comparison"));
+        return Err(ApiError::invalid_request("at most 500 shapes per comparison"));
     }
     let options = ShapeDnaOptions {
         k: req.k,

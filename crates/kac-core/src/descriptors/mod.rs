@@ -110,6 +110,15 @@ impl DescriptorError {
             DescriptorError::Solve { .. } => "solve-failed",
         }
     }
+    /// Whether the request was at fault (it cannot succeed as given) rather than the computation.
+    pub fn caller_fault(&self) -> bool {
+        match self {
+            DescriptorError::InvalidParameter { .. }
+            | DescriptorError::TooFewEigenpairs { .. }
+            | DescriptorError::NotApplicable { .. } => true,
+            DescriptorError::Solve { .. } => false,
+        }
+    }
     pub(crate) fn param(name: &'static str, message: impl Into<String>) -> Self {
         DescriptorError::InvalidParameter { name, message: message.into() }
     }

@@ -221,6 +221,18 @@ impl OperatorError {
             OperatorError::InvalidParameter { .. } => "invalid-parameter",
         }
     }
+    /// Whether the request was at fault (it cannot succeed as given) rather than the computation: always, since
+    /// every operator error is about the shape or the options asked for.
+    pub fn caller_fault(&self) -> bool {
+        match self {
+            OperatorError::NotApplicable { .. }
+            | OperatorError::MassNotApplicable { .. }
+            | OperatorError::DegenerateElement { .. }
+            | OperatorError::NonManifold { .. }
+            | OperatorError::Boundary { .. }
+            | OperatorError::InvalidParameter { .. } => true,
+        }
+    }
 }
 
 /// A built operator: the pair on the kept vertices and how it was made.

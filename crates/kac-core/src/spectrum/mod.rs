@@ -278,6 +278,16 @@ impl EigenError {
             EigenError::Incomplete { .. } => "incomplete-spectrum",
         }
     }
+    /// Whether the request was at fault (it cannot succeed as given) rather than the computation.
+    pub fn caller_fault(&self) -> bool {
+        match self {
+            EigenError::InvalidK { .. } | EigenError::InvalidOption { .. } => true,
+            EigenError::Factorization { .. }
+            | EigenError::Canceled
+            | EigenError::NoConvergence { .. }
+            | EigenError::Incomplete { .. } => false,
+        }
+    }
 }
 
 /// Repair rounds before a spectrum that stays incomplete is an error. Each round finds every pair missed below
