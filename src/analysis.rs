@@ -628,6 +628,26 @@ pub fn measures(v: &Validated, op: Option<&Operator>) -> Measures {
     Measures::of(&v.summary(), mass_total)
 }
 
+/// The shape-DNA of a shape, typed (for `shape-dna` jobs and comparisons), with the eigenpairs it came from and
+/// the number of pairs asked for (k plus the expected zero modes unless they are included).
+pub fn shape_dna_of(
+    v: &Validated,
+    options: &ShapeDnaOptions,
+    operator: &OperatorSpec,
+    solver: &SolverSpec,
+    hooks: Hooks<'_>,
+    reused: &std::cell::Cell<bool>,
+) -> Result<(Arc<Eigen>, shape_dna::ShapeDna, usize), AnalysisError> {
+    let op = build_operator(v, operator)?;
+    let zeros = if options.include_zero { 0 } else { expected_zero_modes(&op) };
+    let want = (options.k + zeros).min(op.pair.n());
+    let e = eigenpairs(v, operator, solver, want, hooks, reused)?;
+    let b = basis_of(&e, want);
+    let m = measures(v, Some(&e.operator));
+    let dna = shape_dna::shape_dna(b.values, b.zero_tol, &m, options)?;
+    Ok((e, dna, want))
+}
+
 /// Runs an analysis on a validated shape.
 pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
     let head = json!({ "shape_id": v.id.hex(), "analysis": analysis.name(), "algorithm_version": ALGORITHM_VERSION });
@@ -686,13 +706,9 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             signature(v, &e, g.values.as_ref(), "gps", g.eigenvalues.clone(), summary)
         }
         Analysis::ShapeDna { options, operator, solver } => {
-            let op = build_operator(v, operator)?;
-            let zeros = if options.include_zero { 0 } else { expected_zero_modes(&op) };
-            let want = (options.k + zeros).min(op.pair.n());
-            let e = eigenpairs(v, operator, solver, want, hooks, &reused)?;
+            let (e, dna, want) = shape_dna_of(v, options, operator, solver, hooks, &reused)?;
             let b = basis_of(&e, want);
             let m = measures(v, Some(&e.operator));
-            let dna = shape_dna::shape_dna(b.values, b.zero_tol, &m, options)?;
             let weyl = weyl_estimate(b.values, b.zero_tol, &m).ok();
             let summary = merge(
                 json!({ "shape_dna": dna, "weyl": weyl, "measures": m, "options": options, "residuals": &e.spectrum.residuals[..want.min(e.spectrum.residuals.len())] }),

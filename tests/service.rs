@@ -936,3 +936,52 @@ fn repeated_wrong_api_keys_are_throttled_per_address() {
     // Health stays public.
     assert_eq!(reply(agent().get(&s.url("/livez")).call()).status, 200);
 }
+
+/// Issue 15, item 5: a comparison is a job in the queue: 202 and a job without `wait`, the same job for the same
+/// request, its result at /v1/results, a shape that cannot be fingerprinted reported without failing the rest,
+/// and the queue's capacity, the job timeout and cancel all apply.
+#[test]
+fn compare_runs_as_a_job_within_the_queue_limits() {
+    let s = Server::start(&[]);
+    let a = upload(&s, &icosphere_off(1), "?format=off").body["id"].as_str().unwrap().to_string();
+    let b = upload(&s, &icosphere_off(2), "?format=off").body["id"].as_str().unwrap().to_string();
+    let cloud = b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 0\n1 0 1\n0 1 1\n1 1 1\n";
+    let c = upload(&s, cloud, "?format=xyz").body["id"].as_str().unwrap().to_string();
+    let req = json!({ "shape_ids": [a, b, c], "k": 5, "operator": { "operator": "cotan" } });
+    let r = reply(agent().post(&s.url("/v1/compare?wait=0")).send_json(req.clone()));
+    assert_eq!(r.status, 202, "{}", r.body);
+    let job = r.body["id"].as_str().unwrap().to_string();
+    assert_eq!(r.location.as_deref(), Some(format!("/v1/jobs/{job}").as_str()));
+    let done = wait_done(&s, &job);
+    assert_eq!((done["status"].as_str(), done["analysis"].as_str()), (Some("succeeded"), Some("compare")), "{done}");
+    let result = reply(agent().get(&s.url(done["result"].as_str().unwrap())).call()).body;
+    assert_eq!(result["shape_ids"], json!([a, b]), "{result}");
+    assert_eq!(result["distances"].as_array().unwrap().len(), 2);
+    assert_eq!(result["nearest"][0]["nearest"][0]["shape_id"], b.as_str());
+    let failures = result["failures"].as_array().unwrap();
+    assert_eq!(failures.len(), 1, "{result}");
+    assert_eq!(
+        (failures[0]["shape_id"].as_str(), failures[0]["code"].as_str()),
+        (Some(c.as_str()), Some("operator-not-applicable"))
+    );
+    // The same request (waiting this time) is the same job, answered with its result.
+    let again = reply(agent().post(&s.url("/v1/compare")).send_json(req));
+    assert_eq!((again.status, &again.body["shape_ids"]), (200, &json!([a, b])), "{}", again.body);
+    assert_eq!(again.location.as_deref(), Some(format!("/v1/results/{job}").as_str()));
+    // The queue's capacity applies: one slot held by a slow job, the comparison is refused.
+    let s = Server::start(&["--workers", "1", "--queue-capacity", "1", "--test-job-delay-ms", "1500"]);
+    let a = upload(&s, &icosphere_off(1), "?format=off").body["id"].as_str().unwrap().to_string();
+    assert_eq!(submit(&s, json!({ "shape_id": a, "analysis": "trees" })).status, 202);
+    let full = reply(agent().post(&s.url("/v1/compare?wait=0")).send_json(json!({ "shape_ids": [a], "k": 3 })));
+    assert_problem(&full, 503, "queue-full");
+    // Cancel and the job timeout apply.
+    let s = Server::start(&["--job-timeout-s", "1", "--test-job-delay-ms", "2500"]);
+    let a = upload(&s, &icosphere_off(1), "?format=off").body["id"].as_str().unwrap().to_string();
+    let t = reply(agent().post(&s.url("/v1/compare?wait=0")).send_json(json!({ "shape_ids": [a], "k": 3 })));
+    let timed = wait_done(&s, t.body["id"].as_str().unwrap());
+    assert_eq!((timed["status"].as_str(), timed["error"]["code"].as_str()), (Some("failed"), Some("job-timeout")));
+    let c = reply(agent().post(&s.url("/v1/compare?wait=0")).send_json(json!({ "shape_ids": [a], "k": 4 })));
+    let id = c.body["id"].as_str().unwrap().to_string();
+    assert_eq!(reply(agent().post(&s.url(&format!("/v1/jobs/{id}/cancel"))).call()).status, 202);
+    assert_eq!(wait_done(&s, &id)["status"], "canceled");
+}

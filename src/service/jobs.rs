@@ -75,7 +75,25 @@ pub struct Job {
     pub view: watch::Sender<JobView>,
     pub stop: AtomicBool,
     pub timed_out: AtomicBool,
-    pub analysis: Analysis,
+    /// The analysis name (`compare` for a comparison).
+    pub name: &'static str,
+}
+
+/// What a job computes, handed to the worker with its inputs.
+pub enum Work {
+    /// One analysis of one stored shape.
+    Analysis(Analysis, Arc<StoredShape>),
+    /// Shape-DNA of several stored shapes and the distances between them.
+    Compare(super::compare::CompareRequest, Vec<Arc<StoredShape>>),
+}
+
+impl Work {
+    fn name(&self) -> &'static str {
+        match self {
+            Work::Analysis(a, _) => a.name(),
+            Work::Compare(..) => "compare",
+        }
+    }
 }
 
 impl Job {
@@ -163,6 +181,41 @@ pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> 
     check_work(state, &analysis, shape.validated.shape.vertex_count())?;
     let canonical = serde_json::to_value(&analysis).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
     let id = job_id(&shape.id, &canonical);
+    let shape_id = shape.id.clone();
+    enqueue(state, id, shape_id, canonical, Work::Analysis(analysis, shape))
+}
+
+/// Submits a comparison of stored shapes (the request's `shape_ids` resolved, in that order), or returns the
+/// existing job for the same request.
+pub fn submit_compare(
+    state: &AppState,
+    mut request: super::compare::CompareRequest,
+    shapes: Vec<Arc<StoredShape>>,
+) -> Result<(Arc<Job>, bool), ApiError> {
+    if request.k == 0 {
+        return Err(ApiError::Analysis(crate::analysis::AnalysisError::invalid_k(
+            "k = 0: ask for at least one eigenpair",
+        )));
+    }
+    if request.k > state.config.max_k {
+        return Err(ApiError::KTooLarge {
+            detail: format!("k = {} is above --max-k {}", request.k, state.config.max_k),
+        });
+    }
+    request.shape_ids = Some(shapes.iter().map(|s| s.id.clone()).collect());
+    let canonical = serde_json::to_value(&request).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
+    let id = job_id("compare", &canonical);
+    enqueue(state, id, String::new(), canonical, Work::Compare(request, shapes))
+}
+
+/// Enqueues work under its id unless a job with that id is queued, running or done (true: newly enqueued).
+fn enqueue(
+    state: &AppState,
+    id: String,
+    shape_id: String,
+    canonical: serde_json::Value,
+    work: Work,
+) -> Result<(Arc<Job>, bool), ApiError> {
     let jobs = &state.jobs;
     let job = {
         let mut map = jobs.jobs.lock().unwrap_or_else(|e| e.into_inner());
@@ -180,8 +233,8 @@ pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> 
         jobs.active.fetch_add(1, Ordering::SeqCst);
         let view = JobView {
             id: id.clone(),
-            shape_id: shape.id.clone(),
-            analysis: analysis.name().into(),
+            shape_id,
+            analysis: work.name().into(),
             status: Status::Enqueued,
             progress: JobProgress { phase: "queued".into(), converged: 0, wanted: 0 },
             created_at: now(),
@@ -195,22 +248,22 @@ pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> 
             view: watch::Sender::new(view),
             stop: AtomicBool::new(false),
             timed_out: AtomicBool::new(false),
-            analysis,
+            name: work.name(),
         });
         map.insert(id.clone(), job.clone());
         job
     };
     state.metrics.jobs_submitted.fetch_add(1, Ordering::Relaxed);
     persist(state, &job);
-    start(state, job.clone(), shape);
+    start(state, job.clone(), work);
     Ok((job, true))
 }
 
 /// Runs a job on the pool, with a timer that stops it when it runs too long. The clock starts when the job starts
 /// running (status `processing`): time spent waiting in the queue does not count against `--job-timeout-s`.
-fn start(state: &AppState, job: Arc<Job>, shape: Arc<StoredShape>) {
+fn start(state: &AppState, job: Arc<Job>, work: Work) {
     let (st, j) = (state.clone(), job.clone());
-    state.jobs.pool.spawn_fifo(move || execute(&st, &j, &shape));
+    state.jobs.pool.spawn_fifo(move || execute(&st, &j, &work));
     let timeout = std::time::Duration::from_secs(state.config.job_timeout_s);
     tokio::spawn(async move {
         let mut rx = job.view.subscribe();
@@ -227,7 +280,8 @@ fn start(state: &AppState, job: Arc<Job>, shape: Arc<StoredShape>) {
             }
         }
         tokio::time::sleep(timeout).await;
-        if !job.snapshot().status.terminal() {
+        // A job already told to stop (canceled) stays canceled: the timer only stops a job nobody stopped.
+        if !job.snapshot().status.terminal() && !job.stop.load(Ordering::SeqCst) {
             job.timed_out.store(true, Ordering::SeqCst);
             job.stop.store(true, Ordering::SeqCst);
         }
@@ -263,14 +317,26 @@ pub fn cancel(state: &AppState, job: &Job) {
 pub fn recover(state: &AppState) -> std::io::Result<usize> {
     let mut requeued = 0;
     for mut view in state.job_store.load_all()? {
-        let analysis: Option<Analysis> = serde_json::from_value(view.request.clone()).ok();
-        let shape = state.shapes.get(&view.shape_id);
         let resume = !view.status.terminal();
-        let failure = match (&analysis, &shape) {
-            (None, _) => Some("the stored request no longer parses"),
-            (_, None) => Some("the job's shape is no longer stored"),
-            _ => None,
+        let work: Result<Work, &str> = if view.analysis == "compare" {
+            match serde_json::from_value::<super::compare::CompareRequest>(view.request.clone()) {
+                Err(_) => Err("the stored request no longer parses"),
+                Ok(req) => {
+                    let shapes: Option<Vec<_>> =
+                        req.shape_ids.iter().flatten().map(|id| state.shapes.get(id)).collect();
+                    shapes.map(|s| Work::Compare(req, s)).ok_or("a shape of the comparison is no longer stored")
+                }
+            }
+        } else {
+            match serde_json::from_value::<Analysis>(view.request.clone()) {
+                Err(_) => Err("the stored request no longer parses"),
+                Ok(a) => match state.shapes.get(&view.shape_id) {
+                    Some(shape) => Ok(Work::Analysis(a, shape)),
+                    None => Err("the job's shape is no longer stored"),
+                },
+            }
         };
+        let failure = work.as_ref().err().copied();
         if resume {
             match failure {
                 Some(why) => {
@@ -290,14 +356,14 @@ pub fn recover(state: &AppState) -> std::io::Result<usize> {
             view: watch::Sender::new(view.clone()),
             stop: AtomicBool::new(false),
             timed_out: AtomicBool::new(false),
-            analysis: analysis.unwrap_or(Analysis::Trees {}),
+            name: work.as_ref().map_or("unknown", Work::name),
         });
         state.jobs.jobs.lock().unwrap_or_else(|e| e.into_inner()).insert(view.id.clone(), job.clone());
         if resume {
             persist(state, &job);
-            if let (None, Some(shape)) = (failure, shape) {
+            if let Ok(work) = work {
                 state.jobs.active.fetch_add(1, Ordering::SeqCst);
-                start(state, job, shape);
+                start(state, job, work);
                 requeued += 1;
             }
         }
@@ -407,16 +473,16 @@ fn finish(state: &AppState, job: &Job, status: Status, error: Option<Problem>, r
     persist(state, job);
 }
 
-fn execute(state: &AppState, job: &Arc<Job>, shape: &StoredShape) {
+fn execute(state: &AppState, job: &Arc<Job>, work: &Work) {
     let started = std::time::Instant::now();
-    let outcome = run_job(state, job, shape);
+    let outcome = run_job(state, job, work);
     state.jobs.active.fetch_sub(1, Ordering::SeqCst);
     if outcome.terminal() {
-        state.metrics.record_job(job.analysis.name(), outcome.name(), started.elapsed().as_secs_f64());
+        state.metrics.record_job(job.name, outcome.name(), started.elapsed().as_secs_f64());
     }
 }
 
-fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
+fn run_job(state: &AppState, job: &Arc<Job>, work: &Work) -> Status {
     if state.draining.load(Ordering::SeqCst) {
         // Shutting down: leave it enqueued in the store; the next start runs it.
         return Status::Enqueued;
@@ -448,12 +514,15 @@ fn run_job(state: &AppState, job: &Arc<Job>, shape: &StoredShape) -> Status {
         cache: Some(&*state.cache),
         threads: state.config.solver_threads,
     };
-    let panic_on = state.config.test_panic_analysis.as_deref() == Some(job.analysis.name());
+    let panic_on = state.config.test_panic_analysis.as_deref() == Some(job.name);
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         if panic_on {
-            panic!("test hook: the '{}' analysis panics", job.analysis.name());
+            panic!("test hook: the '{}' analysis panics", job.name);
         }
-        analysis::run(&shape.validated, &job.analysis, hooks)
+        match work {
+            Work::Analysis(a, shape) => analysis::run(&shape.validated, a, hooks),
+            Work::Compare(req, shapes) => super::compare::run(shapes, req, hooks),
+        }
     }));
     match result {
         Err(panic) => {

@@ -2,6 +2,7 @@
 //! addressed by content hash; analyses run as jobs on a rayon pool behind a bounded queue; results are immutable
 //! JSON (and `.npy` / coloured PLY per array) with strong ETags; every error is RFC 9457 problem+json.
 
+pub mod compare;
 pub mod config;
 pub mod error;
 pub mod jobs;

@@ -1,10 +1,11 @@
 //! Routes under `/v1`, operations endpoints, the OpenAPI document and the interactive docs.
 
+use super::compare::CompareRequest;
 use super::error::{problem_response, ApiError, CODES};
 use super::jobs::{self, JobView, Status};
 use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;
-use crate::analysis::{self, Analysis, Hooks, OperatorSpec, SolverSpec};
+use crate::analysis::{self, Analysis};
 use axum::body::Bytes;
 use axum::extract::rejection::{BytesRejection, JsonRejection};
 use axum::extract::{DefaultBodyLimit, FromRequest, FromRequestParts, Multipart, Path, Request, State};
@@ -13,7 +14,6 @@ use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::{Json, Router};
-use kac_core::descriptors::shape_dna::{self, Metric, Normalization, Reweighting, ShapeDnaOptions};
 use kac_core::io::Format;
 use kac_core::{ReadOptions, ValidateOptions};
 use serde::{Deserialize, Serialize};
@@ -767,7 +767,18 @@ async fn analyze(
     up.fields.clear();
     let (_, shape) = ingest(&st, up).await?;
     let (job, _) = jobs::submit(&st, shape, analysis)?;
-    let wait = q.wait.unwrap_or(10.0).clamp(0.0, st.config.max_wait_s as f64);
+    answer_within(&st, &job, q.wait, &headers).await
+}
+
+/// The synchronous form of a job (`?wait=` seconds, default 10, at most --max-wait-s): its result (200) when it
+/// is ready in time, its problem when it failed or was canceled, else the job (202, to poll or follow).
+async fn answer_within(
+    st: &AppState,
+    job: &jobs::Job,
+    wait: Option<f64>,
+    headers: &HeaderMap,
+) -> Result<Response, ApiError> {
+    let wait = wait.unwrap_or(10.0).clamp(0.0, st.config.max_wait_s as f64);
     let mut rx = job.view.subscribe();
     let _ = tokio::time::timeout(std::time::Duration::from_secs_f64(wait), async {
         loop {
@@ -784,7 +795,7 @@ async fn analyze(
     match view.status {
         Status::Succeeded => {
             let r = st.results.get(&view.id).ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
-            Ok(with_location(result_response(&r, &headers, true), &format!("/v1/results/{}", view.id)))
+            Ok(with_location(result_response(&r, headers, true), &format!("/v1/results/{}", view.id)))
         }
         Status::Failed | Status::Canceled => {
             let p = view.error.clone().ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
@@ -795,115 +806,45 @@ async fn analyze(
     }
 }
 
-/// Distances between stored shapes by shape-DNA, and each shape's nearest neighbours.
-#[derive(Deserialize, Serialize, utoipa::ToSchema)]
-#[serde(remote = "Self")]
-#[serde(deny_unknown_fields)]
-pub struct CompareRequest {
-    /// Shapes to compare (default: every stored shape, at most 500).
-    pub shape_ids: Option<Vec<String>>,
-    /// Fingerprint length (default 50).
-    #[serde(default = "default_dna_k")]
-    pub k: usize,
-    #[serde(default)]
-    pub normalization: Normalization,
-    #[serde(default)]
-    pub reweighting: Reweighting,
-    #[serde(default)]
-    pub include_zero: bool,
-    #[serde(default)]
-    pub metric: Metric,
-    /// Nearest neighbours listed per shape (default 5).
-    #[serde(default = "default_neighbours")]
-    pub neighbours: usize,
-    #[serde(default)]
-    pub operator: OperatorSpec,
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct CompareQuery {
+    /// Seconds to wait for the result (default 10, at most --max-wait-s); 0 answers 202 with the job at once.
+    pub wait: Option<f64>,
 }
 
-fn default_dna_k() -> usize {
-    50
-}
-fn default_neighbours() -> usize {
-    5
-}
-
-#[utoipa::path(post, path = "/v1/compare", tag = "jobs", request_body = CompareRequest,
-    responses((status = 200, description = "the distance matrix and nearest neighbours"),
+/// Distances between stored shapes by shape-DNA, and each shape's nearest neighbours, as a job in the queue
+/// (its capacity, the job timeout, cancel; the same request again is the same job): the result (200) when it is
+/// ready within `wait` seconds, the job (202) otherwise. A shape whose fingerprint fails is listed under
+/// `failures`; the others are compared.
+#[utoipa::path(post, path = "/v1/compare", tag = "jobs", params(CompareQuery), request_body = CompareRequest,
+    responses((status = 200, description = "the distance matrix, nearest neighbours and per-shape failures"),
+              (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
               (status = 400, body = super::error::Problem, content_type = "application/problem+json"),
               (status = 404, body = super::error::Problem, content_type = "application/problem+json"),
-              (status = 422, body = super::error::Problem, content_type = "application/problem+json")))]
+              (status = 409, description = "the job was canceled", body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 422, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 503, body = super::error::Problem, content_type = "application/problem+json")))]
 async fn compare(
     State(st): State<AppState>,
+    Query(q): Query<CompareQuery>,
+    headers: HeaderMap,
     body: Result<Json<Value>, JsonRejection>,
-) -> Result<Json<Value>, ApiError> {
-    let req: CompareRequest = strict_body(&st, body, "CompareRequest")?;
-    if req.k > st.config.max_k {
-        return Err(ApiError::KTooLarge { detail: format!("k = {} is above --max-k {}", req.k, st.config.max_k) });
+) -> Result<Response, ApiError> {
+    if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
+        return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
     }
+    let req: CompareRequest = strict_body(&st, body, "CompareRequest")?;
+    let max = super::compare::MAX_SHAPES;
     let shapes: Vec<Arc<StoredShape>> = match &req.shape_ids {
+        Some(ids) if ids.len() > max => {
+            return Err(ApiError::invalid_request(format!("{} shapes: at most {max} per comparison", ids.len())))
+        }
         Some(ids) => ids
             .iter()
             .map(|id| st.shapes.get(id).ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() }))
             .collect::<Result<_, _>>()?,
-        None => st.shapes.list(0, 500).0.iter().filter_map(|r| st.shapes.get(&r.id)).collect(),
+        None => st.shapes.list(0, max).0.iter().filter_map(|r| st.shapes.get(&r.id)).collect(),
     };
-    if shapes.len() > 500 {
-        return Err(ApiError::invalid_request("at most 500 shapes per comparison"));
-    }
-    let options = ShapeDnaOptions {
-        k: req.k,
-        include_zero: req.include_zero,
-        normalization: req.normalization,
-        reweighting: req.reweighting,
-    };
-    let analysis =
-        Analysis::ShapeDna { options: options.clone(), operator: req.operator.clone(), solver: SolverSpec::default() };
-    let cache = st.cache.clone();
-    let threads = st.config.solver_threads;
-    let list = shapes.clone();
-    let dnas = tokio::task::spawn_blocking(move || {
-        list.iter()
-            .map(|s| {
-                let out = analysis::run(
-                    &s.validated,
-                    &analysis,
-                    Hooks { cache: Some(&*cache), threads, ..Default::default() },
-                )?;
-                let v: Vec<f64> =
-                    serde_json::from_value(out.summary["shape_dna"]["values"].clone()).unwrap_or_default();
-                Ok::<_, analysis::AnalysisError>(v)
-            })
-            .collect::<Result<Vec<_>, _>>()
-    })
-    .await
-    .map_err(|e| ApiError::Internal { detail: format!("comparison panicked: {e}") })??;
-    let n = shapes.len();
-    let mut d = vec![vec![0.0; n]; n];
-    for i in 0..n {
-        for j in i + 1..n {
-            let x = shape_dna::distance(&dnas[i], &dnas[j], req.metric).map_err(|e| ApiError::Analysis(e.into()))?;
-            d[i][j] = x;
-            d[j][i] = x;
-        }
-    }
-    let ids: Vec<&str> = shapes.iter().map(|s| s.id.as_str()).collect();
-    let nearest: Vec<Value> = (0..n)
-        .map(|i| {
-            let mut o: Vec<usize> = (0..n).filter(|&j| j != i).collect();
-            o.sort_by(|&a, &b| d[i][a].total_cmp(&d[i][b]));
-            json!({ "shape_id": ids[i], "nearest": o.iter().take(req.neighbours).map(|&j| json!({ "shape_id": ids[j], "distance": d[i][j] })).collect::<Vec<_>>() })
-        })
-        .collect();
-    Ok(Json(json!({
-        "descriptor": "shape-dna",
-        "options": options,
-        "metric": req.metric.name(),
-        "operator": req.operator,
-        "shape_ids": ids,
-        "fingerprints": dnas,
-        "distances": d,
-        "nearest": nearest,
-    })))
+    let (job, _) = jobs::submit_compare(&st, req, shapes)?;
+    answer_within(&st, &job, q.wait, &headers).await
 }
-
-kac_core::object_only_serde!(CompareRequest);

@@ -280,6 +280,28 @@ impl Metric {
     }
 }
 
+/// The symmetric matrix of distances between fingerprints of equal length (zero diagonal).
+pub fn distance_matrix(fingerprints: &[Vec<f64>], metric: Metric) -> Result<Vec<Vec<f64>>, DescriptorError> {
+    let n = fingerprints.len();
+    let mut d = vec![vec![0.0; n]; n];
+    for i in 0..n {
+        for j in i + 1..n {
+            let x = distance(&fingerprints[i], &fingerprints[j], metric)?;
+            d[i][j] = x;
+            d[j][i] = x;
+        }
+    }
+    Ok(d)
+}
+
+/// The `count` nearest others of row `i` of a distance matrix, nearest first (ties by index): (index, distance).
+pub fn nearest(distances: &[Vec<f64>], i: usize, count: usize) -> Vec<(usize, f64)> {
+    let row = &distances[i];
+    let mut o: Vec<usize> = (0..row.len()).filter(|&j| j != i).collect();
+    o.sort_by(|&a, &b| row[a].total_cmp(&row[b]).then(a.cmp(&b)));
+    o.into_iter().take(count).map(|j| (j, row[j])).collect()
+}
+
 pub fn distance(a: &[f64], b: &[f64], metric: Metric) -> Result<f64, DescriptorError> {
     if a.len() != b.len() {
         return Err(DescriptorError::param("k", format!("fingerprints of {} and {} values", a.len(), b.len())));
