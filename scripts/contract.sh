@@ -25,10 +25,13 @@ done
 [ -n "${ADDR:-}" ] || { echo "the server did not start"; cat "$WORK/serve.err"; exit 1; }
 curl -fsS "http://$ADDR/readyz" > /dev/null   # the Dockerfile's health check
 # positive_data_acceptance is left out: a shape file's validity (and the configured limits) cannot be stated in
-# a JSON Schema, so schema-valid bytes are rightly refused with 4xx.
+# a JSON Schema, so schema-valid bytes are rightly refused with 4xx. use_after_free is left out: DELETE
+# /v1/jobs/{id} cancels the job (documented), and the canceled job stays readable so that its client can see how
+# it ended; the check expects 404 after a DELETE. It became reachable once POST /v1/compare made jobs from an
+# empty store.
 run_schemathesis() {
   "$VENV/bin/schemathesis" run openapi/openapi.json --url "http://$ADDR" \
-    --checks all --exclude-checks positive_data_acceptance \
+    --checks all --exclude-checks positive_data_acceptance,use_after_free \
     --max-examples 50 --workers 2 --seed 7 --no-color 2>&1 | tee "$WORK/st.out"
 }
 if ! run_schemathesis; then

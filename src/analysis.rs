@@ -400,6 +400,26 @@ impl VertexArray {
 pub struct Output {
     pub summary: Value,
     pub arrays: Vec<VertexArray>,
+    /// Shape-DNA fingerprints the analysis computed, for the service's search index.
+    pub fingerprints: Vec<Fingerprint>,
+}
+
+/// One shape's shape-DNA with the family of parameters it was computed with ([`fingerprint_family`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fingerprint {
+    pub family: String,
+    pub shape_id: String,
+    pub values: Vec<f64>,
+}
+
+/// The family of a fingerprint: every parameter that changes its values (the shape-DNA options and the
+/// operator), canonical JSON hashed to 16 hex digits. Fingerprints are compared only within a family.
+pub fn fingerprint_family(options: &ShapeDnaOptions, operator: &OperatorSpec) -> String {
+    use sha2::Digest;
+    let canonical =
+        serde_json::to_vec(&json!({ "options": options, "operator": operator, "version": ALGORITHM_VERSION }))
+            .unwrap_or_default();
+    sha2::Sha256::digest(&canonical).iter().take(8).map(|b| format!("{b:02x}")).collect()
 }
 
 /// The cache key of a spectrum: operator and solver parameters (the shape id is the caller's).
@@ -673,7 +693,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             // Also at the top level, where results before the check was on by default carried it.
             let mut summary = summary;
             summary["completeness"] = json!(e.spectrum.stats.completeness);
-            Output { summary, arrays }
+            Output { fingerprints: vec![], summary, arrays }
         }
         Analysis::Hks { k, options, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
@@ -714,7 +734,9 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 json!({ "shape_dna": dna, "weyl": weyl, "measures": m, "options": options, "residuals": &e.spectrum.residuals[..want.min(e.spectrum.residuals.len())] }),
                 operator_json(&e.operator),
             );
-            Output { summary, arrays: vec![] }
+            let family = fingerprint_family(options, operator);
+            let fingerprints = vec![Fingerprint { family, shape_id: v.id.hex(), values: dna.values.clone() }];
+            Output { fingerprints, summary, arrays: vec![] }
         }
         Analysis::Heat { k, times, sources, method, steps, operator, solver } => {
             let src = map_vertices(v, sources, "sources")?;
@@ -753,7 +775,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                         json!({ "method": "spectral", "k": k, "times": times, "heat_content": content, "heat_trace": trace, "heat_trace_tail_bound": tail, "sources": rows_json, "arrays": "one per source: the heat kernel k_t(source, ·), a column per time" }),
                         operator_json(&e.operator),
                     );
-                    Output { summary, arrays }
+                    Output { fingerprints: vec![], summary, arrays }
                 }
                 HeatMethod::Implicit => {
                     let op = build_operator(v, operator)?;
@@ -775,7 +797,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                         json!({ "method": "implicit", "steps": steps, "times": times, "sources": sources, "arrays": "one per source: backward-Euler flow of u₀ = the hat function at the source, a column per time" }),
                         operator_json(&op),
                     );
-                    Output { summary, arrays }
+                    Output { fingerprints: vec![], summary, arrays }
                 }
             }
         }
@@ -804,13 +826,13 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 "columns": if g.varadhan.is_some() { vec!["heat_method", "varadhan"] } else { vec!["heat_method"] },
                 "operator": "cotan", "mass": "lumped",
             });
-            Output { summary, arrays: vec![a] }
+            Output { fingerprints: vec![], summary, arrays: vec![a] }
         }
         Analysis::Trees {} => {
             let (edges, weights) = operators::edge_graph(&v.shape)
                 .ok_or_else(|| AnalysisError::not_applicable("a point cloud has no edges; build a graph first"))?;
             let t = spanning_trees(v.shape.vertex_count(), &edges, &weights)?;
-            Output { summary: json!({ "trees": t }), arrays: vec![] }
+            Output { fingerprints: vec![], summary: json!({ "trees": t }), arrays: vec![] }
         }
         Analysis::Embed { dimensions, scaling, operator, solver } => {
             let op = build_operator(v, operator)?;
@@ -831,7 +853,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 json!({ "dimensions": dimensions, "scaling": scaling, "eigenvalues": vals, "fiedler": f, "components": components(&e.operator.pair).1, "sign_convention": signatures::SIGN_CONVENTION }),
                 operator_json(&e.operator),
             );
-            Output { summary, arrays }
+            Output { fingerprints: vec![], summary, arrays }
         }
         Analysis::Smooth { alpha, function, fixed_boundary, operator } => {
             let op = build_operator(v, operator)?;
@@ -860,7 +882,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 json!({ "alpha": alpha, "smoothed": what, "fixed_boundary": fixed_boundary, "equation": "(M + αL) u = M ū" }),
                 operator_json(&op),
             );
-            Output { summary, arrays: vec![a] }
+            Output { fingerprints: vec![], summary, arrays: vec![a] }
         }
         Analysis::Interpolate { values, labels, operator } => {
             let op = build_operator(v, operator)?;
@@ -877,6 +899,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                     let um = faer::Mat::from_fn(u.len(), 1, |i, _| u[i]);
                     let a = to_input_rows(v, &op, um.as_ref(), "interpolated");
                     Output {
+                        fingerprints: vec![],
                         summary: merge(json!({ "known": values.len(), "method": "harmonic" }), operator_json(&op)),
                         arrays: vec![a],
                     }
@@ -891,6 +914,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                     let mut s = to_input_rows(v, &op, r.scores.as_ref(), "scores");
                     s.columns = Some(r.classes.iter().map(|&c| c as f64).collect());
                     Output {
+                        fingerprints: vec![],
                         summary: merge(
                             json!({ "labels": r, "method": "harmonic (Zhu et al. 2003)" }),
                             operator_json(&op),
@@ -910,7 +934,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
     if let Some(o) = summary.as_object_mut() {
         o.insert("eigenpairs_reused".into(), reused.get().into());
     }
-    Ok(Output { summary, arrays: out.arrays })
+    Ok(Output { fingerprints: out.fingerprints, summary, arrays: out.arrays })
 }
 
 /// The output of a per-vertex signature: its summary with the operator's, and its values as one array.
@@ -924,7 +948,7 @@ fn signature(
 ) -> Output {
     let mut a = to_input_rows(v, &e.operator, values, name);
     a.columns = Some(columns);
-    Output { summary: merge(summary, operator_json(&e.operator)), arrays: vec![a] }
+    Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays: vec![a] }
 }
 
 /// Validated vertex indices → rows of the (possibly Dirichlet-condensed) operator.

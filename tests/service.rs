@@ -985,3 +985,70 @@ fn compare_runs_as_a_job_within_the_queue_limits() {
     assert_eq!(reply(agent().post(&s.url(&format!("/v1/jobs/{id}/cancel"))).call()).status, 202);
     assert_eq!(wait_done(&s, &id)["status"], "canceled");
 }
+
+fn off_of(m: &kac_core::geometry::TriangleMesh) -> Vec<u8> {
+    kac_core::io::write::off(m).into_bytes()
+}
+
+/// Issue 15, item 5: search over every stored fingerprint of a family: from a stored shape (excluded from its own
+/// answer) or from a fingerprint, nearest first; a shape without a fingerprint gets one as a shape-dna job;
+/// deleted shapes drop out; the index survives a restart (it is reloaded from the store).
+#[test]
+fn search_finds_the_nearest_stored_shapes_by_shape_dna() {
+    let (s, _) = Server::start_in(tempfile::tempdir().unwrap(), &[]);
+    let coarse = kac_core::geometry::generate::icosphere(2);
+    let fine = kac_core::geometry::generate::icosphere(3);
+    let mut stretched = coarse.clone();
+    stretched.vertices.iter_mut().for_each(|p| p[0] *= 2.0);
+    let id = |m: &kac_core::geometry::TriangleMesh| {
+        upload(&s, &off_of(m), "?format=off").body["id"].as_str().unwrap().to_string()
+    };
+    let (a, b, c) = (id(&coarse), id(&fine), id(&stretched));
+    // Fingerprints are kept as shapes are analysed: a comparison of the three stores them.
+    let cmp = reply(
+        agent()
+            .post(&s.url("/v1/compare?wait=60"))
+            .send_json(json!({ "shape_ids": [a, b, c], "k": 8, "normalization": "area" })),
+    );
+    assert_eq!(cmp.status, 200, "{}", cmp.body);
+    let search = |s: &Server, body: Value| reply(agent().post(&s.url("/v1/search")).send_json(body));
+    let r = search(&s, json!({ "shape_id": a, "k": 8, "normalization": "area" }));
+    assert_eq!(r.status, 200, "{}", r.body);
+    assert_eq!(r.body["searched"], 3);
+    let order: Vec<&str> =
+        r.body["neighbours"].as_array().unwrap().iter().map(|n| n["shape_id"].as_str().unwrap()).collect();
+    assert_eq!(order, [b.as_str(), c.as_str()], "the finer sphere before the ellipsoid, the query left out");
+    // The same answer from the fingerprint itself (the query shape is then its own nearest, at distance 0).
+    let fp = r.body["fingerprint"].clone();
+    let f = search(&s, json!({ "fingerprint": fp, "k": 8, "normalization": "area", "neighbours": 2 }));
+    assert_eq!(
+        (f.body["neighbours"][0]["shape_id"].as_str(), f.body["neighbours"][0]["distance"].as_f64()),
+        (Some(a.as_str()), Some(0.0))
+    );
+    assert_eq!(f.body["neighbours"].as_array().unwrap().len(), 2);
+    // Another family (k = 6): the query shape's fingerprint is computed first, as a shape-dna job.
+    let n = search(&s, json!({ "shape_id": b, "k": 6, "normalization": "area" }));
+    assert_eq!((n.status, n.body["searched"].as_u64()), (200, Some(1)), "{}", n.body);
+    let jobs = reply(agent().get(&s.url(&format!("/v1/jobs?shape_id={b}&analysis=shape-dna"))).call());
+    assert_eq!(jobs.body["total"], 1, "{}", jobs.body);
+    // Bad queries.
+    assert_problem(
+        &search(&s, json!({ "fingerprint": [1.0, 2.0], "k": 8, "normalization": "area" })),
+        400,
+        "invalid-request",
+    );
+    assert_problem(&search(&s, json!({ "k": 8 })), 400, "invalid-request");
+    assert_problem(&search(&s, json!({ "shape_id": "0000", "k": 8 })), 404, "not-found");
+    // After SIGKILL and a restart the index is read back; a deleted shape drops out.
+    let (dir, _) = s.stop(false);
+    let (s, _) = Server::start_in(dir, &[]);
+    assert_eq!(reply(agent().delete(&s.url(&format!("/v1/shapes/{c}"))).call()).status, 204);
+    let r = search(&s, json!({ "shape_id": a, "k": 8, "normalization": "area" }));
+    assert_eq!(
+        (r.body["searched"].as_u64(), r.body["neighbours"][0]["shape_id"].as_str()),
+        (Some(2), Some(b.as_str())),
+        "{}",
+        r.body
+    );
+    assert_eq!(r.body["neighbours"].as_array().unwrap().len(), 1);
+}

@@ -5,7 +5,7 @@
 
 use super::error::ApiError;
 use super::store::StoredShape;
-use crate::analysis::{self, AnalysisError, Hooks, OperatorSpec, Output, SolverSpec};
+use crate::analysis::{self, AnalysisError, Fingerprint, Hooks, OperatorSpec, Output, SolverSpec};
 use kac_core::descriptors::shape_dna::{self, Metric, Normalization, Reweighting, ShapeDnaOptions};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -85,6 +85,12 @@ pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) 
         }
     }
     let distances = shape_dna::distance_matrix(&fingerprints, req.metric)?;
+    let family = analysis::fingerprint_family(&options, &req.operator);
+    let found: Vec<Fingerprint> = ids
+        .iter()
+        .zip(&fingerprints)
+        .map(|(id, v)| Fingerprint { family: family.clone(), shape_id: id.clone(), values: v.clone() })
+        .collect();
     let nearest: Vec<_> = (0..ids.len())
         .map(|i| {
             let near: Vec<_> = shape_dna::nearest(&distances, i, req.neighbours)
@@ -105,5 +111,5 @@ pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) 
         "nearest": nearest,
         "failures": failures,
     });
-    Ok(Output { summary, arrays: vec![] })
+    Ok(Output { fingerprints: found, summary, arrays: vec![] })
 }

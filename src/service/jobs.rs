@@ -543,6 +543,12 @@ fn run_job(state: &AppState, job: &Arc<Job>, work: &Work) -> Status {
         }
         Ok(Ok(out)) => {
             job.view.send_modify(|v| v.progress.phase = "storing".into());
+            for f in &out.fingerprints {
+                // The search index is a by-product: a failure to keep a fingerprint does not fail the job.
+                if let Err(e) = state.index.record(&*state.fingerprints, f) {
+                    tracing::error!(shape = %f.shape_id, error = %e, "cannot store the fingerprint");
+                }
+            }
             let id = job.snapshot().id;
             match store_result(&*state.results, &id, out) {
                 Ok(_) => {

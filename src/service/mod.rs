@@ -10,19 +10,23 @@ pub mod listener;
 pub mod openapi;
 pub mod ops;
 pub mod routes;
+pub mod search;
 pub mod store;
 pub mod strict;
 
 use config::Config;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use store::{Database, EigenCache, FileResults, JobStore, ResultStore, ShapeStore};
+use store::{Database, EigenCache, FileResults, FingerprintStore, JobStore, ResultStore, ShapeStore};
 
 pub struct Inner {
     pub config: Config,
     pub shapes: Arc<dyn ShapeStore>,
     pub job_store: Arc<dyn JobStore>,
     pub results: Arc<dyn ResultStore>,
+    pub fingerprints: Arc<dyn FingerprintStore>,
+    /// Every stored fingerprint, by family, for `/v1/search`.
+    pub index: search::Index,
     pub cache: Arc<EigenCache>,
     pub jobs: jobs::Jobs,
     pub metrics: ops::Metrics,
@@ -41,8 +45,11 @@ impl Inner {
             config.workers
         };
         let db = Arc::new(Database::open(&config.data_dir, config.max_vertices, config.store_cache_bytes)?);
+        let index = search::Index::load(&*db)?;
         Ok(Arc::new(Inner {
             shapes: db.clone(),
+            fingerprints: db.clone(),
+            index,
             job_store: db,
             results: Arc::new(FileResults::open(&config.data_dir, config.store_cache_bytes)?),
             cache: Arc::new(EigenCache::new(config.cache_bytes)),

@@ -3,6 +3,7 @@
 use super::compare::CompareRequest;
 use super::error::{problem_response, ApiError, CODES};
 use super::jobs::{self, JobView, Status};
+use super::search::SearchRequest;
 use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis};
@@ -37,6 +38,7 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/results/{id}/arrays/{file}", get(get_array))
         .route("/v1/analyze", post(analyze))
         .route("/v1/compare", post(compare))
+        .route("/v1/search", post(search))
         .route("/problems/{code}", get(problem_doc))
         .route("/openapi.json", get(openapi_json))
         .merge(SwaggerUi::new("/docs").config(utoipa_swagger_ui::Config::from("/openapi.json")))
@@ -450,6 +452,7 @@ async fn get_shape(State(st): State<AppState>, Path(id): Path<String>) -> Result
               (status = 404, body = super::error::Problem, content_type = "application/problem+json")))]
 async fn delete_shape(State(st): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
     if st.shapes.remove(&id) {
+        st.index.remove_shape(&id);
         Ok(StatusCode::NO_CONTENT)
     } else {
         Err(ApiError::NotFound { what: "shape", id })
@@ -770,14 +773,8 @@ async fn analyze(
     answer_within(&st, &job, q.wait, &headers).await
 }
 
-/// The synchronous form of a job (`?wait=` seconds, default 10, at most --max-wait-s): its result (200) when it
-/// is ready in time, its problem when it failed or was canceled, else the job (202, to poll or follow).
-async fn answer_within(
-    st: &AppState,
-    job: &jobs::Job,
-    wait: Option<f64>,
-    headers: &HeaderMap,
-) -> Result<Response, ApiError> {
+/// Waits until the job ends or `wait` seconds (default 10, at most --max-wait-s) pass; its view then.
+async fn wait_for(st: &AppState, job: &jobs::Job, wait: Option<f64>) -> JobView {
     let wait = wait.unwrap_or(10.0).clamp(0.0, st.config.max_wait_s as f64);
     let mut rx = job.view.subscribe();
     let _ = tokio::time::timeout(std::time::Duration::from_secs_f64(wait), async {
@@ -791,7 +788,18 @@ async fn answer_within(
         }
     })
     .await;
-    let view = job.snapshot();
+    job.snapshot()
+}
+
+/// The synchronous form of a job (`?wait=` seconds, default 10, at most --max-wait-s): its result (200) when it
+/// is ready in time, its problem when it failed or was canceled, else the job (202, to poll or follow).
+async fn answer_within(
+    st: &AppState,
+    job: &jobs::Job,
+    wait: Option<f64>,
+    headers: &HeaderMap,
+) -> Result<Response, ApiError> {
+    let view = wait_for(st, job, wait).await;
     match view.status {
         Status::Succeeded => {
             let r = st.results.get(&view.id).ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
@@ -847,4 +855,98 @@ async fn compare(
     };
     let (job, _) = jobs::submit_compare(&st, req, shapes)?;
     answer_within(&st, &job, q.wait, &headers).await
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct SearchQuery {
+    /// With `shape_id` whose fingerprint is not stored yet: seconds to wait for its `shape-dna` job (default 10, at
+    /// most --max-wait-s) before answering 202 with the job.
+    pub wait: Option<f64>,
+}
+
+/// The stored shapes nearest to a shape or a fingerprint by shape-DNA, over every fingerprint of the same family
+/// (k, normalization, reweighting, include_zero, operator) the service holds: those of finished `shape-dna`
+/// jobs and comparisons. A `shape_id` without a stored fingerprint gets one first, as a `shape-dna` job (202 with
+/// the job when it is not done within `wait`).
+#[utoipa::path(post, path = "/v1/search", tag = "jobs", params(SearchQuery), request_body = SearchRequest,
+    responses((status = 200, description = "the nearest shapes, nearest first, and how many were searched"),
+              (status = 202, description = "the query shape's fingerprint is being computed: the job", body = JobView, headers(("Location" = String))),
+              (status = 400, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 404, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 422, body = super::error::Problem, content_type = "application/problem+json"),
+              (status = 503, body = super::error::Problem, content_type = "application/problem+json")))]
+async fn search(
+    State(st): State<AppState>,
+    Query(q): Query<SearchQuery>,
+    body: Result<Json<Value>, JsonRejection>,
+) -> Result<Response, ApiError> {
+    if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
+        return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
+    }
+    let req: SearchRequest = strict_body(&st, body, "SearchRequest")?;
+    if req.k == 0 {
+        return Err(ApiError::Analysis(analysis::AnalysisError::invalid_k(
+            "k = 0: a fingerprint has at least one value",
+        )));
+    }
+    if req.k > st.config.max_k {
+        return Err(ApiError::KTooLarge { detail: format!("k = {} is above --max-k {}", req.k, st.config.max_k) });
+    }
+    if req.neighbours > 1000 {
+        return Err(ApiError::invalid_request(format!("neighbours = {}: at most 1000", req.neighbours)));
+    }
+    let family = req.family();
+    let query = match (&req.shape_id, &req.fingerprint) {
+        (Some(_), Some(_)) | (None, None) => {
+            return Err(ApiError::invalid_request("give either shape_id or fingerprint (one of them)"))
+        }
+        (None, Some(f)) => {
+            if let Some(i) = f.iter().position(|x| !x.is_finite()) {
+                return Err(ApiError::invalid_request(format!("fingerprint value {i} is not a finite number")));
+            }
+            f.clone()
+        }
+        (Some(id), None) => match st.index.get(&family, id) {
+            Some(f) => f,
+            None => {
+                let shape = st.shapes.get(id).ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() })?;
+                let dna = Analysis::ShapeDna {
+                    options: req.options(),
+                    operator: req.operator.clone(),
+                    solver: analysis::SolverSpec::default(),
+                };
+                let (job, _) = jobs::submit(&st, shape, dna)?;
+                let view = wait_for(&st, &job, q.wait).await;
+                match (st.index.get(&family, id), view.status) {
+                    (Some(f), _) => f,
+                    (None, Status::Failed | Status::Canceled) => {
+                        let p = view
+                            .error
+                            .clone()
+                            .ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
+                        let status = StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+                        return Ok(with_location(problem_response(status, &p), &format!("/v1/jobs/{}", view.id)));
+                    }
+                    (None, _) => return Ok(job_response(StatusCode::ACCEPTED, &view)),
+                }
+            }
+        },
+    };
+    let (near, searched) = st
+        .index
+        .nearest(&family, &query, req.metric, req.neighbours, req.shape_id.as_deref())
+        .map_err(ApiError::invalid_request)?;
+    let neighbours: Vec<Value> = near.into_iter().map(|(id, d)| json!({ "shape_id": id, "distance": d })).collect();
+    Ok(Json(json!({
+        "descriptor": "shape-dna",
+        "family": family,
+        "options": req.options(),
+        "metric": req.metric.name(),
+        "operator": req.operator,
+        "shape_id": req.shape_id,
+        "fingerprint": query,
+        "searched": searched,
+        "neighbours": neighbours,
+    }))
+    .into_response())
 }

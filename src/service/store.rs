@@ -90,6 +90,15 @@ pub trait ShapeStore: Send + Sync {
     fn healthy(&self) -> bool;
 }
 
+/// Shape-DNA fingerprints of stored shapes, by family (the parameters they were computed with), kept as shapes
+/// are analysed so that a search compares against every shape the service holds.
+pub trait FingerprintStore: Send + Sync {
+    /// Inserts or replaces one shape's fingerprint in a family.
+    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<()>;
+    /// Every fingerprint: (family, shape id, values).
+    fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>>;
+}
+
 /// Job records as clients see them, kept so that a restart loses no accepted job.
 pub trait JobStore: Send + Sync {
     /// Inserts or replaces a job's record.
@@ -136,7 +145,10 @@ impl Database {
                  id TEXT PRIMARY KEY, format TEXT NOT NULL, created_at TEXT NOT NULL,
                  bytes INTEGER NOT NULL, summary TEXT NOT NULL);
              CREATE TABLE IF NOT EXISTS jobs (
-                 seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, view TEXT NOT NULL);",
+                 seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, view TEXT NOT NULL);
+             CREATE TABLE IF NOT EXISTS fingerprints (
+                 family TEXT NOT NULL, shape_id TEXT NOT NULL, fingerprint BLOB NOT NULL,
+                 PRIMARY KEY (family, shape_id));",
         )
         .map_err(db_err)?;
         Ok(Database {
@@ -223,12 +235,40 @@ impl ShapeStore for Database {
     fn remove(&self, id: &str) -> bool {
         let _id = self.id_lock(id);
         let n = self.conn().execute("DELETE FROM shapes WHERE id = ?1", [id]).unwrap_or(0);
+        let _ = self.conn().execute("DELETE FROM fingerprints WHERE shape_id = ?1", [id]);
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
         let _ = std::fs::remove_file(self.shape_dir.join(id));
         n > 0
     }
     fn healthy(&self) -> bool {
         self.conn().query_row("SELECT 1", [], |r| r.get::<_, i64>(0)).is_ok()
+    }
+}
+
+impl FingerprintStore for Database {
+    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<()> {
+        // Little-endian f64s: 8 bytes a value, exact.
+        let blob: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        self.conn()
+            .execute(
+                "INSERT INTO fingerprints (family, shape_id, fingerprint) VALUES (?1, ?2, ?3)
+                 ON CONFLICT(family, shape_id) DO UPDATE SET fingerprint = excluded.fingerprint",
+                rusqlite::params![family, shape_id, blob],
+            )
+            .map_err(db_err)?;
+        Ok(())
+    }
+    fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>> {
+        let c = self.conn();
+        let mut st = c.prepare("SELECT family, shape_id, fingerprint FROM fingerprints").map_err(db_err)?;
+        let rows = st
+            .query_map([], |r| {
+                let blob: Vec<u8> = r.get(2)?;
+                let values = blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect();
+                Ok((r.get(0)?, r.get(1)?, values))
+            })
+            .map_err(db_err)?;
+        Ok(rows.flatten().collect())
     }
 }
 
