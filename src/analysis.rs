@@ -125,7 +125,7 @@ pub enum Analysis {
         #[serde(default)]
         solver: SolverSpec,
     },
-    /// Heat kernel signature (or its scale-invariant form with `scale_invariant`).
+    /// Heat kernel signature (the scale-invariant form is its own analysis, `si-hks`).
     Hks {
         #[serde(default = "k_signature")]
         k: usize,
@@ -136,6 +136,7 @@ pub enum Analysis {
         #[serde(default)]
         solver: SolverSpec,
     },
+    /// Scale-invariant HKS (Bronstein & Kokkinos 2010): the Fourier moduli of the HKS on a log-time grid.
     SiHks {
         #[serde(default = "k_signature")]
         k: usize,

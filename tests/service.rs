@@ -609,6 +609,9 @@ fn misspelt_and_misplaced_fields_are_refused_with_a_suggestion() {
         let expected = if ["geodesic", "trees"].contains(&a) { Value::Null } else { json!("operator") };
         assert_eq!(r.body["suggestion"], expected, "{a}: {}", r.body);
     }
+    // Geodesics take no operator: a misspelt field of their own gets its suggestion too.
+    let r = submit(&s, json!({ "shape_id": id, "analysis": "geodesic", "sources": [0], "optoins": {} }));
+    assert_eq!((r.status, r.body["suggestion"].as_str()), (422, Some("options")), "{}", r.body);
     let r = submit(&s, json!({ "shape_id": id, "analysis": "shape-dna", "options": { "normalisation": "area" } }));
     assert_problem(&r, 422, "invalid-request");
     assert_eq!(
