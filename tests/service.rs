@@ -1055,3 +1055,26 @@ fn search_finds_the_nearest_stored_shapes_by_shape_dna() {
     );
     assert_eq!(r.body["neighbours"].as_array().unwrap().len(), 1);
 }
+
+/// A shape whose file was lost while its record stayed is stored again by the next upload of it (was 500: the
+/// record's UNIQUE id), and a shape-dna job that finished without a kept fingerprint still serves a search from
+/// its stored result (was 202 forever).
+#[test]
+fn a_lost_upload_and_a_lost_fingerprint_are_recovered() {
+    let (s, _) = Server::start_in(tempfile::tempdir().unwrap(), &[]);
+    let off = icosphere_off(2);
+    let id = upload(&s, &off, "?format=off").body["id"].as_str().unwrap().to_string();
+    let j = submit(&s, json!({ "shape_id": id, "analysis": "shape-dna", "options": { "k": 6 } }));
+    assert_eq!(wait_done(&s, j.body["id"].as_str().unwrap())["status"], "succeeded");
+    let (dir, _) = s.stop(false);
+    std::fs::remove_file(dir.path().join("shapes").join(&id)).unwrap();
+    let db = rusqlite::Connection::open(dir.path().join("kac.sqlite3")).unwrap();
+    assert_eq!(db.execute("DELETE FROM fingerprints", []).unwrap(), 1, "the job kept its fingerprint");
+    drop(db);
+    let (s, _) = Server::start_in(dir, &[]);
+    let again = upload(&s, &off, "?format=off");
+    assert!(again.status == 200 || again.status == 201, "{} {}", again.status, again.body);
+    assert_eq!(reply(agent().get(&s.url(&format!("/v1/shapes/{id}"))).call()).status, 200);
+    let r = reply(agent().post(&s.url("/v1/search")).send_json(json!({ "shape_id": id, "k": 6 })));
+    assert_eq!((r.status, r.body["searched"].as_u64()), (200, Some(1)), "{}", r.body);
+}

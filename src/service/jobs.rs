@@ -202,6 +202,15 @@ pub fn submit_compare(
             detail: format!("k = {} is above --max-k {}", request.k, state.config.max_k),
         });
     }
+    // Each shape's shape-DNA within the limits a shape-dna job of it would have (the largest decides).
+    let dna = Analysis::ShapeDna {
+        options: request.options(),
+        operator: request.operator.clone(),
+        solver: crate::analysis::SolverSpec::default(),
+    };
+    if let Some(largest) = shapes.iter().map(|s| s.validated.shape.vertex_count()).max() {
+        check_work(state, &dna, largest)?;
+    }
     request.shape_ids = Some(shapes.iter().map(|s| s.id.clone()).collect());
     let canonical = serde_json::to_value(&request).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
     let id = job_id("compare", &canonical);
@@ -290,7 +299,13 @@ fn start(state: &AppState, job: Arc<Job>, work: Work) {
 
 /// Writes a job's record to the job store (a failure is logged: the job itself goes on).
 pub fn persist(state: &AppState, job: &Job) {
-    if let Err(e) = state.job_store.save(&job.snapshot()) {
+    // A job replaced under its id (canceled, then submitted again) no longer writes the record: it is the new
+    // job's now.
+    let view = job.snapshot();
+    if !state.jobs.get(&view.id).is_some_and(|current| std::ptr::eq(&*current, job)) {
+        return;
+    }
+    if let Err(e) = state.job_store.save(&view) {
         tracing::error!(job = %job.snapshot().id, error = %e, "cannot persist the job record");
     }
 }
@@ -318,7 +333,15 @@ pub fn recover(state: &AppState) -> std::io::Result<usize> {
     let mut requeued = 0;
     for mut view in state.job_store.load_all()? {
         let resume = !view.status.terminal();
-        let work: Result<Work, &str> = if view.analysis == "compare" {
+        // The analysis name from the stored request alone; shapes are read back only for jobs that resume.
+        let name: &'static str = if view.analysis == "compare" {
+            "compare"
+        } else {
+            serde_json::from_value::<Analysis>(view.request.clone()).map_or("unknown", |a| a.name())
+        };
+        let work: Result<Work, &str> = if !resume {
+            Err("finished")
+        } else if view.analysis == "compare" {
             match serde_json::from_value::<super::compare::CompareRequest>(view.request.clone()) {
                 Err(_) => Err("the stored request no longer parses"),
                 Ok(req) => {
@@ -356,7 +379,7 @@ pub fn recover(state: &AppState) -> std::io::Result<usize> {
             view: watch::Sender::new(view.clone()),
             stop: AtomicBool::new(false),
             timed_out: AtomicBool::new(false),
-            name: work.as_ref().map_or("unknown", Work::name),
+            name,
         });
         state.jobs.jobs.lock().unwrap_or_else(|e| e.into_inner()).insert(view.id.clone(), job.clone());
         if resume {
@@ -490,11 +513,19 @@ fn run_job(state: &AppState, job: &Arc<Job>, work: &Work) -> Status {
     if job.stop.load(Ordering::SeqCst) {
         return stopped(state, job);
     }
+    // Only an enqueued job starts: a cancel that landed after the flag was read has already ended it.
+    let mut started = false;
     job.view.send_modify(|v| {
-        v.status = Status::Processing;
-        v.started_at = Some(now());
-        v.progress.phase = "operator".into();
+        if v.status == Status::Enqueued {
+            v.status = Status::Processing;
+            v.started_at = Some(now());
+            v.progress.phase = "operator".into();
+            started = true;
+        }
     });
+    if !started {
+        return job.snapshot().status;
+    }
     persist(state, job);
     if state.config.test_job_delay_ms > 0 {
         std::thread::sleep(std::time::Duration::from_millis(state.config.test_job_delay_ms));

@@ -228,6 +228,8 @@ pub struct Access {
     failures_per_minute: u32,
     /// Client address → (wrong keys in the current minute, when that minute began).
     failures: Mutex<HashMap<std::net::IpAddr, (u32, Instant)>>,
+    /// When `failures` was last swept of expired entries.
+    swept: Mutex<Instant>,
 }
 
 /// The window of the wrong-key count.
@@ -241,6 +243,7 @@ impl Access {
             buckets: Mutex::new(HashMap::new()),
             failures_per_minute,
             failures: Mutex::new(HashMap::new()),
+            swept: Mutex::new(Instant::now()),
         }
     }
     /// Seconds until `ip` may try a key again, when it has used up its wrong keys for this minute.
@@ -259,9 +262,13 @@ impl Access {
             return;
         }
         let mut f = self.failures.lock().unwrap_or_else(|e| e.into_inner());
-        if f.len() > 100_000 {
+        // Expired entries go in one sweep, at most every 10 s, once the map is large (not on every failure).
+        let mut sweep = self.swept.lock().unwrap_or_else(|e| e.into_inner());
+        if f.len() > 100_000 && sweep.elapsed() > std::time::Duration::from_secs(10) {
             f.retain(|_, (_, since)| since.elapsed() < FAILURE_WINDOW);
+            *sweep = Instant::now();
         }
+        drop(sweep);
         let e = f.entry(ip).or_insert((0, Instant::now()));
         if e.1.elapsed() >= FAILURE_WINDOW {
             *e = (0, Instant::now());

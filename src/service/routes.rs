@@ -307,6 +307,9 @@ async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> R
                 Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
                     return Err(ApiError::BodyTooLarge { limit: st.config.max_body_bytes })
                 }
+                Err(e) if timed_out(&e) => {
+                    return Err(ApiError::BodyTimeout { seconds: st.config.body_read_timeout_s })
+                }
                 Err(e) => return Err(ApiError::invalid_request(format!("multipart: {}", e.body_text()))),
             };
             let name = field.name().unwrap_or("").to_string();
@@ -315,6 +318,8 @@ async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> R
             let data = field.bytes().await.map_err(|e| {
                 if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
                     ApiError::BodyTooLarge { limit: st.config.max_body_bytes }
+                } else if timed_out(&e) {
+                    ApiError::BodyTimeout { seconds: st.config.body_read_timeout_s }
                 } else {
                     ApiError::invalid_request(format!("multipart: {}", e.body_text()))
                 }
@@ -919,6 +924,23 @@ async fn search(
                 let view = wait_for(&st, &job, q.wait).await;
                 match (st.index.get(&family, id), view.status) {
                     (Some(f), _) => f,
+                    (None, Status::Succeeded) => {
+                        // A shape-dna job that finished before fingerprints were kept (or whose fingerprint could
+                        // not be kept): its stored result holds the values.
+                        let r = st
+                            .results
+                            .get(&view.id)
+                            .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
+                        let values: Vec<f64> = serde_json::from_value(r.summary["shape_dna"]["values"].clone())
+                            .map_err(|e| ApiError::Internal {
+                                detail: format!("the shape-dna result has no values: {e}"),
+                            })?;
+                        let f = analysis::Fingerprint { family: family.clone(), shape_id: id.clone(), values };
+                        st.index.record(&*st.fingerprints, &f).map_err(|e| ApiError::Internal {
+                            detail: format!("the fingerprint could not be stored: {e}"),
+                        })?;
+                        f.values
+                    }
                     (None, Status::Failed | Status::Canceled) => {
                         let p = view
                             .error

@@ -121,10 +121,11 @@ impl Index {
         let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());
         fams.entry(f.family.clone()).or_default().put(&f.shape_id, &f.values);
     }
-    /// Keeps a fingerprint: in the store, then in the index.
+    /// Keeps a fingerprint: in the store, then in the index; not at all when its shape is no longer stored.
     pub fn record(&self, store: &dyn FingerprintStore, f: &Fingerprint) -> std::io::Result<()> {
-        store.put_fingerprint(&f.family, &f.shape_id, &f.values)?;
-        self.insert(f);
+        if store.put_fingerprint(&f.family, &f.shape_id, &f.values)? {
+            self.insert(f);
+        }
         Ok(())
     }
     /// Forgets a deleted shape in every family (the store drops its rows with the shape).

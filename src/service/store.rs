@@ -93,8 +93,8 @@ pub trait ShapeStore: Send + Sync {
 /// Shape-DNA fingerprints of stored shapes, by family (the parameters they were computed with), kept as shapes
 /// are analysed so that a search compares against every shape the service holds.
 pub trait FingerprintStore: Send + Sync {
-    /// Inserts or replaces one shape's fingerprint in a family.
-    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<()>;
+    /// Inserts or replaces one shape's fingerprint in a family, if the shape is still stored (true then).
+    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool>;
     /// Every fingerprint: (family, shape id, values).
     fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>>;
 }
@@ -186,25 +186,37 @@ fn row_record(r: &rusqlite::Row<'_>) -> rusqlite::Result<ShapeRecord> {
 
 impl ShapeStore for Database {
     fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)> {
-        // One writer per id from the check to the record: the first upload's file and record win together, and
-        // every other caller gets the stored shape (in the first one's format) back.
-        let _id = self.id_lock(&shape.id);
-        if let Some(existing) = self.get(&shape.id) {
-            return Ok((false, existing));
+        let path = self.shape_dir.join(&shape.id);
+        // Twice at most: a shape stored under this id (record and file) is returned as it is; if it cannot be
+        // read back (its file lost or unreadable, or removed in between), the second round stores this upload.
+        for force in [false, true] {
+            {
+                // One writer per id from the check to the record: the first upload's file and record win
+                // together, and every other caller gets the stored shape (in the first one's format) back.
+                let _id = self.id_lock(&shape.id);
+                if force || self.record(&shape.id).is_none() || !path.exists() {
+                    // The upload first (atomically), then its record: a crash between leaves an unreferenced file
+                    // only, which the next upload of that id replaces.
+                    write_atomic(&path, original)?;
+                    let r = &shape.record;
+                    self.conn()
+                        .execute(
+                            "INSERT INTO shapes (id, format, created_at, bytes, summary) VALUES (?1, ?2, ?3, ?4, ?5)
+                             ON CONFLICT(id) DO UPDATE SET format = excluded.format, bytes = excluded.bytes,
+                             summary = excluded.summary",
+                            rusqlite::params![r.id, r.format, r.created_at, r.bytes as i64, r.summary.to_string()],
+                        )
+                        .map_err(db_err)?;
+                    let s = Arc::new(shape);
+                    self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(&s.id, s.clone(), shape_size(&s));
+                    return Ok((true, s));
+                }
+            }
+            if let Some(existing) = self.get(&shape.id) {
+                return Ok((false, existing));
+            }
         }
-        // The upload first (atomically), then its record: a crash between leaves an unreferenced file only, which
-        // the next upload of that id replaces.
-        write_atomic(&self.shape_dir.join(&shape.id), original)?;
-        let r = &shape.record;
-        self.conn()
-            .execute(
-                "INSERT INTO shapes (id, format, created_at, bytes, summary) VALUES (?1, ?2, ?3, ?4, ?5)",
-                rusqlite::params![r.id, r.format, r.created_at, r.bytes as i64, r.summary.to_string()],
-            )
-            .map_err(db_err)?;
-        let s = Arc::new(shape);
-        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(&s.id, s.clone(), shape_size(&s));
-        Ok((true, s))
+        unreachable!("the forced round stores the shape or returns its error")
     }
     fn get(&self, id: &str) -> Option<Arc<StoredShape>> {
         if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
@@ -216,6 +228,9 @@ impl ShapeStore for Database {
         let read = kac_core::ReadOptions { max_vertices: self.max_vertices.max(1), ..Default::default() };
         let validated = kac_core::load_bytes(&bytes, format, &read, &Default::default()).ok()?;
         let s = Arc::new(StoredShape { record, validated });
+        // Cached only if still stored: a removal that ran while this parsed must not be undone by the cache.
+        let _id = self.id_lock(id);
+        self.record(id)?;
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(id, s.clone(), shape_size(&s));
         Some(s)
     }
@@ -246,17 +261,21 @@ impl ShapeStore for Database {
 }
 
 impl FingerprintStore for Database {
-    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<()> {
-        // Little-endian f64s: 8 bytes a value, exact.
+    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool> {
+        // Little-endian f64s: 8 bytes a value, exact. Under the shape's lock and only while it is stored, so a
+        // shape deleted while its analysis ran leaves no fingerprint behind.
         let blob: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-        self.conn()
+        let _id = self.id_lock(shape_id);
+        let n = self
+            .conn()
             .execute(
-                "INSERT INTO fingerprints (family, shape_id, fingerprint) VALUES (?1, ?2, ?3)
+                "INSERT INTO fingerprints (family, shape_id, fingerprint)
+                 SELECT ?1, ?2, ?3 WHERE EXISTS (SELECT 1 FROM shapes WHERE id = ?2)
                  ON CONFLICT(family, shape_id) DO UPDATE SET fingerprint = excluded.fingerprint",
                 rusqlite::params![family, shape_id, blob],
             )
             .map_err(db_err)?;
-        Ok(())
+        Ok(n > 0)
     }
     fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>> {
         let c = self.conn();

@@ -306,6 +306,7 @@ fn factor_shift(
     sym: &Symbolic,
     par: Par,
     run: &Run<'_>,
+    control: &Control<'_>,
 ) -> Result<Shifted, EigenError> {
     let failed =
         |sigma: f64, message: String| EigenError::Factorization { message: format!("σ = {sigma:e}: {message}") };
@@ -320,6 +321,7 @@ fn factor_shift(
     let interior = if run.interior_shift { weyl_shift(pair, o.k + run.deflated_values.len()) } else { None };
     if let Some(mut sigma) = interior {
         for _attempt in 0..2 {
+            control.check()?;
             let values = pair.shifted(sigma);
             let Ok((factor, below)) = Cholesky::factor_ldlt(sym, &values, par) else { break };
             let undeflated = below.saturating_sub(run.deflated_below(sigma));
@@ -336,6 +338,7 @@ fn factor_shift(
     let mut sigma = default_sigma(pair);
     let mut attempt = 0;
     loop {
+        control.check()?;
         match Cholesky::factor(sym, &pair.shifted(sigma), par) {
             Ok(factor) => return Ok(Shifted { sigma, factor, below_sigma: None }),
             Err(message) => {
@@ -416,7 +419,7 @@ pub fn eigs_block_lanczos(
     let symbolic_s = t0.elapsed().as_secs_f64();
     control.phase("factorization", 0, k)?;
     let t1 = Instant::now();
-    let Shifted { sigma, factor: chol, below_sigma } = factor_shift(pair, o, &sym, par, run)?;
+    let Shifted { sigma, factor: chol, below_sigma } = factor_shift(pair, o, &sym, par, run, &control)?;
     control.check()?;
     // Eigenvalues below σ the iteration must find itself (the inertia less the deflated ones).
     let below_undeflated = below_sigma.map(|nu| nu.saturating_sub(run.deflated_below(sigma)));
