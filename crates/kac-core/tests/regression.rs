@@ -19,8 +19,12 @@ fn gltf_position_accessor_out_of_range_is_an_error_not_a_panic() {
 #[test]
 fn fuzz_regressions_do_not_panic() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/regressions");
-    let Ok(entries) = std::fs::read_dir(&dir) else { return };
-    for e in entries.flatten() {
+    let entries: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("the fuzz regression corpus {} cannot be read: {e}", dir.display()))
+        .flatten()
+        .collect();
+    assert!(!entries.is_empty(), "the fuzz regression corpus {} is empty", dir.display());
+    for e in entries {
         let bytes = std::fs::read(e.path()).unwrap();
         for f in Format::ALL {
             let _ = load_bytes(&bytes, f, &ReadOptions::default(), &ValidateOptions::default());
