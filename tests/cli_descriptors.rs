@@ -104,20 +104,29 @@ fn shape_dna_ev_files_and_compare() {
 }
 
 #[test]
-fn trees_embed_heat_geodesic_smooth_interpolate() {
+fn trees_counts_spanning_trees_of_known_graphs() {
     let dir = tempfile::tempdir().unwrap();
     let p = generate(dir.path(), "petersen", &[], "p.json");
     let v = run_json(&["trees", p.to_str().unwrap()]);
     assert_eq!(v["trees"]["count"], "2000");
     let c = generate(dir.path(), "cycle", &["--n", "12"], "c.json");
     assert_eq!(run_json(&["trees", c.to_str().unwrap()])["trees"]["count"], "12");
+}
+
+#[test]
+fn embed_gives_the_path_graphs_fiedler_value_and_one_cut_edge() {
+    let dir = tempfile::tempdir().unwrap();
     let path = generate(dir.path(), "path", &["--n", "20"], "path.json");
     let e = run_json(&["embed", path.to_str().unwrap(), "-d", "2"]);
     let lam = e["fiedler"]["algebraic_connectivity"].as_f64().unwrap();
     assert!((lam - (2.0 - 2.0 * (std::f64::consts::PI / 20.0).cos())).abs() < 1e-10);
     assert_eq!(e["fiedler"]["cut_edges"], 1);
     assert_eq!(e["arrays"]["embedding"]["cols"], 2);
+}
 
+#[test]
+fn heat_trace_follows_the_spheres_series_and_the_implicit_method_runs() {
+    let dir = tempfile::tempdir().unwrap();
     let s = generate(dir.path(), "icosphere", &["--level", "3"], "s.off");
     let s = s.to_str().unwrap();
     let h = run_json(&["heat", s, "-k", "40", "--times", "0.5", "--source", "3"]);
@@ -129,6 +138,13 @@ fn trees_embed_heat_geodesic_smooth_interpolate() {
     assert_eq!(h["arrays"]["heat_kernel"]["rows"], 642);
     let i = run_json(&["heat", s, "--method", "implicit", "--times", "0.1", "--steps", "4", "--source", "3"]);
     assert_eq!(i["method"], "implicit");
+}
+
+#[test]
+fn geodesic_distance_reaches_pi_at_the_antipode_and_refuses_a_missing_source() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = generate(dir.path(), "icosphere", &["--level", "3"], "s.off");
+    let s = s.to_str().unwrap();
     let g = run_json(&["geodesic", s, "--source", "0"]);
     let d = column(&g, "distance", 0);
     assert_eq!(d[0], 0.0);
@@ -137,8 +153,11 @@ fn trees_embed_heat_geodesic_smooth_interpolate() {
     let out = kac().args(["geodesic", s, "--source", "100000"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("vertex 100000 does not exist"));
+}
 
-    // Linear functions survive harmonic interpolation and clamped smoothing on a flat square.
+#[test]
+fn interpolation_and_clamped_smoothing_keep_linear_functions_on_a_flat_square() {
+    let dir = tempfile::tempdir().unwrap();
     let q = generate(dir.path(), "square", &["--n", "8"], "q.obj");
     let q = q.to_str().unwrap();
     // f = x given on the boundary.

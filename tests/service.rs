@@ -276,8 +276,9 @@ fn spectrum_shape_dna_and_hks_equal_the_library_and_requests_are_idempotent() {
     );
 }
 
-#[test]
-fn cancel_panic_and_full_queue() {
+/// A server with one worker, room for three jobs, jobs that wait 1.5 s before computing, and `trees` jobs that
+/// panic; and a stored sphere.
+fn slow_server() -> (Server, String) {
     let s = Server::start(&[
         "--workers",
         "1",
@@ -289,30 +290,45 @@ fn cancel_panic_and_full_queue() {
         "trees",
     ]);
     let id = upload(&s, &icosphere_off(2), "?format=off").body["id"].as_str().unwrap().to_string();
-    let a = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 3 }));
-    let b = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 4 }));
-    let c = submit(&s, json!({ "shape_id": id, "analysis": "trees" }));
-    assert_eq!((a.status, b.status, c.status), (202, 202, 202));
-    // A fourth job finds the queue full: 503 with Retry-After.
-    let d = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 5 }));
+    (s, id)
+}
+
+#[test]
+fn a_full_queue_answers_503_with_retry_after() {
+    let (s, id) = slow_server();
+    for k in 3..6 {
+        assert_eq!(submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": k })).status, 202);
+    }
+    let d = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 6 }));
     assert_problem(&d, 503, "queue-full");
     assert!(d.retry_after.as_deref().is_some_and(|v| v.parse::<u64>().is_ok()));
-    // Cancel the second while it waits: it never runs.
+}
+
+#[test]
+fn a_job_canceled_while_queued_never_runs_and_can_be_submitted_again() {
+    let (s, id) = slow_server();
+    let a = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 3 }));
+    let b = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 4 }));
     let b_id = b.body["id"].as_str().unwrap();
     let cancel = reply(agent().post(&s.url(&format!("/v1/jobs/{b_id}/cancel"))).call());
     assert_eq!(cancel.status, 202);
-    assert_eq!(wait_done(&s, b_id)["status"], "canceled");
-    // The first finishes; the panicking one fails alone and the server keeps serving.
+    let done = wait_done(&s, b_id);
+    assert_eq!((done["status"].as_str(), &done["started_at"]), (Some("canceled"), &Value::Null), "{done}");
     assert_eq!(wait_done(&s, a.body["id"].as_str().unwrap())["status"], "succeeded");
+    let again = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 4 }));
+    assert_eq!(again.status, 202);
+    assert_eq!(wait_done(&s, b_id)["status"], "succeeded");
+}
+
+#[test]
+fn a_panicking_job_fails_alone_and_the_server_keeps_serving() {
+    let (s, id) = slow_server();
+    let c = submit(&s, json!({ "shape_id": id, "analysis": "trees" }));
     let failed = wait_done(&s, c.body["id"].as_str().unwrap());
-    assert_eq!(failed["status"], "failed");
-    assert_eq!(failed["error"]["code"], "job-panicked");
+    assert_eq!((failed["status"].as_str(), failed["error"]["code"].as_str()), (Some("failed"), Some("job-panicked")));
     assert_eq!(reply(agent().get(&s.url("/livez")).call()).status, 200);
     let e = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 6 }));
     assert_eq!(wait_done(&s, e.body["id"].as_str().unwrap())["status"], "succeeded");
-    // A canceled job can be submitted again.
-    let again = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 4 }));
-    assert_eq!(again.status, 202);
 }
 
 #[test]
