@@ -1,0 +1,217 @@
+//! `/v1/jobs` and `/v1/analyze`: submitting analyses as jobs, reading, cancelling and following them, and the
+//! synchronous form that waits for a job's result.
+
+use super::*;
+
+/// A job request: the shape and the analysis with its parameters (`{"shape_id": "…", "analysis": "hks", "k": 50}`).
+#[derive(Deserialize, Serialize, utoipa::ToSchema)]
+pub struct JobRequest {
+    pub shape_id: String,
+    #[serde(flatten)]
+    pub analysis: Analysis,
+}
+
+pub(crate) fn job_response(status: StatusCode, v: &JobView) -> Response {
+    with_location((status, Json(job_json(v))).into_response(), &format!("/v1/jobs/{}", v.id))
+}
+
+pub(crate) fn job_json(v: &JobView) -> Value {
+    let mut j = serde_json::to_value(v).unwrap_or(Value::Null);
+    if let Some(o) = j.as_object_mut() {
+        o.insert(
+            "links".into(),
+            json!({ "self": format!("/v1/jobs/{}", v.id), "events": format!("/v1/jobs/{}/events", v.id), "shape": format!("/v1/shapes/{}", v.shape_id) }),
+        );
+    }
+    j
+}
+
+/// Submit an analysis of a stored shape: 202 with the job (a repeated request returns the existing job, 200).
+#[utoipa::path(post, path = "/v1/jobs", tag = "jobs", request_body = JobRequest,
+    responses(
+        (status = 202, description = "enqueued", body = JobView, headers(("Location" = String))),
+        (status = 200, description = "the same request was already submitted", body = JobView, headers(("Location" = String))),
+        (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
+        (status = 404, description = "no such shape", body = crate::service::error::Problem, content_type = "application/problem+json"),
+        (status = 413, description = "k above --max-k", body = crate::service::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "queue full", body = crate::service::error::Problem, content_type = "application/problem+json", headers(("Retry-After" = u64)))))]
+pub(crate) async fn create_job(
+    State(st): State<AppState>,
+    body: Result<Json<Value>, JsonRejection>,
+) -> Result<Response, ApiError> {
+    let req: JobRequest = strict_body(&st, body, "JobRequest")?;
+    let shape = st.shapes.get(&req.shape_id).ok_or(ApiError::NotFound { what: "shape", id: req.shape_id.clone() })?;
+    let (job, created) = jobs::submit(&st, shape, req.analysis)?;
+    Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job.snapshot()))
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct JobFilter {
+    /// enqueued, processing, succeeded, failed, canceled.
+    pub status: Option<String>,
+    pub shape_id: Option<String>,
+    /// Analysis name (spectrum, hks, …).
+    pub analysis: Option<String>,
+    pub limit: Option<usize>,
+    pub offset: Option<usize>,
+}
+
+/// List jobs, oldest first, with filters.
+#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobFilter), responses((status = 200, description = "a page of jobs")))]
+pub(crate) async fn list_jobs(State(st): State<AppState>, Query(f): Query<JobFilter>) -> Json<Value> {
+    let all: Vec<JobView> = st
+        .jobs
+        .list()
+        .into_iter()
+        .filter(|j| f.status.as_deref().is_none_or(|s| j.status.name() == s))
+        .filter(|j| f.shape_id.as_deref().is_none_or(|s| j.shape_id == s))
+        .filter(|j| f.analysis.as_deref().is_none_or(|a| j.analysis == a))
+        .collect();
+    let limit = f.limit.unwrap_or(100).min(1000);
+    let offset = f.offset.unwrap_or(0);
+    let items: Vec<Value> = all.iter().skip(offset).take(limit).map(job_json).collect();
+    Json(json!({ "total": all.len(), "offset": offset, "limit": limit, "items": items }))
+}
+
+/// A job: status, progress, timestamps, error (problem detail) and result link.
+#[utoipa::path(get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path)),
+    responses((status = 200, body = JobView), (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn get_job(State(st): State<AppState>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
+    st.jobs.get(&id).map(|j| Json(job_json(&j.snapshot()))).ok_or(ApiError::NotFound { what: "job", id })
+}
+
+/// Cancel a job (POST `/v1/jobs/{id}/cancel` or DELETE `/v1/jobs/{id}`): an enqueued job never starts, a running
+/// one stops at its next stop-flag check (every phase makes one; see the README). Finished jobs are left as they are.
+#[utoipa::path(post, path = "/v1/jobs/{id}/cancel", tag = "jobs", params(("id" = String, Path)),
+    responses((status = 202, description = "cancellation requested", body = JobView),
+              (status = 200, description = "already finished", body = JobView),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let job = st.jobs.get(&id).ok_or(ApiError::NotFound { what: "job", id })?;
+    let view = job.snapshot();
+    if view.status.terminal() {
+        return Ok(job_response(StatusCode::OK, &view));
+    }
+    jobs::cancel(&st, &job);
+    Ok(job_response(StatusCode::ACCEPTED, &job.snapshot()))
+}
+
+/// Cancel a job (the same as POST `/v1/jobs/{id}/cancel`); the job record stays.
+#[utoipa::path(delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path)),
+    responses((status = 202, description = "cancellation requested", body = JobView),
+              (status = 200, description = "already finished", body = JobView),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn delete_job(state: State<AppState>, id: Path<String>) -> Result<Response, ApiError> {
+    cancel_job(state, id).await
+}
+
+/// Progress as server-sent events: one `job` event with the job object on every change, until it finishes.
+#[utoipa::path(get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path)),
+    responses((status = 200, description = "text/event-stream of job objects", content_type = "text/event-stream"),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn job_events(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let job = st.jobs.get(&id).ok_or(ApiError::NotFound { what: "job", id })?;
+    let rx = job.view.subscribe();
+    let stream = futures_util::stream::unfold((rx, false, true), |(mut rx, done, first)| async move {
+        if done {
+            return None;
+        }
+        if !first && rx.changed().await.is_err() {
+            return None;
+        }
+        let v = rx.borrow_and_update().clone();
+        let terminal = v.status.terminal();
+        let ev = Event::default().event("job").json_data(job_json(&v)).unwrap_or_default();
+        Some((Ok::<_, std::convert::Infallible>(ev), (rx, terminal, false)))
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct AnalyzeQuery {
+    /// Seconds to wait for the result (default 10, at most --max-wait-s).
+    pub wait: Option<f64>,
+    /// Format of the shape (as for uploads).
+    #[param(value_type = Option<kac_core::io::Format>)]
+    pub format: Option<String>,
+    /// The analysis as JSON (`{"analysis":"spectrum","k":10}`), when the body is the raw shape.
+    pub analysis: Option<String>,
+}
+
+/// Upload and analyse in one request: multipart with a `file` part and an `analysis` part (JSON), or the raw
+/// shape as the body and `?analysis=JSON`. Returns the result (200) when it is ready within `wait` seconds, the
+/// job (202) otherwise, or the job's problem if it failed.
+#[utoipa::path(post, path = "/v1/analyze", tag = "jobs", params(AnalyzeQuery),
+    request_body(content = Vec<u8>, description = "multipart/form-data with 'file' and 'analysis' parts, or the raw shape", content_type = "multipart/form-data"),
+    responses((status = 200, description = "the result"),
+              (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
+              (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 409, description = "the job was canceled", body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 422, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 503, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn analyze(
+    State(st): State<AppState>,
+    Query(q): Query<AnalyzeQuery>,
+    req: Request,
+) -> Result<Response, ApiError> {
+    if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
+        // Before the upload is read or a job submitted (a NaN wait panicked the timer after the job was queued).
+        return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
+    }
+    let headers = req.headers().clone();
+    let mut up = read_upload(&st, q.format.clone(), req).await?;
+    let text = q
+        .analysis
+        .clone()
+        .or_else(|| up.fields.iter().find(|(n, _)| n == "analysis").map(|(_, v)| v.clone()))
+        .ok_or_else(|| ApiError::invalid_request("give the analysis as a multipart part or ?analysis=JSON"))?;
+    let value: Value = serde_json::from_str(&text).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
+    crate::service::strict::check_body(&value, "Analysis").map_err(ApiError::UnknownField)?;
+    let analysis: Analysis =
+        serde_json::from_value(value).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
+    up.fields.clear();
+    let (_, shape) = ingest(&st, up).await?;
+    let (job, _) = jobs::submit(&st, shape, analysis)?;
+    answer_within(&st, &job, q.wait, &headers).await
+}
+
+/// Waits until the job ends or `wait` seconds (default 10, at most --max-wait-s) pass; its view then.
+pub(crate) async fn wait_for(st: &AppState, job: &jobs::Job, wait: Option<f64>) -> JobView {
+    let wait = wait.unwrap_or(10.0).clamp(0.0, st.config.max_wait_s as f64);
+    let mut rx = job.view.subscribe();
+    let _ = tokio::time::timeout(std::time::Duration::from_secs_f64(wait), async {
+        loop {
+            if rx.borrow_and_update().status.terminal() {
+                break;
+            }
+            if rx.changed().await.is_err() {
+                break;
+            }
+        }
+    })
+    .await;
+    job.snapshot()
+}
+
+/// The synchronous form of a job (`?wait=` seconds, default 10, at most --max-wait-s): its result (200) when it
+/// is ready in time, its problem when it failed or was canceled, else the job (202, to poll or follow).
+pub(crate) async fn answer_within(
+    st: &AppState,
+    job: &jobs::Job,
+    wait: Option<f64>,
+    headers: &HeaderMap,
+) -> Result<Response, ApiError> {
+    let view = wait_for(st, job, wait).await;
+    match view.status {
+        Status::Succeeded => {
+            let r = st.results.get(&view.id).ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
+            Ok(with_location(result_response(&r, headers, true), &format!("/v1/results/{}", view.id)))
+        }
+        Status::Failed | Status::Canceled => {
+            let p = view.error.clone().ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
+            let status = StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+            Ok(with_location(problem_response(status, &p), &format!("/v1/jobs/{}", view.id)))
+        }
+        _ => Ok(job_response(StatusCode::ACCEPTED, &view)),
+    }
+}

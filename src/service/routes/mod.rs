@@ -1,0 +1,200 @@
+//! Routes under `/v1`, operations endpoints, the OpenAPI document and the interactive docs: the router and the
+//! request plumbing every handler shares (strict bodies and queries, body errors, encodings, 405s) here, the
+//! handlers one file per resource.
+
+mod analyses;
+mod health;
+mod results;
+mod retrieval;
+mod shapes;
+
+pub(crate) use analyses::*;
+pub(crate) use health::*;
+pub(crate) use results::*;
+pub(crate) use retrieval::*;
+pub(crate) use shapes::*;
+
+use super::compare::CompareRequest;
+use super::error::{problem_response, ApiError, CODES};
+use super::jobs::{self, JobView, Status};
+use super::search::SearchRequest;
+use super::store::{ShapeRecord, StoredResult, StoredShape};
+use super::AppState;
+use crate::analysis::{self, Analysis};
+use axum::body::Bytes;
+use axum::extract::rejection::{BytesRejection, JsonRejection};
+use axum::extract::{DefaultBodyLimit, FromRequest, FromRequestParts, Multipart, Path, Request, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode, Uri};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use kac_core::io::Format;
+use kac_core::{ReadOptions, ValidateOptions};
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use utoipa_swagger_ui::SwaggerUi;
+
+pub fn router(state: AppState) -> Router {
+    let limit = state.config.max_body_bytes;
+    let api = Router::new()
+        .route("/livez", get(livez))
+        .route("/readyz", get(readyz))
+        .route("/v1/shapes", post(upload_shape).get(list_shapes))
+        .route("/v1/shapes/{id}", get(get_shape).delete(delete_shape))
+        .route("/v1/jobs", post(create_job).get(list_jobs))
+        .route("/v1/jobs/{id}", get(get_job).delete(delete_job))
+        .route("/v1/jobs/{id}/cancel", post(cancel_job))
+        .route("/v1/jobs/{id}/events", get(job_events))
+        .route("/v1/results/{id}", get(get_result))
+        .route("/v1/results/{id}/arrays/{file}", get(get_array))
+        .route("/v1/analyze", post(analyze))
+        .route("/v1/compare", post(compare))
+        .route("/v1/search", post(search))
+        .route("/problems/{code}", get(problem_doc))
+        .route("/openapi.json", get(openapi_json))
+        .merge(SwaggerUi::new("/docs").config(utoipa_swagger_ui::Config::from("/openapi.json")))
+        .route("/metrics", get(metrics))
+        .fallback(not_found)
+        .route_layer(axum::middleware::from_fn(strict_query))
+        .route_layer(axum::middleware::from_fn(identity_encoding_only))
+        .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::authorize))
+        .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::observe))
+        .layer(DefaultBodyLimit::max(limit))
+        .layer(tower_http::timeout::RequestBodyTimeoutLayer::new(std::time::Duration::from_secs_f64(
+            state.config.body_read_timeout_s.max(0.001),
+        )))
+        .with_state(state);
+    // Outside the method routers, where 405 responses already carry their Allow header.
+    Router::new().fallback_service(api).layer(axum::middleware::map_response(problem_405))
+}
+
+/// The document `kac openapi` prints (with the request schemas closed, see `openapi::document`), built once.
+pub(crate) async fn openapi_json() -> Response {
+    static DOC: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    let body = DOC.get_or_init(super::openapi::document).clone();
+    ([(header::CONTENT_TYPE, "application/json")], body).into_response()
+}
+
+pub(crate) async fn not_found(uri: Uri) -> ApiError {
+    ApiError::RouteNotFound { path: uri.path().to_string() }
+}
+
+/// Whether a body error comes from the body read timeout (`tower_http`'s `TimeoutError` in its source chain).
+pub(crate) fn timed_out(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cur = Some(e);
+    while let Some(err) = cur {
+        if err.is::<tower_http::timeout::TimeoutError>() {
+            return true;
+        }
+        cur = err.source();
+    }
+    false
+}
+
+pub(crate) fn body_error(state: &AppState, e: BytesRejection) -> ApiError {
+    if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+        ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
+    } else if timed_out(&e) {
+        ApiError::BodyTimeout { seconds: state.config.body_read_timeout_s }
+    } else {
+        ApiError::invalid_request(e.body_text())
+    }
+}
+
+pub(crate) fn json_error(state: &AppState, e: JsonRejection) -> ApiError {
+    match e {
+        JsonRejection::MissingJsonContentType(_) => {
+            ApiError::UnsupportedMediaType { detail: "send the request body as application/json".into() }
+        }
+        JsonRejection::BytesRejection(b) => body_error(state, b),
+        other if other.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+            ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
+        }
+        other => ApiError::invalid_json(other.body_text()),
+    }
+}
+
+/// A JSON body checked against its OpenAPI schema (no field the document does not declare at its place, see
+/// [`super::strict`]), then deserialized.
+pub(crate) fn strict_body<T: serde::de::DeserializeOwned>(
+    st: &AppState,
+    body: Result<Json<Value>, JsonRejection>,
+    schema: &str,
+) -> Result<T, ApiError> {
+    let Json(v) = body.map_err(|e| json_error(st, e))?;
+    super::strict::check_body(&v, schema).map_err(ApiError::UnknownField)?;
+    serde_json::from_value(v).map_err(|e| ApiError::invalid_json(e.to_string()))
+}
+
+/// Every query parameter must be one the document declares for the routed operation.
+pub(crate) async fn strict_query(
+    matched: Option<axum::extract::MatchedPath>,
+    req: Request,
+    next: axum::middleware::Next,
+) -> Result<Response, ApiError> {
+    if let (Some(path), Some(query)) = (matched.as_ref(), req.uri().query()) {
+        super::strict::check_query(path.as_str(), req.method().as_str(), query).map_err(ApiError::UnknownField)?;
+    }
+    Ok(next.run(req).await)
+}
+
+/// The service reads request bodies as sent: a `Content-Encoding` other than `identity` (a gzip-compressed
+/// upload, say) is 415 `unsupported-media-type`, rather than bytes sniffed as some format and refused with a
+/// misleading parse error.
+pub(crate) async fn identity_encoding_only(req: Request, next: axum::middleware::Next) -> Result<Response, ApiError> {
+    if let Some(enc) = req.headers().get(header::CONTENT_ENCODING) {
+        let enc = enc.to_str().unwrap_or("(not text)").trim();
+        if !enc.eq_ignore_ascii_case("identity") && !enc.is_empty() {
+            return Err(ApiError::UnsupportedMediaType {
+                detail: format!(
+                    "Content-Encoding '{enc}' is not decoded here: send the body uncompressed (identity encoding)"
+                ),
+            });
+        }
+    }
+    Ok(next.run(req).await)
+}
+
+/// Query parameters whose rejection is a problem document (400 `invalid-request`), not axum's plain text.
+pub struct Query<T>(pub T);
+
+impl<T: serde::de::DeserializeOwned, S: Send + Sync> FromRequestParts<S> for Query<T> {
+    type Rejection = ApiError;
+    async fn from_request_parts(parts: &mut axum::http::request::Parts, state: &S) -> Result<Self, ApiError> {
+        axum::extract::Query::<T>::from_request_parts(parts, state)
+            .await
+            .map(|q| Query(q.0))
+            .map_err(|e| ApiError::invalid_request(e.body_text()))
+    }
+}
+
+/// 405 responses keep axum's `Allow` header and get a problem body.
+pub(crate) async fn problem_405(resp: Response) -> Response {
+    if resp.status() != StatusCode::METHOD_NOT_ALLOWED
+        || resp.headers().get(header::CONTENT_TYPE).is_some_and(|c| c == "application/problem+json")
+    {
+        return resp;
+    }
+    // HEAD is implied by GET (RFC 9110); the Allow header lists the documented methods.
+    let allow = resp
+        .headers()
+        .get(header::ALLOW)
+        .and_then(|a| a.to_str().ok())
+        .map(|a| a.split(',').map(str::trim).filter(|m| *m != "HEAD").collect::<Vec<_>>().join(","));
+    let allow = allow.and_then(|a| HeaderValue::from_str(&a).ok());
+    let mut r = ApiError::MethodNotAllowed.into_response();
+    if let Some(a) = allow {
+        r.headers_mut().insert(header::ALLOW, a);
+    }
+    r
+}
+
+pub(crate) fn with_location(mut r: Response, location: &str) -> Response {
+    if let Ok(v) = HeaderValue::from_str(location) {
+        r.headers_mut().insert(header::LOCATION, v);
+    }
+    r
+}

@@ -1,0 +1,136 @@
+//! `/v1/results`: immutable results with strong ETags, their per-vertex arrays as `.npy`, JSON or coloured PLY.
+
+use super::*;
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct ResultQuery {
+    /// Include per-vertex values inline (default true; false gives the summary and the array links only).
+    pub values: Option<bool>,
+}
+
+pub(crate) fn immutable(mut r: Response, etag: &str) -> Response {
+    let h = r.headers_mut();
+    if let Ok(v) = HeaderValue::from_str(etag) {
+        h.insert(header::ETAG, v);
+    }
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("public, max-age=31536000, immutable"));
+    r
+}
+
+pub(crate) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+    headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"))
+}
+
+pub(crate) fn result_body(r: &StoredResult, values: bool) -> (Bytes, String) {
+    if values {
+        (r.body.clone(), r.etag.clone())
+    } else {
+        (r.summary_body.clone(), format!("\"{}-summary\"", r.etag.trim_matches('"')))
+    }
+}
+
+pub(crate) fn result_response(r: &StoredResult, headers: &HeaderMap, values: bool) -> Response {
+    let (body, etag) = result_body(r, values);
+    if not_modified(headers, &etag) {
+        return immutable(StatusCode::NOT_MODIFIED.into_response(), &etag);
+    }
+    let mut resp = (StatusCode::OK, body).into_response();
+    resp.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static("application/json"));
+    immutable(resp, &etag)
+}
+
+/// A finished result (immutable; strong ETag, `If-None-Match` → 304).
+#[utoipa::path(get, path = "/v1/results/{id}", tag = "results", params(("id" = String, Path), ResultQuery),
+    responses((status = 200, description = "the result JSON: every parameter used, the numbers, per-vertex arrays with .npy and .ply links"),
+              (status = 304, description = "not modified"),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn get_result(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+    Query(q): Query<ResultQuery>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let r = st.results.get(&id).ok_or(ApiError::NotFound { what: "result", id })?;
+    Ok(result_response(&r, &headers, q.values.unwrap_or(true)))
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct ArrayQuery {
+    /// PLY: which column colours the vertices (default 0).
+    pub column: Option<usize>,
+}
+
+/// A per-vertex array of a result: `NAME.npy` (float64, rows in the upload's vertex numbering), `NAME.json`, or
+/// `NAME.ply` (the shape with one column as vertex colours, for viewing).
+#[utoipa::path(get, path = "/v1/results/{id}/arrays/{file}", tag = "results",
+    params(("id" = String, Path), ("file" = String, Path, description = "NAME.npy, NAME.json or NAME.ply"), ArrayQuery),
+    responses((status = 200, description = "the array"), (status = 304, description = "not modified"),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn get_array(
+    State(st): State<AppState>,
+    Path((id, file)): Path<(String, String)>,
+    Query(q): Query<ArrayQuery>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let r = st.results.get(&id).ok_or(ApiError::NotFound { what: "result", id: id.clone() })?;
+    let (name, ext) = file.rsplit_once('.').ok_or(ApiError::NotFound { what: "array", id: file.clone() })?;
+    let a = r.arrays.iter().find(|a| a.name == name).ok_or(ApiError::NotFound { what: "array", id: file.clone() })?;
+    let col = q.column.unwrap_or(0);
+    let etag = format!("\"{}-{name}-{ext}-{col}\"", r.etag.trim_matches('"'));
+    if not_modified(&headers, &etag) {
+        return Ok(immutable(StatusCode::NOT_MODIFIED.into_response(), &etag));
+    }
+    let (body, ct): (Vec<u8>, &'static str) = match ext {
+        "npy" => (kac_core::io::npy::encode_f64(a.rows, a.cols, &a.data), "application/octet-stream"),
+        "json" => (
+            serde_json::to_vec(&json!({ "rows": a.rows, "cols": a.cols, "columns": a.columns, "values": a.to_json() }))
+                .unwrap_or_default(),
+            "application/json",
+        ),
+        "ply" => {
+            if col >= a.cols {
+                return Err(ApiError::invalid_request(format!("column {col} does not exist ({} columns)", a.cols)));
+            }
+            let shape_id = r.summary["shape_id"].as_str().unwrap_or("").to_string();
+            let shape = st.shapes.get(&shape_id).ok_or(ApiError::NotFound { what: "shape", id: shape_id })?;
+            (coloured_ply(&shape, a, col), "application/x-ply")
+        }
+        _ => return Err(ApiError::NotFound { what: "array format", id: file }),
+    };
+    let mut resp = (StatusCode::OK, body).into_response();
+    resp.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(ct));
+    Ok(immutable(resp, &etag))
+}
+
+/// The validated shape as binary PLY with one array column mapped to colours (dark blue → yellow, a
+/// viridis-like ramp over the finite range; NaN grey).
+pub(crate) fn coloured_ply(shape: &StoredShape, a: &analysis::VertexArray, col: usize) -> Vec<u8> {
+    let v = &shape.validated;
+    let n = v.shape.vertex_count();
+    let mut vals = vec![f64::NAN; n];
+    for (input, &m) in v.vertex_map.iter().enumerate() {
+        if m != u32::MAX && vals[m as usize].is_nan() {
+            vals[m as usize] = a.data[input * a.cols + col];
+        }
+    }
+    let (lo, hi) = vals.iter().filter(|x| x.is_finite()).fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    const RAMP: [[f64; 3]; 5] =
+        [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
+    let colors: Vec<[u8; 3]> = vals
+        .iter()
+        .map(|&x| {
+            if !x.is_finite() {
+                return [128, 128, 128];
+            }
+            let t = if hi > lo { (x - lo) / (hi - lo) } else { 0.5 } * 4.0;
+            let i = (t.floor() as usize).min(3);
+            let f = t - i as f64;
+            let c = |k: usize| (RAMP[i][k] * (1.0 - f) + RAMP[i + 1][k] * f).round() as u8;
+            [c(0), c(1), c(2)]
+        })
+        .collect();
+    kac_core::io::write::ply(&v.shape, true, Some(&colors))
+}

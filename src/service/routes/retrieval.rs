@@ -1,0 +1,157 @@
+//! `/v1/compare` and `/v1/search`: shape-DNA comparisons as jobs, and the nearest stored shapes by fingerprint.
+
+use super::*;
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct CompareQuery {
+    /// Seconds to wait for the result (default 10, at most --max-wait-s); 0 answers 202 with the job at once.
+    pub wait: Option<f64>,
+}
+
+/// Distances between stored shapes by shape-DNA, and each shape's nearest neighbours, as a job in the queue
+/// (its capacity, the job timeout, cancel; the same request again is the same job): the result (200) when it is
+/// ready within `wait` seconds, the job (202) otherwise. A shape whose fingerprint fails is listed under
+/// `failures`; the others are compared.
+#[utoipa::path(post, path = "/v1/compare", tag = "jobs", params(CompareQuery), request_body = CompareRequest,
+    responses((status = 200, description = "the distance matrix, nearest neighbours and per-shape failures"),
+              (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
+              (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 409, description = "the job was canceled", body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 422, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 503, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn compare(
+    State(st): State<AppState>,
+    Query(q): Query<CompareQuery>,
+    headers: HeaderMap,
+    body: Result<Json<Value>, JsonRejection>,
+) -> Result<Response, ApiError> {
+    if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
+        return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
+    }
+    let req: CompareRequest = strict_body(&st, body, "CompareRequest")?;
+    let max = crate::service::compare::MAX_SHAPES;
+    let shapes: Vec<Arc<StoredShape>> = match &req.shape_ids {
+        Some(ids) if ids.len() > max => {
+            return Err(ApiError::invalid_request(format!("{} shapes: at most {max} per comparison", ids.len())))
+        }
+        Some(ids) => ids
+            .iter()
+            .map(|id| st.shapes.get(id).ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() }))
+            .collect::<Result<_, _>>()?,
+        None => st.shapes.list(0, max).0.iter().filter_map(|r| st.shapes.get(&r.id)).collect(),
+    };
+    let (job, _) = jobs::submit_compare(&st, req, shapes)?;
+    answer_within(&st, &job, q.wait, &headers).await
+}
+
+#[derive(Deserialize, utoipa::IntoParams)]
+pub struct SearchQuery {
+    /// With `shape_id` whose fingerprint is not stored yet: seconds to wait for its `shape-dna` job (default 10, at
+    /// most --max-wait-s) before answering 202 with the job.
+    pub wait: Option<f64>,
+}
+
+/// The stored shapes nearest to a shape or a fingerprint by shape-DNA, over every fingerprint of the same family
+/// (k, normalization, reweighting, include_zero, operator) the service holds: those of finished `shape-dna`
+/// jobs and comparisons. A `shape_id` without a stored fingerprint gets one first, as a `shape-dna` job (202 with
+/// the job when it is not done within `wait`).
+#[utoipa::path(post, path = "/v1/search", tag = "jobs", params(SearchQuery), request_body = SearchRequest,
+    responses((status = 200, description = "the nearest shapes, nearest first, and how many were searched"),
+              (status = 202, description = "the query shape's fingerprint is being computed: the job", body = JobView, headers(("Location" = String))),
+              (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 422, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 503, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn search(
+    State(st): State<AppState>,
+    Query(q): Query<SearchQuery>,
+    body: Result<Json<Value>, JsonRejection>,
+) -> Result<Response, ApiError> {
+    if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
+        return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
+    }
+    let req: SearchRequest = strict_body(&st, body, "SearchRequest")?;
+    if req.k == 0 {
+        return Err(ApiError::Analysis(analysis::AnalysisError::invalid_k(
+            "k = 0: a fingerprint has at least one value",
+        )));
+    }
+    if req.k > st.config.max_k {
+        return Err(ApiError::KTooLarge { detail: format!("k = {} is above --max-k {}", req.k, st.config.max_k) });
+    }
+    if req.neighbours > 1000 {
+        return Err(ApiError::invalid_request(format!("neighbours = {}: at most 1000", req.neighbours)));
+    }
+    let family = req.family();
+    let query = match (&req.shape_id, &req.fingerprint) {
+        (Some(_), Some(_)) | (None, None) => {
+            return Err(ApiError::invalid_request("give either shape_id or fingerprint (one of them)"))
+        }
+        (None, Some(f)) => {
+            if let Some(i) = f.iter().position(|x| !x.is_finite()) {
+                return Err(ApiError::invalid_request(format!("fingerprint value {i} is not a finite number")));
+            }
+            f.clone()
+        }
+        (Some(id), None) => match st.index.get(&family, id) {
+            Some(f) => f,
+            None => {
+                let shape = st.shapes.get(id).ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() })?;
+                let dna = Analysis::ShapeDna {
+                    options: req.options(),
+                    operator: req.operator.clone(),
+                    solver: analysis::SolverSpec::default(),
+                };
+                let (job, _) = jobs::submit(&st, shape, dna)?;
+                let view = wait_for(&st, &job, q.wait).await;
+                match (st.index.get(&family, id), view.status) {
+                    (Some(f), _) => f,
+                    (None, Status::Succeeded) => {
+                        // A shape-dna job that finished before fingerprints were kept (or whose fingerprint could
+                        // not be kept): its stored result holds the values.
+                        let r = st
+                            .results
+                            .get(&view.id)
+                            .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
+                        let values: Vec<f64> = serde_json::from_value(r.summary["shape_dna"]["values"].clone())
+                            .map_err(|e| ApiError::Internal {
+                                detail: format!("the shape-dna result has no values: {e}"),
+                            })?;
+                        let f = analysis::Fingerprint { family: family.clone(), shape_id: id.clone(), values };
+                        st.index.record(&*st.fingerprints, &f).map_err(|e| ApiError::Internal {
+                            detail: format!("the fingerprint could not be stored: {e}"),
+                        })?;
+                        f.values
+                    }
+                    (None, Status::Failed | Status::Canceled) => {
+                        let p = view
+                            .error
+                            .clone()
+                            .ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
+                        let status = StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+                        return Ok(with_location(problem_response(status, &p), &format!("/v1/jobs/{}", view.id)));
+                    }
+                    (None, _) => return Ok(job_response(StatusCode::ACCEPTED, &view)),
+                }
+            }
+        },
+    };
+    let (near, searched) = st
+        .index
+        .nearest(&family, &query, req.metric, req.neighbours, req.shape_id.as_deref())
+        .map_err(ApiError::invalid_request)?;
+    let neighbours: Vec<Value> = near.into_iter().map(|(id, d)| json!({ "shape_id": id, "distance": d })).collect();
+    Ok(Json(json!({
+        "descriptor": "shape-dna",
+        "family": family,
+        "options": req.options(),
+        "metric": req.metric.name(),
+        "operator": req.operator,
+        "shape_id": req.shape_id,
+        "fingerprint": query,
+        "searched": searched,
+        "neighbours": neighbours,
+    }))
+    .into_response())
+}
