@@ -1,0 +1,98 @@
+//! Eigenpairs for an analysis: the operator it names, and the solve, reused through the eigenpair cache.
+
+use super::*;
+
+/// The cache key of a spectrum: operator and solver parameters (the shape id is the caller's).
+pub fn spectrum_key(op: &OperatorSpec, solver: &SolverSpec) -> String {
+    // An unverified spectrum must not serve a request that asks for the check.
+    serde_json::to_string(&json!({ "operator": op, "solver": solver, "version": ALGORITHM_VERSION }))
+        .unwrap_or_default()
+}
+
+/// Computed eigenpairs with the operator they belong to.
+pub struct Eigen {
+    pub operator: Operator,
+    pub spectrum: Spectrum,
+}
+
+/// Where computed eigenpairs are kept between analyses (the service's cache; the CLI has none). `get` returns
+/// an entry with at least `k` pairs for the key, if one exists.
+pub trait SpectrumCache: Sync {
+    fn get(&self, key: &str, k: usize) -> Option<Arc<Eigen>>;
+    fn put(&self, key: &str, eigen: Arc<Eigen>);
+}
+
+/// Hooks passed down to the eigensolver.
+#[derive(Default, Clone, Copy)]
+pub struct Hooks<'a> {
+    pub control: Control<'a>,
+    pub cache: Option<&'a dyn SpectrumCache>,
+    /// Solver threads (0: rayon's pool).
+    pub threads: usize,
+    /// Told about every eigensolve (for metrics).
+    pub on_solve: Option<&'a (dyn Fn(&kac_core::spectrum::Stats) + Sync)>,
+}
+
+pub fn build_operator(v: &Validated, spec: &OperatorSpec) -> Result<Operator, AnalysisError> {
+    let boundary = match (&spec.dirichlet_vertices, spec.boundary) {
+        (Some(list), _) => Boundary::DirichletVertices(
+            map_vertices(v, list, "dirichlet_vertices")?.iter().map(|&i| i as u32).collect(),
+        ),
+        (None, BoundarySpec::Dirichlet) => Boundary::Dirichlet,
+        (None, BoundarySpec::Neumann) => Boundary::Neumann,
+    };
+    let o = OperatorOptions {
+        operator: spec.operator,
+        mass: spec.mass,
+        boundary,
+        cloud: CloudParams { k: spec.neighbours, neighbourhood: spec.neighbourhood, t: spec.time, radius: None },
+        ..Default::default()
+    };
+    Ok(operators::build(&v.shape, &o)?)
+}
+
+/// Zero modes to expect: connected components of the operator for a Neumann problem, none for Dirichlet.
+pub(crate) fn expected_zero_modes(op: &Operator) -> usize {
+    if op.interior.is_some() {
+        0
+    } else {
+        components(&op.pair).1
+    }
+}
+
+/// Eigenpairs for an analysis: from the cache when it holds enough, else solved (and cached).
+pub fn eigenpairs(
+    v: &Validated,
+    spec: &OperatorSpec,
+    solver: &SolverSpec,
+    k: usize,
+    hooks: Hooks<'_>,
+    reused: &std::cell::Cell<bool>,
+) -> Result<Arc<Eigen>, AnalysisError> {
+    if k == 0 {
+        // Before the cache, which holds at least as many pairs as any k and would answer k = 0 with none.
+        return Err(AnalysisError::invalid_k("k = 0: ask for at least one eigenpair (1 ≤ k ≤ the number of unknowns)"));
+    }
+    let key = format!("{}:{}", v.id.hex(), spectrum_key(spec, solver));
+    if let Some(e) = hooks.cache.and_then(|c| c.get(&key, k)) {
+        reused.set(true);
+        return Ok(e);
+    }
+    hooks.control.check()?;
+    let operator = build_operator(v, spec)?;
+    hooks.control.check()?;
+    let n = operator.pair.n();
+    if k == 0 || k > n {
+        return Err(AnalysisError::invalid_k(format!("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {n})")));
+    }
+    let opts = EigenOptions { k, tol: solver.tol, threads: hooks.threads, verify: solver.verify, ..Default::default() };
+    let spectrum = spectrum::eigs(&operator.pair, &opts, None, hooks.control)?;
+    if let Some(f) = hooks.on_solve {
+        f(&spectrum.stats);
+    }
+    let e = Arc::new(Eigen { operator, spectrum });
+    if let Some(c) = hooks.cache {
+        c.put(&key, e.clone());
+    }
+    Ok(e)
+}

@@ -1,0 +1,85 @@
+//! Why an analysis failed: one variant per kind, the core's errors kept whole.
+
+use super::*;
+
+/// Why an analysis failed: one variant per kind, the core's errors kept whole. Its code and whether the request
+/// was at fault come from exhaustive matches (a new variant anywhere must say both).
+#[derive(Debug, Clone, PartialEq)]
+pub enum AnalysisError {
+    /// A parameter of the request is out of its range (`invalid-parameter`).
+    InvalidParameter(String),
+    /// k = 0, or more eigenpairs than unknowns (`invalid-k`).
+    InvalidK(String),
+    /// The analysis does not apply to this kind of shape (`not-applicable`).
+    NotApplicable(String),
+    Operator(operators::OperatorError),
+    Eigen(spectrum::EigenError),
+    Descriptor(DescriptorError),
+}
+
+impl AnalysisError {
+    pub fn invalid_parameter(message: impl Into<String>) -> Self {
+        AnalysisError::InvalidParameter(message.into())
+    }
+    pub fn invalid_k(message: impl Into<String>) -> Self {
+        AnalysisError::InvalidK(message.into())
+    }
+    pub fn not_applicable(message: impl Into<String>) -> Self {
+        AnalysisError::NotApplicable(message.into())
+    }
+    /// The stable problem code.
+    pub fn code(&self) -> &'static str {
+        match self {
+            AnalysisError::InvalidParameter(_) => "invalid-parameter",
+            AnalysisError::InvalidK(_) => "invalid-k",
+            AnalysisError::NotApplicable(_) => "not-applicable",
+            AnalysisError::Operator(e) => e.code(),
+            AnalysisError::Eigen(e) => e.code(),
+            AnalysisError::Descriptor(e) => e.code(),
+        }
+    }
+    /// The request cannot succeed as given (4xx); otherwise a computation failed (5xx / failed job).
+    pub fn caller_fault(&self) -> bool {
+        match self {
+            AnalysisError::InvalidParameter(_) | AnalysisError::InvalidK(_) | AnalysisError::NotApplicable(_) => true,
+            AnalysisError::Operator(e) => e.caller_fault(),
+            AnalysisError::Eigen(e) => e.caller_fault(),
+            AnalysisError::Descriptor(e) => e.caller_fault(),
+        }
+    }
+    /// Stopped by its stop flag (a cancel or a timeout), not failed.
+    pub fn is_stop(&self) -> bool {
+        matches!(self, AnalysisError::Eigen(spectrum::EigenError::Canceled))
+    }
+}
+
+impl std::fmt::Display for AnalysisError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            AnalysisError::InvalidParameter(m) | AnalysisError::InvalidK(m) | AnalysisError::NotApplicable(m) => {
+                f.write_str(m)
+            }
+            AnalysisError::Operator(e) => e.fmt(f),
+            AnalysisError::Eigen(e) => e.fmt(f),
+            AnalysisError::Descriptor(e) => e.fmt(f),
+        }
+    }
+}
+
+impl From<DescriptorError> for AnalysisError {
+    fn from(e: DescriptorError) -> Self {
+        AnalysisError::Descriptor(e)
+    }
+}
+
+impl From<operators::OperatorError> for AnalysisError {
+    fn from(e: operators::OperatorError) -> Self {
+        AnalysisError::Operator(e)
+    }
+}
+
+impl From<spectrum::EigenError> for AnalysisError {
+    fn from(e: spectrum::EigenError) -> Self {
+        AnalysisError::Eigen(e)
+    }
+}

@@ -1,0 +1,75 @@
+//! What an analysis returns: a JSON summary, per-vertex arrays, and the shape-DNA fingerprints it computed.
+
+use super::*;
+
+/// Every name a per-vertex array can have.
+pub const ARRAY_NAMES: &[&str] = &[
+    "eigenvectors",
+    "hks",
+    "si_hks",
+    "wks",
+    "gps",
+    "heat_kernel",
+    "heat",
+    "distance",
+    "embedding",
+    "fiedler",
+    "smoothed",
+    "interpolated",
+    "labels",
+    "scores",
+];
+
+/// A per-vertex array in the input numbering, row-major (rows × cols).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VertexArray {
+    pub name: &'static str,
+    pub rows: usize,
+    pub cols: usize,
+    pub data: Vec<f64>,
+    /// What the columns are (times, energies, frequencies, …), for JSON and file headers.
+    pub columns: Option<Vec<f64>>,
+}
+
+impl VertexArray {
+    /// Rows as nested JSON arrays (NaN and ±∞ as null).
+    pub fn to_json(&self) -> Value {
+        Value::Array(
+            self.data
+                .chunks(self.cols.max(1))
+                .map(|r| {
+                    Value::Array(
+                        r.iter().map(|&v| serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number)).collect(),
+                    )
+                })
+                .collect(),
+        )
+    }
+}
+
+/// The result of an analysis: a JSON summary and per-vertex arrays.
+#[derive(Debug, Clone)]
+pub struct Output {
+    pub summary: Value,
+    pub arrays: Vec<VertexArray>,
+    /// Shape-DNA fingerprints the analysis computed, for the service's search index.
+    pub fingerprints: Vec<Fingerprint>,
+}
+
+/// One shape's shape-DNA with the family of parameters it was computed with ([`fingerprint_family`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fingerprint {
+    pub family: String,
+    pub shape_id: String,
+    pub values: Vec<f64>,
+}
+
+/// The family of a fingerprint: every parameter that changes its values (the shape-DNA options and the
+/// operator), canonical JSON hashed to 16 hex digits. Fingerprints are compared only within a family.
+pub fn fingerprint_family(options: &ShapeDnaOptions, operator: &OperatorSpec) -> String {
+    use sha2::Digest;
+    let canonical =
+        serde_json::to_vec(&json!({ "options": options, "operator": operator, "version": ALGORITHM_VERSION }))
+            .unwrap_or_default();
+    sha2::Sha256::digest(&canonical).iter().take(8).map(|b| format!("{b:02x}")).collect()
+}

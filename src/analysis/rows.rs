@@ -1,0 +1,88 @@
+//! Vertex numbering: requests and per-vertex outputs use the uploaded file's numbering; operators work on the
+//! validated (welded, possibly Dirichlet-reduced) vertices.
+
+use super::*;
+
+/// Maps input vertex indices to validated ones.
+pub(crate) fn map_vertices(v: &Validated, list: &[u32], what: &str) -> Result<Vec<usize>, AnalysisError> {
+    list.iter()
+        .map(|&i| match v.vertex_map.get(i as usize) {
+            Some(&m) if m != u32::MAX => Ok(m as usize),
+            Some(_) => Err(AnalysisError::invalid_parameter(format!("{what}: vertex {i} was dropped by validation"))),
+            None => Err(AnalysisError::invalid_parameter(format!(
+                "{what}: vertex {i} does not exist ({} vertices)",
+                v.vertex_map.len()
+            ))),
+        })
+        .collect()
+}
+
+/// Spreads an (operator rows × cols) matrix to the input numbering: Dirichlet vertices 0, dropped ones NaN.
+pub fn to_input_rows(v: &Validated, op: &Operator, m: faer::MatRef<'_, f64>, name: &'static str) -> VertexArray {
+    spread(v, m, name, |col| op.expand(col))
+}
+
+/// Spreads a (validated vertices × cols) matrix to the input numbering.
+pub fn validated_to_input(v: &Validated, m: faer::MatRef<'_, f64>, name: &'static str) -> VertexArray {
+    spread(v, m, name, |col| col.to_vec())
+}
+
+pub(crate) fn spread(
+    v: &Validated,
+    m: faer::MatRef<'_, f64>,
+    name: &'static str,
+    expand: impl Fn(&[f64]) -> Vec<f64>,
+) -> VertexArray {
+    let cols = m.ncols();
+    let rows = v.vertex_map.len();
+    let mut data = vec![f64::NAN; rows * cols];
+    for j in 0..cols {
+        let col: Vec<f64> = m.col(j).iter().copied().collect();
+        let full = expand(&col);
+        for (input, &mapped) in v.vertex_map.iter().enumerate() {
+            if mapped != u32::MAX {
+                data[input * cols + j] = full[mapped as usize];
+            }
+        }
+    }
+    VertexArray { name, rows, cols, data, columns: None }
+}
+
+/// Validated vertex indices → rows of the (possibly Dirichlet-condensed) operator.
+pub(crate) fn to_operator_rows(op: &Operator, list: &[usize]) -> Result<Vec<usize>, AnalysisError> {
+    match &op.interior {
+        None => Ok(list.to_vec()),
+        Some(keep) => list
+            .iter()
+            .map(|&i| {
+                keep.binary_search(&(i as u32))
+                    .map_err(|_| AnalysisError::invalid_parameter(format!("vertex {i} is on the Dirichlet boundary")))
+            })
+            .collect(),
+    }
+}
+
+/// A per-vertex function in the input numbering → the validated numbering (welded vertices: the first value).
+pub(crate) fn from_input_rows(v: &Validated, f: &[f64], what: &str) -> Result<Vec<f64>, AnalysisError> {
+    if f.len() != v.vertex_map.len() {
+        return Err(AnalysisError::invalid_parameter(format!(
+            "{what}: {} values for {} input vertices",
+            f.len(),
+            v.vertex_map.len()
+        )));
+    }
+    let mut out = vec![f64::NAN; v.shape.vertex_count()];
+    for (i, &m) in v.vertex_map.iter().enumerate() {
+        if m != u32::MAX && out[m as usize].is_nan() {
+            out[m as usize] = f[i];
+        }
+    }
+    if let Some(i) = out.iter().position(|x| !x.is_finite()) {
+        return Err(AnalysisError::invalid_parameter(format!("{what}: vertex {i} has no finite value")));
+    }
+    Ok(out)
+}
+
+kac_core::object_only_serde!(OperatorSpec);
+
+kac_core::object_only_serde!(SolverSpec);
