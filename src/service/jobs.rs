@@ -177,8 +177,8 @@ impl Jobs {
 
 /// Submits a job, or returns the existing one for the same request (true: newly enqueued).
 pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(Arc<Job>, bool), ApiError> {
-    check_limits(state, &analysis)?;
-    check_work(state, &analysis, shape.validated.shape.vertex_count())?;
+    super::limits::check_limits(state, &analysis)?;
+    super::limits::check_work(state, &analysis, shape.validated.shape.vertex_count())?;
     let canonical = serde_json::to_value(&analysis).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
     let id = job_id(&shape.id, &canonical);
     let shape_id = shape.id.clone();
@@ -209,7 +209,7 @@ pub fn submit_compare(
         solver: crate::analysis::SolverSpec::default(),
     };
     if let Some(largest) = shapes.iter().map(|s| s.validated.shape.vertex_count()).max() {
-        check_work(state, &dna, largest)?;
+        super::limits::check_work(state, &dna, largest)?;
     }
     request.shape_ids = Some(shapes.iter().map(|s| s.id.clone()).collect());
     let canonical = serde_json::to_value(&request).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
@@ -392,95 +392,6 @@ pub fn recover(state: &AppState) -> std::io::Result<usize> {
         }
     }
     Ok(requeued)
-}
-
-fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
-    // Every analysis says whether it asks for eigenpairs, and how many (no default arm: a new one must say).
-    let asked = match a {
-        Analysis::Spectrum { k, .. }
-        | Analysis::Hks { k, .. }
-        | Analysis::SiHks { k, .. }
-        | Analysis::Wks { k, .. }
-        | Analysis::Gps { k, .. }
-        | Analysis::Heat { k, .. } => Some(("k", *k)),
-        Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
-        Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
-        Analysis::Geodesic { .. } | Analysis::Trees { .. } | Analysis::Smooth { .. } | Analysis::Interpolate { .. } => {
-            None
-        }
-    };
-    let Some((what, k)) = asked else { return Ok(()) };
-    if k == 0 {
-        // Refused at submission: the same answer on every path (a job, /v1/analyze, a cached spectrum).
-        return Err(ApiError::Analysis(crate::analysis::AnalysisError::invalid_k(format!(
-            "{what} = 0: ask for at least one eigenpair (1 ≤ {what} ≤ the number of unknowns)"
-        ))));
-    }
-    if k > state.config.max_k {
-        return Err(ApiError::KTooLarge {
-            detail: format!("k = {k} is above the limit of {} (--max-k)", state.config.max_k),
-        });
-    }
-    Ok(())
-}
-
-/// Bounded work: every list or grid of the request against `--max-samples`, and the widest per-vertex array the
-/// analysis will hold (eigenvectors included) against `--max-output-values`, before anything is allocated.
-fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(), ApiError> {
-    let len = |v: &Option<Vec<f64>>| v.as_ref().map(Vec::len);
-    // (name of the field, its count) for every list or grid; and the columns of the widest per-vertex array.
-    let (counts, columns): (Vec<(&str, usize)>, usize) = match a {
-        // The k eigenvectors are held (and cached) whether or not they are returned.
-        Analysis::Spectrum { k, .. } => (vec![], *k),
-        Analysis::Hks { k, options, .. } => {
-            let t = len(&options.times).unwrap_or(options.count);
-            (vec![("options.count", options.count), ("options.times", t)], t.max(*k))
-        }
-        Analysis::SiHks { k, options, .. } => (
-            vec![("options.samples", options.samples), ("options.frequencies", options.frequencies)],
-            options.samples.max(options.frequencies).max(*k),
-        ),
-        Analysis::Wks { k, options, .. } => {
-            let e = len(&options.energies).unwrap_or(options.count);
-            (vec![("options.count", options.count), ("options.energies", e)], e.max(*k))
-        }
-        Analysis::Gps { k, dimensions, .. } => (vec![], dimensions.unwrap_or(*k).max(*k)),
-        Analysis::ShapeDna { options, .. } => (vec![], options.k),
-        Analysis::Heat { k, times, sources, steps, .. } => {
-            let t = len(times).unwrap_or(10);
-            (
-                vec![("times", t), ("sources", sources.len()), ("steps", *steps)],
-                t.saturating_mul(sources.len().max(1)).max(*k),
-            )
-        }
-        Analysis::Geodesic { sources, options } => {
-            (vec![("sources", sources.len()), ("options.varadhan_steps", options.varadhan_steps)], 2)
-        }
-        Analysis::Trees {} => (vec![], 1),
-        Analysis::Embed { dimensions, .. } => (vec![], dimensions.saturating_add(1)),
-        Analysis::Smooth { .. } => (vec![], 3),
-        Analysis::Interpolate { values, labels, .. } => {
-            let classes = labels.iter().map(|l| l.1 as usize + 1).max().unwrap_or(1);
-            (vec![("values", values.len()), ("labels", labels.len()), ("classes in labels", classes)], classes)
-        }
-    };
-    let max = state.config.max_samples;
-    if let Some((name, n)) = counts.into_iter().find(|&(_, n)| n > max) {
-        return Err(ApiError::TooManySamples {
-            detail: format!("{name} = {n} is above the limit of {max} (--max-samples, KAC_MAX_SAMPLES)"),
-        });
-    }
-    let values = vertices.saturating_mul(columns);
-    let max = state.config.max_output_values;
-    if values > max {
-        return Err(ApiError::OutputTooLarge {
-            detail: format!(
-                "this analysis holds a per-vertex array of {vertices} vertices × {columns} columns = {values} values, \
-                 above the limit of {max} (--max-output-values, KAC_MAX_OUTPUT_VALUES)"
-            ),
-        });
-    }
-    Ok(())
 }
 
 fn finish(state: &AppState, job: &Job, status: Status, error: Option<Problem>, result: Option<String>) {

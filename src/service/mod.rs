@@ -6,6 +6,7 @@ pub mod compare;
 pub mod config;
 pub mod error;
 pub mod jobs;
+pub mod limits;
 pub mod listener;
 pub mod openapi;
 pub mod ops;
