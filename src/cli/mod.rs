@@ -137,9 +137,7 @@ pub struct ShapeArgs {
 }
 
 fn parse_format(s: &str) -> Result<Format, String> {
-    Format::from_name(s).ok_or_else(|| {
-        format!("unknown format '{s}'; one of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx")
-    })
+    Format::from_name(s).ok_or_else(|| format!("unknown format '{s}'; one of: {}", Format::names()))
 }
 
 fn parse_weld(s: &str) -> Result<Weld, String> {

@@ -49,11 +49,8 @@ pub(crate) struct Upload {
 }
 
 pub(crate) fn parse_format(name: &str) -> Result<Format, ApiError> {
-    Format::from_name(name).ok_or_else(|| {
-        ApiError::invalid_request(format!(
-            "unknown format '{name}'; one of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx"
-        ))
-    })
+    Format::from_name(name)
+        .ok_or_else(|| ApiError::invalid_request(format!("unknown format '{name}'; one of: {}", Format::names())))
 }
 
 pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Request) -> Result<Upload, ApiError> {

@@ -51,6 +51,10 @@ pub enum Format {
 }
 
 impl Format {
+    /// Every format's name, comma-separated, in the order of [`Format::ALL`] (for messages that list them).
+    pub fn names() -> String {
+        Format::ALL.iter().map(|f| f.name()).collect::<Vec<_>>().join(", ")
+    }
     pub const ALL: [Format; 13] = [
         Format::Obj,
         Format::Off,
@@ -239,8 +243,7 @@ pub fn choose_format(explicit: Option<Format>, path: Option<&Path>, bytes: &[u8]
         }
     }
     Format::sniff(bytes).ok_or_else(|| ShapeError::UnknownFormat {
-        message: "no format given and the content matches none of: obj, off, ply, stl, gltf, glb, medit, gmsh, vtk, xyz, csv, json, mtx"
-            .into(),
+        message: format!("no format given and the content matches none of: {}", Format::names()),
     })
 }
 
