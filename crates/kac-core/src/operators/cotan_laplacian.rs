@@ -46,23 +46,6 @@ pub fn face_lengths(v: &[Point], f: &[u32; 3]) -> [f64; 3] {
     [0, 1, 2].map(|k| vec3::norm(vec3::sub(v[f[(k + 1) % 3] as usize], v[f[(k + 2) % 3] as usize])))
 }
 
-/// Per-corner mass for the `lumped` and `voronoi` masses of one triangle.
-fn corner_masses(mass: Mass, l: [f64; 3], cot: [f64; 3], area: f64) -> [f64; 3] {
-    match mass {
-        Mass::Voronoi => {
-            let obtuse = (0..3).find(|&k| cot[k] < 0.0);
-            match obtuse {
-                Some(o) => [0, 1, 2].map(|k| if k == o { area / 2.0 } else { area / 4.0 }),
-                None => [0, 1, 2].map(|k| {
-                    let (a, b) = ((k + 1) % 3, (k + 2) % 3);
-                    (l[a] * l[a] * cot[a] + l[b] * l[b] * cot[b]) / 8.0
-                }),
-            }
-        }
-        _ => [area / 3.0; 3],
-    }
-}
-
 /// The cotangent pair (L, M) of `n` vertices and `faces`, with `lengths(face)` giving the edge lengths.
 pub fn cotan_pair(
     n: usize,
@@ -77,7 +60,7 @@ pub fn cotan_pair(
         .map(|f| {
             let l = lengths(f);
             let (cot, area) = corner_cotangents(l);
-            let cm = if consistent { [area / 6.0; 3] } else { corner_masses(mass, l, cot, area) };
+            let cm = super::mass::triangle_corners(mass, l, cot, area);
             (cot, area, cm)
         })
         .collect();
@@ -123,7 +106,7 @@ pub fn cotan_pair(
                 }
                 let w = 0.5 * cot[opposite];
                 dl += w;
-                buf.push((i, -w, if consistent { area / 12.0 } else { 0.0 }));
+                buf.push((i, -w, super::mass::triangle_off(mass, *area)));
             }
         }
         buf.sort_unstable_by_key(|e| e.0);

@@ -78,10 +78,11 @@ pub fn string_pair(v: &[Point], segments: &[[u32; 2]], mass: Mass) -> Result<Spa
                 message: "zero length".into(),
             });
         }
-        off.push((s[0], s[1], [-1.0 / h, if consistent { h / 6.0 } else { 0.0 }]));
+        let (m_diag, m_off) = super::mass::segment(mass, h);
+        off.push((s[0], s[1], [-1.0 / h, m_off]));
         for &i in s {
             dl[i as usize] += 1.0 / h;
-            dm[i as usize] += if consistent { h / 3.0 } else { h / 2.0 };
+            dm[i as usize] += m_diag;
         }
     }
     let (pattern, [stiffness, m]) = assemble(n, &off, [&dl, &dm]);

@@ -6,11 +6,14 @@ pub mod boundary;
 pub mod cotan_laplacian;
 pub mod graph_laplacian;
 pub mod intrinsic_delaunay;
+pub mod mass;
 pub mod point_cloud;
 pub mod properties;
 pub mod robust;
 pub mod sparse;
 pub mod tet_laplacian;
+
+pub use mass::Mass;
 
 use crate::geometry::{Shape, ShapeKind};
 use graph_laplacian::GraphKind;
@@ -83,35 +86,6 @@ impl OperatorKind {
     }
     fn is_graph(self) -> bool {
         matches!(self, OperatorKind::Graph | OperatorKind::GraphNormalized | OperatorKind::GraphRandomWalk)
-    }
-}
-
-/// Mass matrices. `Identity` and `Degree` are what the graph Laplacians use (reported, not chosen).
-#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Mass {
-    Consistent,
-    Lumped,
-    Voronoi,
-    Identity,
-    Degree,
-}
-
-impl Mass {
-    pub fn name(self) -> &'static str {
-        match self {
-            Mass::Consistent => "consistent",
-            Mass::Lumped => "lumped",
-            Mass::Voronoi => "voronoi",
-            Mass::Identity => "identity",
-            Mass::Degree => "degree",
-        }
-    }
-    pub fn from_name(s: &str) -> Option<Self> {
-        [Mass::Consistent, Mass::Lumped, Mass::Voronoi, Mass::Identity, Mass::Degree]
-            .into_iter()
-            .find(|m| m.name() == s)
     }
 }
 

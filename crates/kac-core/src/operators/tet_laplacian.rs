@@ -31,11 +31,12 @@ pub fn tet_pair(v: &[Point], tets: &[[u32; 4]], mass: Mass) -> Result<SparsePair
         g[2] = vec3::scale(vec3::cross(e[2], e[0]), 1.0 / det);
         g[3] = vec3::scale(vec3::cross(e[0], e[1]), 1.0 / det);
         g[0] = vec3::scale(vec3::add(vec3::add(g[1], g[2]), g[3]), -1.0);
+        let (m_diag, m_off) = super::mass::tetrahedron(mass, vol);
         for a in 0..4 {
             dl[t[a] as usize] += vol * vec3::dot(g[a], g[a]);
-            dm[t[a] as usize] += if consistent { vol / 10.0 } else { vol / 4.0 };
+            dm[t[a] as usize] += m_diag;
             for b in a + 1..4 {
-                off.push((t[a], t[b], [vol * vec3::dot(g[a], g[b]), if consistent { vol / 20.0 } else { 0.0 }]));
+                off.push((t[a], t[b], [vol * vec3::dot(g[a], g[b]), m_off]));
             }
         }
     }
