@@ -32,6 +32,8 @@
 //! per pair the relative residual ‖Lφ − λMφ‖₂ / (max(|λ|, |σ|) · ‖Mφ‖₂).
 
 pub mod basis_products;
+mod blocks;
+mod completeness;
 pub mod dense;
 pub mod factor;
 pub mod lanczos;
@@ -39,6 +41,9 @@ pub mod null_space;
 pub mod weyl_law;
 
 use crate::operators::sparse::SparsePair;
+use blocks::*;
+pub use completeness::check_completeness;
+use completeness::*;
 use faer::{Mat, MatRef};
 use null_space::{Deflation, ZeroModes};
 use serde::{Deserialize, Serialize};
@@ -290,67 +295,6 @@ impl EigenError {
     }
 }
 
-/// Repair rounds before a spectrum that stays incomplete is an error. Each round finds every pair missed below
-/// the check's shift unless the repair solve itself misses one, which the next round sees.
-const MAX_REPAIRS: usize = 3;
-
-/// The largest problem (or block) a repair hands to the dense path when too few unknowns are left for the
-/// Krylov method.
-const DENSE_REPAIR_MAX: usize = 8000;
-
-/// Relative width of a gap between consecutive eigenvalues that the inertia check may put its shift in.
-const GAP: f64 = 1e-6;
-
-/// Whether a problem of `n` unknowns (`free` of them left after deflation, `k` pairs wanted beyond the deflated
-/// ones) is solved densely; `block` is the largest problem the dense path would factor (a component's size
-/// when the components are solved one by one, see [`Blocks`]).
-fn use_dense(method: Method, block: usize, free: usize, k: usize) -> bool {
-    match method {
-        Method::Dense => true,
-        Method::Sparse => false,
-        Method::Auto => block <= 1500 || (3 * k > free && block <= 8000) || k + 1 >= free,
-    }
-}
-
-/// The connected components of L's graph when M couples none of them either: the pencil is then block diagonal
-/// (after a permutation) and its spectrum the union of the blocks' spectra, so the dense path factors each
-/// component alone (Σ n_c³ work instead of n³).
-struct Blocks {
-    labels: Vec<u32>,
-    count: usize,
-    largest: usize,
-}
-
-impl Blocks {
-    fn of(pair: &SparsePair) -> Option<Blocks> {
-        let (labels, count) = pair.components();
-        if count < 2 {
-            return None;
-        }
-        let p = &pair.pattern;
-        for j in 0..p.n {
-            for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
-                if labels[p.row_idx[pos]] != labels[j] && pair.mass[pos] != 0.0 {
-                    return None;
-                }
-            }
-        }
-        let mut size = vec![0usize; count];
-        labels.iter().for_each(|&l| size[l as usize] += 1);
-        let largest = size.iter().copied().max().unwrap_or(0);
-        Some(Blocks { labels, count, largest })
-    }
-
-    /// Rows of each block, ascending.
-    fn rows(&self) -> Vec<Vec<usize>> {
-        let mut rows = vec![Vec::new(); self.count];
-        for (i, &l) in self.labels.iter().enumerate() {
-            rows[l as usize].push(i);
-        }
-        rows
-    }
-}
-
 /// The k smallest eigenpairs of L φ = λ M φ, complete (see [`Completeness`]).
 pub fn eigs(
     pair: &SparsePair,
@@ -430,7 +374,7 @@ pub fn eigs(
 }
 
 /// The first k known zero modes as a spectrum (nothing solved).
-fn zero_mode_spectrum(pair: &SparsePair, zeros: &ZeroModes, k: usize) -> Spectrum {
+pub(crate) fn zero_mode_spectrum(pair: &SparsePair, zeros: &ZeroModes, k: usize) -> Spectrum {
     let n = pair.n();
     let mut vectors = Mat::<f64>::zeros(n, k);
     for (j, z) in zeros.vectors.iter().take(k).enumerate() {
@@ -466,7 +410,7 @@ pub(crate) fn zeros_checked(n: usize, m: usize, control: &Control<'_>) -> Result
 }
 
 /// The known zero modes (eigenvalue 0) followed by the pairs of a deflated solve.
-fn prepend_zero_modes(
+pub(crate) fn prepend_zero_modes(
     pair: &SparsePair,
     zeros: &ZeroModes,
     s: Spectrum,
@@ -491,327 +435,13 @@ fn prepend_zero_modes(
     Ok(Spectrum { values, vectors, residuals: vec![], stats: s.stats })
 }
 
-/// The dense solve (every eigenvalue is computed, so nothing can be missed), block by block where the pencil is
-/// block diagonal, with the known zero modes in place of the dense solver's basis of the null space when the
-/// dense solver agrees on its dimension.
-fn dense_with_zero_modes(
-    pair: &SparsePair,
-    zeros: &ZeroModes,
-    blocks: Option<&Blocks>,
-    k: usize,
-    control: Control<'_>,
-) -> Result<Spectrum, EigenError> {
-    control.phase("dense", 0, k)?;
-    let mut s = match blocks {
-        Some(b) => dense_by_blocks(pair, b, k, control)?,
-        None => dense_stoppable(pair, k, &control)?,
-    };
-    control.check()?;
-    let z = zeros.len().min(k);
-    let scale = crate::spectrum::lanczos::default_sigma(pair).abs() * pair.n() as f64;
-    // The dense solver's first z eigenvalues are zeros to rounding (10⁻¹⁴ of the operator's scale); its (z + 1)-th
-    // is not, or the known zero modes do not span its null space and its own basis stays.
-    let agrees = s.values[..z].iter().all(|l| l.abs() <= 1e-9 * scale)
-        && s.values.get(zeros.len()).is_none_or(|l| l.abs() > 1e-9 * scale);
-    if z > 0 && agrees {
-        let head = zero_mode_spectrum(pair, zeros, z);
-        s.vectors.as_mut().subcols_mut(0, z).copy_from(head.vectors.as_ref());
-        s.values[..z].iter_mut().for_each(|v| *v = 0.0);
-    }
-    Ok(s)
-}
-
-/// [`dense::eigs_dense`], which is one decomposition that cannot stop inside (96 s at 7,921 unknowns, 2.7 s at
-/// 2,562 on one core): with a stop flag it runs on a thread of its own while this one watches the flag every
-/// 50 ms, and a stop returns `Canceled` at once. The abandoned decomposition then finishes on its thread and
-/// its result is dropped (its core stays busy until then; the caller's worker is free).
-fn dense_stoppable(pair: &SparsePair, k: usize, control: &Control<'_>) -> Result<Spectrum, EigenError> {
-    if control.stop.is_none() || pair.n() <= 1500 {
-        // No flag, or at most about half a second of work.
-        return dense::eigs_dense(pair, k);
-    }
-    // At most one dense thread per core, abandoned ones included: a client that submits and cancels over and over
-    // waits here (still stoppable) instead of piling up decompositions.
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    static DENSE_THREADS: AtomicUsize = AtomicUsize::new(0);
-    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
-    while DENSE_THREADS.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| (n < cores).then_some(n + 1)).is_err() {
-        control.check()?;
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-    let owned = pair.clone();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::Builder::new()
-        .name("kac-dense".into())
-        .spawn(move || {
-            let _ = tx.send(dense::eigs_dense(&owned, k));
-            DENSE_THREADS.fetch_sub(1, Ordering::SeqCst);
-        })
-        .inspect_err(|_| {
-            DENSE_THREADS.fetch_sub(1, Ordering::SeqCst);
-        })
-        .map_err(|e| EigenError::Factorization { message: format!("cannot start the dense solve: {e}") })?;
-    loop {
-        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
-            Ok(result) => return result,
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => control.check()?,
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                return Err(EigenError::Factorization { message: "the dense solve stopped without a result".into() })
-            }
-        }
-    }
-}
-
-/// Every eigenpair of each block, merged: the k smallest of the union, ascending.
-fn dense_by_blocks(pair: &SparsePair, blocks: &Blocks, k: usize, control: Control<'_>) -> Result<Spectrum, EigenError> {
-    let t0 = Instant::now();
-    let n = pair.n();
-    let mut parts = Vec::with_capacity(blocks.count);
-    for rows in blocks.rows() {
-        control.check()?;
-        let (pattern, mut values) =
-            crate::operators::sparse::submatrix(&pair.pattern, &[&pair.stiffness, &pair.mass], &rows);
-        let mass = values.pop().unwrap_or_default();
-        let stiffness = values.pop().unwrap_or_default();
-        let sub = SparsePair {
-            pattern: std::sync::Arc::new(pattern),
-            stiffness,
-            mass,
-            mass_is_diagonal: pair.mass_is_diagonal,
-            dimension: pair.dimension,
-            kernel: crate::operators::sparse::Kernel::Unknown,
-        };
-        let m = rows.len();
-        parts.push((rows, dense_stoppable(&sub, m, &control)?));
-    }
-    let mut order: Vec<(f64, usize, usize)> = parts
-        .iter()
-        .enumerate()
-        .flat_map(|(b, (_, s))| s.values.iter().enumerate().map(move |(j, &v)| (v, b, j)))
-        .collect();
-    order.sort_by(|x, y| x.0.total_cmp(&y.0));
-    order.truncate(k);
-    let mut vectors = Mat::<f64>::zeros(n, order.len());
-    for (c, &(_, b, j)) in order.iter().enumerate() {
-        let (rows, s) = &parts[b];
-        for (r, &i) in rows.iter().enumerate() {
-            vectors[(i, c)] = s.vectors[(r, j)];
-        }
-    }
-    let total = t0.elapsed().as_secs_f64();
-    Ok(Spectrum {
-        values: order.iter().map(|o| o.0).collect(),
-        vectors,
-        residuals: vec![],
-        stats: Stats {
-            method: "dense",
-            sigma: lanczos::default_sigma(pair),
-            subspace: blocks.largest,
-            factor_nnz: parts.iter().map(|(r, _)| r.len() * (r.len() + 1) / 2).sum(),
-            factorization: "cholesky",
-            timings: Timings { iteration_s: total, total_s: total, ..Default::default() },
-            ..Default::default()
-        },
-    })
-}
-
 /// Keeps the first k pairs.
-fn truncate(s: &mut Spectrum, k: usize) {
+pub(crate) fn truncate(s: &mut Spectrum, k: usize) {
     if s.values.len() > k {
         s.values.truncate(k);
         s.residuals.truncate(k);
         s.vectors = s.vectors.as_ref().subcols(0, k).to_owned();
     }
-}
-
-/// Where to count: τ in the first gap wider than [`GAP`] above the `wanted`-th of the ascending `values` (which
-/// may hold converged pairs beyond `wanted`), else in the last such gap below it. Returns τ and the number of
-/// `values` below it; `None` when the values have no gap at all.
-fn check_shift(values: &[f64], wanted: usize) -> Option<(f64, usize)> {
-    let wide = |j: usize| values[j + 1] - values[j] > GAP * values[j + 1].abs().max(values[j].abs()).max(1e-300);
-    let last = values.len().checked_sub(1)?;
-    let above = (wanted.saturating_sub(1)..last).find(|&j| wide(j));
-    let j = above.or_else(|| (0..wanted.saturating_sub(1).min(last)).rev().find(|&j| wide(j)))?;
-    Some((0.5 * (values[j] + values[j + 1]), j + 1))
-}
-
-/// The largest backward error of a test solve accepted from the check's LDLᵀ factor (as for the solver's own
-/// factor: [`lanczos`]'s LDLᵀ stability test); beyond it the count may be wrong and τ moves within its gap.
-const CHECK_BACKWARD_ERROR: f64 = 1e-10;
-
-/// Sylvester's inertia at τ: the eigenvalues of the problem below τ, from an LDLᵀ factor whose test solve is
-/// backward stable; τ is tried at the middle, then at a third and two thirds of the gap (lo, hi).
-fn inertia_in_gap(sym: &factor::Symbolic, pair: &SparsePair, lo: f64, hi: f64) -> Result<(f64, usize), EigenError> {
-    let mut last = String::new();
-    for f in [0.5, 1.0 / 3.0, 2.0 / 3.0] {
-        let tau = lo + f * (hi - lo);
-        let values = pair.shifted(tau);
-        match factor::Cholesky::factor_ldlt(sym, &values, faer::Par::Seq) {
-            Ok((factor, below)) => {
-                let e = lanczos::solve_backward_error(pair, &values, &factor, faer::Par::Seq);
-                if e <= CHECK_BACKWARD_ERROR {
-                    return Ok((tau, below));
-                }
-                last = format!("the LDLᵀ factor of L − {tau:e}·M is not backward stable ({e:.1e})");
-            }
-            Err(e) => last = format!("LDLᵀ of L − {tau:e}·M failed ({e})"),
-        }
-    }
-    Err(EigenError::Factorization { message: format!("the completeness check could not count: {last}") })
-}
-
-/// Checks by inertia that the ascending `values` hold every eigenvalue below the check's shift (see
-/// [`Completeness`]), without repairing; `Ok(None)` when the values have no gap to put a shift in.
-pub fn check_completeness(
-    pair: &SparsePair,
-    values: &[f64],
-    wanted: usize,
-    symbolic: Option<&factor::Symbolic>,
-) -> Result<Option<Completeness>, EigenError> {
-    let t = Instant::now();
-    let Some((_, found)) = check_shift(values, wanted) else { return Ok(None) };
-    let owned;
-    let sym = match symbolic {
-        Some(s) if s.fits(pair) => s,
-        _ => {
-            owned =
-                factor::Symbolic::analyze(&pair.pattern).map_err(|message| EigenError::Factorization { message })?;
-            &owned
-        }
-    };
-    let (tau, below) = inertia_in_gap(sym, pair, values[found - 1], values[found])?;
-    Ok(Some(Completeness {
-        method: "inertia",
-        complete: below == found,
-        shift: Some(tau),
-        below_shift: Some(below),
-        found_below_shift: Some(found),
-        repairs: 0,
-        repaired_pairs: 0,
-        seconds: t.elapsed().as_secs_f64(),
-    }))
-}
-
-/// The completeness check of a sparse solve, repaired: while the inertia counts more eigenvalues below τ than were
-/// found, every found pair is deflated and the iteration runs again (σ below the spectrum, another seed) for the
-/// missing ones, which are the smallest of what is left; their pairs join the others and the count is taken
-/// again. `s` holds the k wanted pairs and any converged guard pairs, ascending, the first `zeros.len()` the known
-/// zero modes.
-fn verify_and_repair(
-    pair: &SparsePair,
-    sym: &factor::Symbolic,
-    options: &EigenOptions,
-    control: Control<'_>,
-    (zeros, blocks): (&ZeroModes, Option<&Blocks>),
-    s: &mut Spectrum,
-    k: usize,
-) -> Result<(), EigenError> {
-    let t = Instant::now();
-    let z = zeros.len();
-    let mut repairs = 0;
-    let mut repaired_pairs = 0;
-    loop {
-        // The gap to count in; with no gap at all (every value found is one cluster), just below the cluster,
-        // where nothing may lie.
-        let (lo, hi, found) = match check_shift(&s.values, k) {
-            Some((_, found)) => (s.values[found - 1], s.values[found], found),
-            None => {
-                let v0 = s.values[0];
-                let scale = v0.abs().max(lanczos::default_sigma(pair).abs());
-                (v0 - 2.0 * GAP * scale, v0 - GAP * scale, 0)
-            }
-        };
-        control.phase("verifying", k, k)?;
-        let (tau, below) = inertia_in_gap(sym, pair, lo, hi)?;
-        control.check()?;
-        let c = Completeness {
-            method: "inertia",
-            complete: below == found,
-            shift: Some(tau),
-            below_shift: Some(below),
-            found_below_shift: Some(found),
-            repairs,
-            repaired_pairs,
-            seconds: 0.0,
-        };
-        if below == found {
-            s.stats.completeness = Some(c);
-            break;
-        }
-        if below < found || repairs == MAX_REPAIRS {
-            // Fewer eigenvalues than pairs found cannot be (the found vectors are M-orthonormal); more after the
-            // repairs means the repair solves keep missing them.
-            return Err(EigenError::Incomplete { shift: tau, below, found, repairs });
-        }
-        if control.stopped() {
-            return Err(EigenError::Canceled);
-        }
-        repairs += 1;
-        let missing = below - found;
-        let p = s.values.len() - z;
-        let found_vectors = s.vectors.as_ref().subcols(z, p).to_owned();
-        let m_found = mass_times(pair, found_vectors.as_ref());
-        let deflation = Deflation { sparse: &zeros.vectors, dense: Some((found_vectors.as_ref(), m_found.as_ref())) };
-        let mut deflated_values = vec![0.0; z];
-        deflated_values.extend_from_slice(&s.values[z..]);
-        let run = lanczos::Run { deflation: &deflation, deflated_values: &deflated_values, interior_shift: false };
-        let o = EigenOptions {
-            k: missing,
-            sigma: Some(lanczos::default_sigma(pair)),
-            seed: options.seed.wrapping_add(repairs as u64),
-            ..options.clone()
-        };
-        let Some(mut extra) = lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)? else {
-            // Too few unknowns left for the Krylov method: the dense path computes every eigenvalue.
-            if blocks.map_or(pair.n(), |b| b.largest) > DENSE_REPAIR_MAX {
-                return Err(EigenError::Incomplete { shift: tau, below, found, repairs });
-            }
-            let stats = std::mem::take(&mut s.stats);
-            *s = dense_with_zero_modes(pair, zeros, blocks, k, control)?;
-            s.stats = Stats { completeness: Some(Completeness { repairs, ..Completeness::by("dense") }), ..stats };
-            finish(pair, s, z.min(k), control)?;
-            break;
-        };
-        finish(pair, &mut extra, 0, control)?;
-        repaired_pairs += extra.values.len().min(missing);
-        merge(s, extra);
-    }
-    if let Some(c) = s.stats.completeness.as_mut() {
-        c.seconds = t.elapsed().as_secs_f64();
-    }
-    s.stats.timings.verify_s = t.elapsed().as_secs_f64();
-    Ok(())
-}
-
-/// M X for a dense block.
-fn mass_times(pair: &SparsePair, x: MatRef<'_, f64>) -> Mat<f64> {
-    let mut out = Mat::<f64>::zeros(x.nrows(), x.ncols());
-    let mut scratch = Vec::new();
-    crate::operators::sparse::spmm(&pair.pattern, &pair.mass, x, out.as_mut(), &mut scratch);
-    out
-}
-
-/// Adds the pairs of a repair solve to a spectrum, keeping the ascending order.
-fn merge(s: &mut Spectrum, extra: Spectrum) {
-    let (n, a, b) = (s.vectors.nrows(), s.values.len(), extra.values.len());
-    let mut order: Vec<(f64, bool, usize)> = (0..a).map(|j| (s.values[j], false, j)).collect();
-    order.extend((0..b).map(|j| (extra.values[j], true, j)));
-    // Stable: the known zero modes (exact zeros) stay first.
-    order.sort_by(|x, y| x.0.total_cmp(&y.0));
-    let mut vectors = Mat::<f64>::zeros(n, a + b);
-    let (mut values, mut residuals) = (Vec::with_capacity(a + b), Vec::with_capacity(a + b));
-    for (j, &(v, from_extra, i)) in order.iter().enumerate() {
-        let (src, res) = if from_extra { (&extra.vectors, &extra.residuals) } else { (&s.vectors, &s.residuals) };
-        vectors.as_mut().col_mut(j).copy_from(src.col(i));
-        values.push(v);
-        residuals.push(res.get(i).copied().unwrap_or(0.0));
-    }
-    s.values = values;
-    s.residuals = residuals;
-    s.vectors = vectors;
-    s.stats.block_steps += extra.stats.block_steps;
-    s.stats.solves += extra.stats.solves;
-    s.stats.restarts += extra.stats.restarts;
 }
 
 /// Fixes signs (largest-magnitude entry positive), replaces each eigenvalue by the Rayleigh quotient φᵀLφ / φᵀMφ
@@ -821,7 +451,12 @@ fn merge(s: &mut Spectrum, extra: Spectrum) {
 /// depend on the shift: a solver's λ = σ + 1/θ carries θ's rounding error magnified by (λ − σ)², which with σ
 /// inside the spectrum reached 10⁻¹¹ relative on the lowest eigenvalues of a 41k-vertex sphere (10⁻¹⁴ with the
 /// quotient).
-fn finish(pair: &SparsePair, s: &mut Spectrum, exact: usize, control: Control<'_>) -> Result<(), EigenError> {
+pub(crate) fn finish(
+    pair: &SparsePair,
+    s: &mut Spectrum,
+    exact: usize,
+    control: Control<'_>,
+) -> Result<(), EigenError> {
     let n = pair.n();
     let k = s.values.len();
     let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);

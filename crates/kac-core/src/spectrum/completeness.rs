@@ -1,0 +1,210 @@
+//! Completeness: Sylvester's inertia at a shift in a gap above the pairs found counts the eigenvalues below it;
+//! a shortfall is repaired by solving again, deflated against what was found, or densely for small blocks.
+
+use super::*;
+
+/// Repair rounds before a spectrum that stays incomplete is an error. Each round finds every pair missed below
+/// the check's shift unless the repair solve itself misses one, which the next round sees.
+pub(crate) const MAX_REPAIRS: usize = 3;
+
+/// The largest problem (or block) a repair hands to the dense path when too few unknowns are left for the
+/// Krylov method.
+pub(crate) const DENSE_REPAIR_MAX: usize = 8000;
+
+/// Relative width of a gap between consecutive eigenvalues that the inertia check may put its shift in.
+pub(crate) const GAP: f64 = 1e-6;
+
+/// Where to count: τ in the first gap wider than [`GAP`] above the `wanted`-th of the ascending `values` (which
+/// may hold converged pairs beyond `wanted`), else in the last such gap below it. Returns τ and the number of
+/// `values` below it; `None` when the values have no gap at all.
+pub(crate) fn check_shift(values: &[f64], wanted: usize) -> Option<(f64, usize)> {
+    let wide = |j: usize| values[j + 1] - values[j] > GAP * values[j + 1].abs().max(values[j].abs()).max(1e-300);
+    let last = values.len().checked_sub(1)?;
+    let above = (wanted.saturating_sub(1)..last).find(|&j| wide(j));
+    let j = above.or_else(|| (0..wanted.saturating_sub(1).min(last)).rev().find(|&j| wide(j)))?;
+    Some((0.5 * (values[j] + values[j + 1]), j + 1))
+}
+
+/// The largest backward error of a test solve accepted from the check's LDLᵀ factor (as for the solver's own
+/// factor: [`lanczos`]'s LDLᵀ stability test); beyond it the count may be wrong and τ moves within its gap.
+pub(crate) const CHECK_BACKWARD_ERROR: f64 = 1e-10;
+
+/// Sylvester's inertia at τ: the eigenvalues of the problem below τ, from an LDLᵀ factor whose test solve is
+/// backward stable; τ is tried at the middle, then at a third and two thirds of the gap (lo, hi).
+pub(crate) fn inertia_in_gap(
+    sym: &factor::Symbolic,
+    pair: &SparsePair,
+    lo: f64,
+    hi: f64,
+) -> Result<(f64, usize), EigenError> {
+    let mut last = String::new();
+    for f in [0.5, 1.0 / 3.0, 2.0 / 3.0] {
+        let tau = lo + f * (hi - lo);
+        let values = pair.shifted(tau);
+        match factor::Cholesky::factor_ldlt(sym, &values, faer::Par::Seq) {
+            Ok((factor, below)) => {
+                let e = lanczos::solve_backward_error(pair, &values, &factor, faer::Par::Seq);
+                if e <= CHECK_BACKWARD_ERROR {
+                    return Ok((tau, below));
+                }
+                last = format!("the LDLᵀ factor of L − {tau:e}·M is not backward stable ({e:.1e})");
+            }
+            Err(e) => last = format!("LDLᵀ of L − {tau:e}·M failed ({e})"),
+        }
+    }
+    Err(EigenError::Factorization { message: format!("the completeness check could not count: {last}") })
+}
+
+/// Checks by inertia that the ascending `values` hold every eigenvalue below the check's shift (see
+/// [`Completeness`]), without repairing; `Ok(None)` when the values have no gap to put a shift in.
+pub fn check_completeness(
+    pair: &SparsePair,
+    values: &[f64],
+    wanted: usize,
+    symbolic: Option<&factor::Symbolic>,
+) -> Result<Option<Completeness>, EigenError> {
+    let t = Instant::now();
+    let Some((_, found)) = check_shift(values, wanted) else { return Ok(None) };
+    let owned;
+    let sym = match symbolic {
+        Some(s) if s.fits(pair) => s,
+        _ => {
+            owned =
+                factor::Symbolic::analyze(&pair.pattern).map_err(|message| EigenError::Factorization { message })?;
+            &owned
+        }
+    };
+    let (tau, below) = inertia_in_gap(sym, pair, values[found - 1], values[found])?;
+    Ok(Some(Completeness {
+        method: "inertia",
+        complete: below == found,
+        shift: Some(tau),
+        below_shift: Some(below),
+        found_below_shift: Some(found),
+        repairs: 0,
+        repaired_pairs: 0,
+        seconds: t.elapsed().as_secs_f64(),
+    }))
+}
+
+/// The completeness check of a sparse solve, repaired: while the inertia counts more eigenvalues below τ than were
+/// found, every found pair is deflated and the iteration runs again (σ below the spectrum, another seed) for the
+/// missing ones, which are the smallest of what is left; their pairs join the others and the count is taken
+/// again. `s` holds the k wanted pairs and any converged guard pairs, ascending, the first `zeros.len()` the known
+/// zero modes.
+pub(crate) fn verify_and_repair(
+    pair: &SparsePair,
+    sym: &factor::Symbolic,
+    options: &EigenOptions,
+    control: Control<'_>,
+    (zeros, blocks): (&ZeroModes, Option<&Blocks>),
+    s: &mut Spectrum,
+    k: usize,
+) -> Result<(), EigenError> {
+    let t = Instant::now();
+    let z = zeros.len();
+    let mut repairs = 0;
+    let mut repaired_pairs = 0;
+    loop {
+        // The gap to count in; with no gap at all (every value found is one cluster), just below the cluster,
+        // where nothing may lie.
+        let (lo, hi, found) = match check_shift(&s.values, k) {
+            Some((_, found)) => (s.values[found - 1], s.values[found], found),
+            None => {
+                let v0 = s.values[0];
+                let scale = v0.abs().max(lanczos::default_sigma(pair).abs());
+                (v0 - 2.0 * GAP * scale, v0 - GAP * scale, 0)
+            }
+        };
+        control.phase("verifying", k, k)?;
+        let (tau, below) = inertia_in_gap(sym, pair, lo, hi)?;
+        control.check()?;
+        let c = Completeness {
+            method: "inertia",
+            complete: below == found,
+            shift: Some(tau),
+            below_shift: Some(below),
+            found_below_shift: Some(found),
+            repairs,
+            repaired_pairs,
+            seconds: 0.0,
+        };
+        if below == found {
+            s.stats.completeness = Some(c);
+            break;
+        }
+        if below < found || repairs == MAX_REPAIRS {
+            // Fewer eigenvalues than pairs found cannot be (the found vectors are M-orthonormal); more after the
+            // repairs means the repair solves keep missing them.
+            return Err(EigenError::Incomplete { shift: tau, below, found, repairs });
+        }
+        if control.stopped() {
+            return Err(EigenError::Canceled);
+        }
+        repairs += 1;
+        let missing = below - found;
+        let p = s.values.len() - z;
+        let found_vectors = s.vectors.as_ref().subcols(z, p).to_owned();
+        let m_found = mass_times(pair, found_vectors.as_ref());
+        let deflation = Deflation { sparse: &zeros.vectors, dense: Some((found_vectors.as_ref(), m_found.as_ref())) };
+        let mut deflated_values = vec![0.0; z];
+        deflated_values.extend_from_slice(&s.values[z..]);
+        let run = lanczos::Run { deflation: &deflation, deflated_values: &deflated_values, interior_shift: false };
+        let o = EigenOptions {
+            k: missing,
+            sigma: Some(lanczos::default_sigma(pair)),
+            seed: options.seed.wrapping_add(repairs as u64),
+            ..options.clone()
+        };
+        let Some(mut extra) = lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)? else {
+            // Too few unknowns left for the Krylov method: the dense path computes every eigenvalue.
+            if blocks.map_or(pair.n(), |b| b.largest) > DENSE_REPAIR_MAX {
+                return Err(EigenError::Incomplete { shift: tau, below, found, repairs });
+            }
+            let stats = std::mem::take(&mut s.stats);
+            *s = dense_with_zero_modes(pair, zeros, blocks, k, control)?;
+            s.stats = Stats { completeness: Some(Completeness { repairs, ..Completeness::by("dense") }), ..stats };
+            finish(pair, s, z.min(k), control)?;
+            break;
+        };
+        finish(pair, &mut extra, 0, control)?;
+        repaired_pairs += extra.values.len().min(missing);
+        merge(s, extra);
+    }
+    if let Some(c) = s.stats.completeness.as_mut() {
+        c.seconds = t.elapsed().as_secs_f64();
+    }
+    s.stats.timings.verify_s = t.elapsed().as_secs_f64();
+    Ok(())
+}
+
+/// M X for a dense block.
+pub(crate) fn mass_times(pair: &SparsePair, x: MatRef<'_, f64>) -> Mat<f64> {
+    let mut out = Mat::<f64>::zeros(x.nrows(), x.ncols());
+    let mut scratch = Vec::new();
+    crate::operators::sparse::spmm(&pair.pattern, &pair.mass, x, out.as_mut(), &mut scratch);
+    out
+}
+
+/// Adds the pairs of a repair solve to a spectrum, keeping the ascending order.
+pub(crate) fn merge(s: &mut Spectrum, extra: Spectrum) {
+    let (n, a, b) = (s.vectors.nrows(), s.values.len(), extra.values.len());
+    let mut order: Vec<(f64, bool, usize)> = (0..a).map(|j| (s.values[j], false, j)).collect();
+    order.extend((0..b).map(|j| (extra.values[j], true, j)));
+    // Stable: the known zero modes (exact zeros) stay first.
+    order.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let mut vectors = Mat::<f64>::zeros(n, a + b);
+    let (mut values, mut residuals) = (Vec::with_capacity(a + b), Vec::with_capacity(a + b));
+    for (j, &(v, from_extra, i)) in order.iter().enumerate() {
+        let (src, res) = if from_extra { (&extra.vectors, &extra.residuals) } else { (&s.vectors, &s.residuals) };
+        vectors.as_mut().col_mut(j).copy_from(src.col(i));
+        values.push(v);
+        residuals.push(res.get(i).copied().unwrap_or(0.0));
+    }
+    s.values = values;
+    s.residuals = residuals;
+    s.vectors = vectors;
+    s.stats.block_steps += extra.stats.block_steps;
+    s.stats.solves += extra.stats.solves;
+    s.stats.restarts += extra.stats.restarts;
+}
