@@ -31,7 +31,7 @@ pub fn area_from_lengths(l: [f64; 3]) -> f64 {
     }
 }
 
-/// Cotangents of the three corners of a triangle with edge lengths `l` (l[k] opposite corner k), and its area.
+/// Cotangents of the three corners of a triangle with edge lengths `l` (`l[k]` opposite corner k), and its area.
 #[inline]
 pub fn corner_cotangents(l: [f64; 3]) -> ([f64; 3], f64) {
     let area = area_from_lengths(l);
@@ -40,7 +40,7 @@ pub fn corner_cotangents(l: [f64; 3]) -> ([f64; 3], f64) {
     (cot, area)
 }
 
-/// Edge lengths of face `f` from positions: l[k] = |p[f[k+1]] − p[f[k+2]]|.
+/// Edge lengths of face `f` from positions: `l[k] = |p[f[k+1]] − p[f[k+2]]|`.
 #[inline]
 pub fn face_lengths(v: &[Point], f: &[u32; 3]) -> [f64; 3] {
     [0, 1, 2].map(|k| vec3::norm(vec3::sub(v[f[(k + 1) % 3] as usize], v[f[(k + 2) % 3] as usize])))
