@@ -32,7 +32,7 @@ impl Default for OperatorSpec {
             mass: None,
             boundary: BoundarySpec::Neumann,
             dirichlet_vertices: None,
-            neighbours: 16,
+            neighbours: kac_core::operators::DEFAULT_NEIGHBOURS,
             time: None,
             neighbourhood: Neighbourhood::Radius,
         }
@@ -67,7 +67,7 @@ pub(crate) fn is_true(b: &bool) -> bool {
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        SolverSpec { tol: 1e-10, verify: true }
+        SolverSpec { tol: kac_core::spectrum::DEFAULT_TOL, verify: true }
     }
 }
 

@@ -20,7 +20,7 @@ pub struct OutArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Relative residual tolerance of the eigensolver.
-    #[arg(long, default_value_t = 1e-10)]
+    #[arg(long, default_value_t = kac_core::spectrum::DEFAULT_TOL)]
     pub tol: f64,
     /// Solver threads (default: all cores).
     #[arg(long, default_value_t = 0)]
@@ -99,19 +99,19 @@ pub struct HksCmd {
     #[arg(long)]
     pub scale_invariant: bool,
     /// SI-HKS: log-time base α.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = SiHksOptions::default().alpha)]
     pub alpha: f64,
     /// SI-HKS: first τ (default log_α(1/λ_max)).
     #[arg(long, allow_hyphen_values = true)]
     pub tau_start: Option<f64>,
     /// SI-HKS: τ step.
-    #[arg(long, default_value_t = 1.0 / 16.0)]
+    #[arg(long, default_value_t = SiHksOptions::default().tau_step)]
     pub tau_step: f64,
     /// SI-HKS: τ samples.
-    #[arg(long, default_value_t = 385)]
+    #[arg(long, default_value_t = SiHksOptions::default().samples)]
     pub samples: usize,
     /// SI-HKS: Fourier moduli kept.
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = SiHksOptions::default().frequencies)]
     pub frequencies: usize,
 }
 
@@ -152,10 +152,10 @@ pub struct WksCmd {
     #[arg(short = 'k', long = "k", default_value_t = 100)]
     pub k: usize,
     /// Log-energies, evenly spaced in [log λ₁, log λ_max].
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = WksOptions::default().count)]
     pub count: usize,
     /// σ as a multiple of the energy spacing.
-    #[arg(long, default_value_t = 6.0)]
+    #[arg(long, default_value_t = WksOptions::default().variance)]
     pub variance: f64,
 }
 
@@ -330,7 +330,7 @@ pub struct TreesCmd {
 
 pub fn trees(a: TreesCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
-    let o = OutArgs { out: None, tol: 1e-10, threads: 0, no_verify: false };
+    let o = OutArgs { out: None, tol: kac_core::spectrum::DEFAULT_TOL, threads: 0, no_verify: false };
     emit(run(&v, &Analysis::Trees {}, &o)?, &o)
 }
 
@@ -452,7 +452,7 @@ pub struct CompareCmd {
     /// euclidean, manhattan or canberra.
     #[arg(long, default_value = "euclidean", value_parser = parse_metric)]
     pub metric: Metric,
-    #[arg(long, default_value_t = 1e-10)]
+    #[arg(long, default_value_t = kac_core::spectrum::DEFAULT_TOL)]
     pub tol: f64,
     /// Skip the eigensolver's completeness check (Sylvester's inertia, with repair; on by default).
     #[arg(long)]

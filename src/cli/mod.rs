@@ -74,7 +74,7 @@ pub struct OperatorArgs {
     #[arg(long, value_delimiter = ',')]
     pub dirichlet_vertices: Option<Vec<u32>>,
     /// Point clouds: neighbours per point.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = kac_core::operators::DEFAULT_NEIGHBOURS)]
     pub neighbours: usize,
     /// Point clouds: heat-kernel time t (default (2h)², h the mean nearest-neighbour distance).
     #[arg(long)]

@@ -25,7 +25,7 @@ pub struct SpectrumCmd {
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Relative residual tolerance.
-    #[arg(long, default_value_t = 1e-10)]
+    #[arg(long, default_value_t = kac_core::spectrum::DEFAULT_TOL)]
     pub tol: f64,
     /// Solver: auto, dense or sparse.
     #[arg(long, default_value = "auto", value_parser = ["auto", "dense", "sparse"])]

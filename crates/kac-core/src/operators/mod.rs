@@ -135,9 +135,13 @@ pub struct CloudParams {
     pub radius: Option<f64>,
 }
 
+/// Neighbours per point of the point-cloud operator unless asked otherwise (the one place this default is written:
+/// the CLI and the service take it from here).
+pub const DEFAULT_NEIGHBOURS: usize = 16;
+
 impl Default for CloudParams {
     fn default() -> Self {
-        CloudParams { k: 16, neighbourhood: Neighbourhood::Radius, t: None, radius: None }
+        CloudParams { k: DEFAULT_NEIGHBOURS, neighbourhood: Neighbourhood::Radius, t: None, radius: None }
     }
 }
 

@@ -91,11 +91,15 @@ pub struct EigenOptions {
     pub deflate_null_space: bool,
 }
 
+/// The residual tolerance of a solve unless asked otherwise (the one place this default is written: the CLI and
+/// the service take it from here).
+pub const DEFAULT_TOL: f64 = 1e-10;
+
 impl Default for EigenOptions {
     fn default() -> Self {
         EigenOptions {
             k: 10,
-            tol: 1e-10,
+            tol: DEFAULT_TOL,
             sigma: None,
             block: None,
             subspace: None,
