@@ -33,19 +33,8 @@ pub(crate) fn spread(
     name: &'static str,
     expand: impl Fn(&[f64]) -> Vec<f64>,
 ) -> VertexArray {
-    let cols = m.ncols();
-    let rows = v.vertex_map.len();
-    let mut data = vec![f64::NAN; rows * cols];
-    for j in 0..cols {
-        let col: Vec<f64> = m.col(j).iter().copied().collect();
-        let full = expand(&col);
-        for (input, &mapped) in v.vertex_map.iter().enumerate() {
-            if mapped != u32::MAX {
-                data[input * cols + j] = full[mapped as usize];
-            }
-        }
-    }
-    VertexArray { name, rows, cols, data, columns: None }
+    let data = v.to_input_rows(m, expand);
+    VertexArray { name, rows: v.vertex_map.len(), cols: m.ncols(), data, columns: None }
 }
 
 /// Validated vertex indices → rows of the (possibly Dirichlet-condensed) operator.

@@ -89,18 +89,8 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
     };
     let s = result.map_err(|e| Failure { code: if e.caller_fault() { 2 } else { 1 }, message: e.to_string() })?;
     if let Some(path) = &a.eigenvectors {
-        let rows = v.vertex_map.len();
-        let k = s.values.len();
-        let mut data = vec![f64::NAN; rows * k];
-        for j in 0..k {
-            let col: Vec<f64> = (0..op.pair.n()).map(|i| s.vectors[(i, j)]).collect();
-            let full = op.expand(&col);
-            for (input, &mapped) in v.vertex_map.iter().enumerate() {
-                if mapped != u32::MAX {
-                    data[input * k + j] = full[mapped as usize];
-                }
-            }
-        }
+        let (rows, k) = (v.vertex_map.len(), s.values.len());
+        let data = v.to_input_rows(s.vectors.as_ref(), |col| op.expand(col));
         std::fs::write(path, kac_core::io::npy::encode_f64(rows, k, &data))
             .map_err(|e| Failure { code: 1, message: format!("cannot write {}: {e}", path.display()) })?;
     }

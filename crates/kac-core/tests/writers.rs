@@ -67,3 +67,30 @@ fn polyline_and_graph_round_trip_through_obj_and_json() {
     .unwrap();
     assert_eq!(v.shape, g);
 }
+
+/// The colour ramp spans the finite range (its ends at the minimum and the maximum), grey for NaN; and values
+/// carried to input rows and back return unchanged, with the dropped input vertex NaN.
+#[test]
+fn colour_ramp_and_vertex_numbering_round_trip() {
+    let c = kac_core::io::write::colour_ramp(&[2.0, f64::NAN, -1.0, 0.5]);
+    assert_eq!(c, vec![[253, 231, 37], [128, 128, 128], [68, 1, 84], [33, 145, 140]]);
+    // A square of two triangles with a duplicated corner (welded) and an unused vertex (dropped).
+    let obj = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 1 1 0\nv 5 5 5\nf 1 2 3\nf 1 5 4\n";
+    let v = kac_core::load_bytes(
+        obj.as_bytes(),
+        kac_core::Format::Obj,
+        &kac_core::ReadOptions::default(),
+        &kac_core::ValidateOptions::default(),
+    )
+    .unwrap();
+    let n = v.shape.vertex_count();
+    assert_eq!((n, v.vertex_map.len()), (4, 6));
+    let m = faer::Mat::from_fn(n, 2, |i, j| (10 * j + i) as f64);
+    let rows = v.to_input_rows(m.as_ref(), |c| c.to_vec());
+    assert_eq!(rows[2 * 2], rows[4 * 2], "welded input vertices share their value");
+    assert!(rows[5 * 2].is_nan() && rows[5 * 2 + 1].is_nan(), "the dropped vertex is NaN");
+    for j in 0..2 {
+        let back = v.from_input_rows(&rows, 2, j);
+        assert_eq!(back, (0..n).map(|i| m[(i, j)]).collect::<Vec<_>>());
+    }
+}

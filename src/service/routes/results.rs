@@ -109,28 +109,6 @@ pub(crate) async fn get_array(
 /// viridis-like ramp over the finite range; NaN grey).
 pub(crate) fn coloured_ply(shape: &StoredShape, a: &analysis::VertexArray, col: usize) -> Vec<u8> {
     let v = &shape.validated;
-    let n = v.shape.vertex_count();
-    let mut vals = vec![f64::NAN; n];
-    for (input, &m) in v.vertex_map.iter().enumerate() {
-        if m != u32::MAX && vals[m as usize].is_nan() {
-            vals[m as usize] = a.data[input * a.cols + col];
-        }
-    }
-    let (lo, hi) = vals.iter().filter(|x| x.is_finite()).fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
-    const RAMP: [[f64; 3]; 5] =
-        [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
-    let colors: Vec<[u8; 3]> = vals
-        .iter()
-        .map(|&x| {
-            if !x.is_finite() {
-                return [128, 128, 128];
-            }
-            let t = if hi > lo { (x - lo) / (hi - lo) } else { 0.5 } * 4.0;
-            let i = (t.floor() as usize).min(3);
-            let f = t - i as f64;
-            let c = |k: usize| (RAMP[i][k] * (1.0 - f) + RAMP[i + 1][k] * f).round() as u8;
-            [c(0), c(1), c(2)]
-        })
-        .collect();
-    kac_core::io::write::ply(&v.shape, true, Some(&colors))
+    let colours = kac_core::io::write::colour_ramp(&v.from_input_rows(&a.data, a.cols, col));
+    kac_core::io::write::ply(&v.shape, true, Some(&colours))
 }

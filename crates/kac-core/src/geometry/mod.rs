@@ -5,6 +5,7 @@
 
 pub mod generate;
 pub mod hash;
+pub mod numbering;
 pub mod summary;
 pub mod topology;
 pub mod triangulate;

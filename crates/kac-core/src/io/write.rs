@@ -111,3 +111,25 @@ pub fn json(shape: &Shape) -> serde_json::Value {
         },
     }
 }
+
+/// Colours for per-vertex values: a viridis-like ramp (dark blue → yellow, five stops interpolated linearly) over
+/// the finite range of `values`, grey for NaN or infinite values.
+pub fn colour_ramp(values: &[f64]) -> Vec<[u8; 3]> {
+    const RAMP: [[f64; 3]; 5] =
+        [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
+    let (lo, hi) =
+        values.iter().filter(|x| x.is_finite()).fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    values
+        .iter()
+        .map(|&x| {
+            if !x.is_finite() {
+                return [128, 128, 128];
+            }
+            let t = if hi > lo { (x - lo) / (hi - lo) } else { 0.5 } * 4.0;
+            let i = (t.floor() as usize).min(3);
+            let f = t - i as f64;
+            let c = |k: usize| (RAMP[i][k] * (1.0 - f) + RAMP[i + 1][k] * f).round() as u8;
+            [c(0), c(1), c(2)]
+        })
+        .collect()
+}
