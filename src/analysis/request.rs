@@ -6,23 +6,56 @@ use super::*;
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
 pub const ALGORITHM_VERSION: u32 = 3;
 
-/// Which operator to build (see `kac_core::operators`).
-#[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Which operator to build (see `kac_core::operators`): one type for the service's `operator` object and the
+/// CLI's operator flags (`--operator`, `--mass`, `--boundary`, `--dirichlet-vertices`, `--neighbours`, `--time`,
+/// `--neighbourhood`), so both take the same options with the same defaults.
+#[derive(utoipa::ToSchema, clap::Args, Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
 #[serde(default, deny_unknown_fields)]
 pub struct OperatorSpec {
-    /// Default: by shape kind.
+    /// cotan, intrinsic-delaunay, robust, graph, graph-normalized, graph-random-walk, point-cloud, tet, string
+    /// (default: by shape kind).
+    #[arg(long = "operator", value_parser = parse_operator)]
     pub operator: Option<OperatorKind>,
-    /// Default: consistent for FEM operators, lumped for robust and point-cloud.
+    /// consistent, lumped, voronoi (default: consistent for FEM operators, lumped for robust and point-cloud).
+    #[arg(long, value_parser = parse_mass)]
     pub mass: Option<Mass>,
+    /// neumann (default) or dirichlet (the shape's boundary).
+    #[arg(long, value_enum, default_value_t = BoundarySpec::Neumann)]
     pub boundary: BoundarySpec,
-    /// Dirichlet on these vertices (input numbering) instead of the shape's boundary.
+    /// Dirichlet on these vertices instead of the shape's boundary (indices in the input file's numbering; the
+    /// CLI takes them comma-separated).
+    #[arg(long, value_delimiter = ',')]
     pub dirichlet_vertices: Option<Vec<u32>>,
     /// Point clouds: neighbours per point.
+    #[arg(long, default_value_t = kac_core::operators::DEFAULT_NEIGHBOURS)]
     pub neighbours: usize,
-    /// Point clouds: heat-kernel time.
+    /// Point clouds: heat-kernel time t (default (2h)², h the mean nearest-neighbour distance).
+    #[arg(long)]
     pub time: Option<f64>,
+    /// Point clouds: sum the heat kernel over `radius` (ε-ball, default) or `knn` (k nearest) neighbourhoods.
+    #[arg(long, default_value = "radius", value_parser = parse_neighbourhood)]
     pub neighbourhood: Neighbourhood,
+}
+
+fn parse_operator(s: &str) -> Result<OperatorKind, String> {
+    OperatorKind::from_name(s)
+        .ok_or_else(|| format!("unknown operator '{s}'; one of: {}", OperatorKind::ALL.map(|k| k.name()).join(", ")))
+}
+
+fn parse_mass(s: &str) -> Result<Mass, String> {
+    match Mass::from_name(s) {
+        Some(m @ (Mass::Consistent | Mass::Lumped | Mass::Voronoi)) => Ok(m),
+        _ => Err(format!("unknown mass '{s}'; one of: consistent, lumped, voronoi")),
+    }
+}
+
+fn parse_neighbourhood(s: &str) -> Result<Neighbourhood, String> {
+    match s {
+        "radius" => Ok(Neighbourhood::Radius),
+        "knn" => Ok(Neighbourhood::Knn),
+        _ => Err(format!("unknown neighbourhood '{s}'; one of: radius, knn")),
+    }
 }
 
 impl Default for OperatorSpec {
@@ -39,7 +72,7 @@ impl Default for OperatorSpec {
     }
 }
 
-#[derive(utoipa::ToSchema, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum BoundarySpec {
     #[default]

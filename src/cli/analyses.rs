@@ -3,7 +3,8 @@
 //! (rows in the input file's vertex numbering) unless `--out FILE.npy` asks for a NumPy file (several arrays:
 //! `FILE.npy`, `FILE.<name>.npy`, …).
 
-use super::{print_json, Failure, OperatorArgs, ShapeArgs};
+use super::{print_json, Failure, ShapeArgs};
+use crate::analysis::OperatorSpec;
 use crate::analysis::{self, Analysis, EmbedScaling, HeatMethod, Hooks, Output, SolverSpec};
 use clap::Args;
 use kac_core::descriptors::shape_dna::{self, Metric, Normalization, Reweighting, ShapeDnaOptions};
@@ -81,7 +82,7 @@ pub struct HksCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
     /// Eigenpairs summed.
@@ -127,14 +128,14 @@ pub fn hks(a: HksCmd) -> Result<(), Failure> {
                 samples: a.samples,
                 frequencies: a.frequencies,
             },
-            operator: a.op.spec(),
+            operator: a.op.clone(),
             solver: solver(&a.out),
         }
     } else {
         Analysis::Hks {
             k: a.k,
             options: HksOptions { times: a.times, count: a.count, scale: a.scale },
-            operator: a.op.spec(),
+            operator: a.op.clone(),
             solver: solver(&a.out),
         }
     };
@@ -146,7 +147,7 @@ pub struct WksCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
     #[arg(short = 'k', long = "k", default_value_t = 100)]
@@ -164,7 +165,7 @@ pub fn wks(a: WksCmd) -> Result<(), Failure> {
     let an = Analysis::Wks {
         k: a.k,
         options: WksOptions { count: a.count, variance: a.variance, energies: None },
-        operator: a.op.spec(),
+        operator: a.op.clone(),
         solver: solver(&a.out),
     };
     emit(run(&v, &an, &a.out)?, &a.out)
@@ -217,7 +218,7 @@ pub struct ShapeDnaCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     #[command(flatten)]
     pub dna: DnaArgs,
     #[command(flatten)]
@@ -229,7 +230,7 @@ pub struct ShapeDnaCmd {
 
 pub fn shape_dna(a: ShapeDnaCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
-    let an = Analysis::ShapeDna { options: a.dna.options(), operator: a.op.spec(), solver: solver(&a.out) };
+    let an = Analysis::ShapeDna { options: a.dna.options(), operator: a.op.clone(), solver: solver(&a.out) };
     let out = run(&v, &an, &a.out)?;
     if let Some(path) = &a.ev {
         let dna = &out.summary["shape_dna"];
@@ -259,7 +260,7 @@ pub struct HeatCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
     #[arg(short = 'k', long = "k", default_value_t = 100)]
@@ -286,7 +287,7 @@ pub fn heat(a: HeatCmd) -> Result<(), Failure> {
         sources: a.source,
         method: if a.method == "implicit" { HeatMethod::Implicit } else { HeatMethod::Spectral },
         steps: a.steps,
-        operator: a.op.spec(),
+        operator: a.op.clone(),
         solver: solver(&a.out),
     };
     emit(run(&v, &an, &a.out)?, &a.out)
@@ -339,7 +340,7 @@ pub struct EmbedCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
     #[arg(short = 'd', long, default_value_t = 3)]
@@ -354,7 +355,7 @@ pub fn embed(a: EmbedCmd) -> Result<(), Failure> {
     let an = Analysis::Embed {
         dimensions: a.dimensions,
         scaling: if a.scaling == "gps" { EmbedScaling::Gps } else { EmbedScaling::None },
-        operator: a.op.spec(),
+        operator: a.op.clone(),
         solver: solver(&a.out),
     };
     emit(run(&v, &an, &a.out)?, &a.out)
@@ -386,7 +387,7 @@ pub struct SmoothCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
     /// α in (M + αL) u = M ū (units of length²).
@@ -403,7 +404,7 @@ pub struct SmoothCmd {
 pub fn smooth(a: SmoothCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
     let function = a.function.as_deref().map(read_function).transpose()?;
-    let an = Analysis::Smooth { alpha: a.alpha, function, fixed_boundary: a.fixed_boundary, operator: a.op.spec() };
+    let an = Analysis::Smooth { alpha: a.alpha, function, fixed_boundary: a.fixed_boundary, operator: a.op.clone() };
     emit(run(&v, &an, &a.out)?, &a.out)
 }
 
@@ -419,7 +420,7 @@ pub struct InterpolateCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
     /// Known values, VERTEX:VALUE comma-separated (input numbering).
@@ -432,7 +433,7 @@ pub struct InterpolateCmd {
 
 pub fn interpolate(a: InterpolateCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
-    let an = Analysis::Interpolate { values: a.values, labels: a.labels, operator: a.op.spec() };
+    let an = Analysis::Interpolate { values: a.values, labels: a.labels, operator: a.op.clone() };
     emit(run(&v, &an, &a.out)?, &a.out)
 }
 
@@ -448,7 +449,7 @@ pub struct CompareCmd {
     #[command(flatten)]
     pub dna: DnaArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     /// euclidean, manhattan or canberra.
     #[arg(long, default_value = "euclidean", value_parser = parse_metric)]
     pub metric: Metric,
@@ -479,7 +480,7 @@ pub fn compare(a: CompareCmd) -> Result<(), Failure> {
         let (v, _) = shape.load()?;
         let an = Analysis::ShapeDna {
             options: a.dna.options(),
-            operator: a.op.spec(),
+            operator: a.op.clone(),
             solver: SolverSpec { tol: a.tol, verify: !a.no_verify },
         };
         let out = analysis::run(&v, &an, Hooks::default())?;

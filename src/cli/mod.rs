@@ -1,10 +1,8 @@
 //! Command-line parsing and the subcommands. Exit codes: 0 success, 2 unreadable input or bad arguments,
 //! 1 any other failure.
 
-use crate::analysis::{BoundarySpec, OperatorSpec};
 use clap::{Args, Parser, Subcommand};
 use kac_core::geometry::validate::Weld;
-use kac_core::operators::{Mass, Neighbourhood, OperatorKind};
 use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
 use std::path::PathBuf;
 
@@ -57,66 +55,9 @@ enum Command {
     Openapi,
 }
 
-/// Options choosing the operator, shared by every subcommand that builds one.
-#[derive(Args, Debug, Clone)]
-pub struct OperatorArgs {
-    /// cotan, intrinsic-delaunay, robust, graph, graph-normalized, graph-random-walk, point-cloud, tet, string
-    /// (default: by shape kind).
-    #[arg(long = "operator", value_parser = parse_operator)]
-    pub operator: Option<OperatorKind>,
-    /// consistent, lumped, voronoi (default: consistent for FEM operators, lumped for robust and point-cloud).
-    #[arg(long, value_parser = parse_mass)]
-    pub mass: Option<Mass>,
-    /// neumann (default) or dirichlet (the shape's boundary).
-    #[arg(long, default_value = "neumann", value_parser = ["neumann", "dirichlet"])]
-    pub boundary: String,
-    /// Dirichlet on these vertices instead (comma-separated indices in the input file's numbering).
-    #[arg(long, value_delimiter = ',')]
-    pub dirichlet_vertices: Option<Vec<u32>>,
-    /// Point clouds: neighbours per point.
-    #[arg(long, default_value_t = kac_core::operators::DEFAULT_NEIGHBOURS)]
-    pub neighbours: usize,
-    /// Point clouds: heat-kernel time t (default (2h)², h the mean nearest-neighbour distance).
-    #[arg(long)]
-    pub time: Option<f64>,
-    /// Point clouds: sum the heat kernel over `radius` (ε-ball, default) or `knn` (k nearest) neighbourhoods.
-    #[arg(long, default_value = "radius", value_parser = ["radius", "knn"])]
-    pub neighbourhood: String,
-}
-
-impl OperatorArgs {
-    /// The operator request these flags describe.
-    pub fn spec(&self) -> OperatorSpec {
-        OperatorSpec {
-            operator: self.operator,
-            mass: self.mass,
-            boundary: if self.boundary == "dirichlet" { BoundarySpec::Dirichlet } else { BoundarySpec::Neumann },
-            dirichlet_vertices: self.dirichlet_vertices.clone(),
-            neighbours: self.neighbours,
-            time: self.time,
-            neighbourhood: if self.neighbourhood == "knn" { Neighbourhood::Knn } else { Neighbourhood::Radius },
-        }
-    }
-    pub fn build(&self, v: &Validated) -> Result<kac_core::operators::Operator, Failure> {
-        crate::analysis::build_operator(v, &self.spec()).map_err(Failure::from)
-    }
-}
-
 impl From<crate::analysis::AnalysisError> for Failure {
     fn from(e: crate::analysis::AnalysisError) -> Self {
         Failure { code: if e.caller_fault() { 2 } else { 1 }, message: e.to_string() }
-    }
-}
-
-fn parse_operator(s: &str) -> Result<OperatorKind, String> {
-    OperatorKind::from_name(s)
-        .ok_or_else(|| format!("unknown operator '{s}'; one of: {}", OperatorKind::ALL.map(|k| k.name()).join(", ")))
-}
-
-fn parse_mass(s: &str) -> Result<Mass, String> {
-    match Mass::from_name(s) {
-        Some(m @ (Mass::Consistent | Mass::Lumped | Mass::Voronoi)) => Ok(m),
-        _ => Err(format!("unknown mass '{s}'; one of: consistent, lumped, voronoi")),
     }
 }
 

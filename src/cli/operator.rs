@@ -1,7 +1,8 @@
 //! `kac operator FILE [--operator NAME] [--mass NAME] [--boundary neumann|dirichlet] [--report] [--out-dir DIR]`:
 //! the operator summary (size, non-zeros, parameters, properties) as JSON; L and M as Matrix Market files.
 
-use super::{print_json, Failure, OperatorArgs, ShapeArgs};
+use super::{print_json, Failure, ShapeArgs};
+use crate::analysis::OperatorSpec;
 use clap::Args;
 use kac_core::operators::properties;
 use serde_json::json;
@@ -13,7 +14,7 @@ pub struct OperatorCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     /// Add the property report (symmetry, locality, linear precision, maximum principle, PSD, null space).
     #[arg(long)]
     pub report: bool,
@@ -25,7 +26,7 @@ pub struct OperatorCmd {
 pub fn run(a: OperatorCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
     let t = Instant::now();
-    let op = a.op.build(&v)?;
+    let op = crate::analysis::build_operator(&v, &a.op)?;
     let assembly_s = t.elapsed().as_secs_f64();
     let mut out = json!({
         "shape_id": v.id.hex(),

@@ -1,7 +1,8 @@
 //! `kac spectrum FILE -k K [--operator NAME] [--mass NAME] [--boundary neumann|dirichlet]
 //! [--eigenvectors OUT.npy] [--threads N]`: the k smallest eigenpairs of L φ = λ M φ as JSON.
 
-use super::{print_json, Failure, OperatorArgs, ShapeArgs};
+use super::{print_json, Failure, ShapeArgs};
+use crate::analysis::OperatorSpec;
 use clap::Args;
 use kac_core::spectrum::{self, Control, EigenOptions, Method};
 use serde_json::json;
@@ -13,7 +14,7 @@ pub struct SpectrumCmd {
     #[command(flatten)]
     pub shape: ShapeArgs,
     #[command(flatten)]
-    pub op: OperatorArgs,
+    pub op: OperatorSpec,
     /// Number of eigenpairs.
     #[arg(short = 'k', long = "k", default_value_t = 10)]
     pub k: usize,
@@ -62,7 +63,7 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
     let read_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let op = a.op.build(&v)?;
+    let op = crate::analysis::build_operator(&v, &a.op)?;
     let assembly_s = t1.elapsed().as_secs_f64();
     let method = match a.method.as_str() {
         "dense" => Method::Dense,
