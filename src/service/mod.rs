@@ -83,14 +83,19 @@ pub fn serve(config: Config) -> Result<(), String> {
         let _ = std::io::stdout().flush();
         let st = state.clone();
         let grace = std::time::Duration::from_secs(state.config.shutdown_grace_s);
+        // One grace period from the signal, shared by open connections and running jobs.
+        let signalled = Arc::new(std::sync::OnceLock::<std::time::Instant>::new());
+        let at = signalled.clone();
         let shutdown = async move {
             shutdown_signal().await;
+            let _ = at.set(std::time::Instant::now());
             tracing::info!("shutting down: no new connections, no new jobs");
             st.draining.store(true, std::sync::atomic::Ordering::SeqCst);
         };
         listener::serve(listener, app, state.clone(), shutdown, grace).await;
-        // Let running jobs finish within the grace period; enqueued ones stay in the store for the next start.
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(state.config.shutdown_grace_s);
+        // Let running jobs finish within what is left of the grace period; enqueued ones stay in the store for the
+        // next start.
+        let deadline = *signalled.get_or_init(std::time::Instant::now) + grace;
         while state.jobs.running() > 0 && std::time::Instant::now() < deadline {
             tokio::time::sleep(std::time::Duration::from_millis(50)).await;
         }
