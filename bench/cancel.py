@@ -8,18 +8,10 @@ the job was in. Prints one JSON line per trial and a summary line. Standard libr
 
 Usage: python3 bench/cancel.py [--k 500] [--level 7] [--delays 0.05,0.3,1,2,4,8,16]
 """
-import argparse, json, os, subprocess, sys, tempfile, time, urllib.request
+import argparse, json, os, subprocess, sys, tempfile, time
 
-def call(base, method, path, body=None, ctype="application/json"):
-    data = body if isinstance(body, (bytes, type(None))) else json.dumps(body).encode()
-    req = urllib.request.Request(base + path, data=data, method=method)
-    if data is not None:
-        req.add_header("content-type", ctype)
-    try:
-        with urllib.request.urlopen(req, timeout=120) as r:
-            return r.status, json.loads(r.read() or b"null")
-    except urllib.error.HTTPError as e:
-        return e.code, json.loads(e.read() or b"null")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from kac_http import call, release_kac  # noqa: E402
 
 def main():
     ap = argparse.ArgumentParser()
@@ -28,10 +20,7 @@ def main():
     ap.add_argument("--delays", default="0.05,0.3,1,2,4,8,16")
     ap.add_argument("--analysis", default="spectrum")
     a = ap.parse_args()
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    subprocess.run(["cargo", "build", "--release", "--locked", "--bin", "kac"], cwd=root, check=True,
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    kac = os.path.join(root, "target", "release", "kac")
+    kac = release_kac()
     work = tempfile.mkdtemp()
     mesh = os.path.join(work, "sphere.off")
     subprocess.run([kac, "generate", "icosphere", "--level", str(a.level), "--out", mesh], check=True,

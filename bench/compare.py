@@ -7,27 +7,17 @@ metric (a new job whose eigenpairs all come from the cache), each as the whole s
 
 Usage: python3 bench/compare.py [--n 20]
 """
-import argparse, json, os, subprocess, tempfile, time, urllib.request
+import argparse, json, os, subprocess, tempfile, time
+import sys
 
-def call(base, method, path, body=None, ctype="application/json"):
-    data = body if isinstance(body, (bytes, type(None))) else json.dumps(body).encode()
-    req = urllib.request.Request(base + path, data=data, method=method)
-    if data is not None:
-        req.add_header("content-type", ctype)
-    try:
-        with urllib.request.urlopen(req, timeout=900) as r:
-            return r.status, json.loads(r.read() or b"null")
-    except urllib.error.HTTPError as e:
-        return e.code, json.loads(e.read() or b"null")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from kac_http import call, release_kac  # noqa: E402
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=20)
     a = ap.parse_args()
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    subprocess.run(["cargo", "build", "--release", "--locked", "--bin", "kac"], cwd=root, check=True,
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    kac = os.path.join(root, "target", "release", "kac")
+    kac = release_kac()
     work = tempfile.mkdtemp()
     mesh = os.path.join(work, "sphere.off")
     subprocess.run([kac, "generate", "icosphere", "--level", "4", "--out", mesh], check=True, stdout=subprocess.DEVNULL)
@@ -53,7 +43,7 @@ def main():
         for name, body in [("first", req), ("same request again", req),
                            ("other metric, eigenpairs cached", dict(req, metric="canberra"))]:
             t = time.perf_counter()
-            st, r = call(base, "POST", "/v1/compare?wait=600", body)
+            st, r = call(base, "POST", "/v1/compare?wait=600", body, timeout=900)
             times[name] = round(time.perf_counter() - t, 3)
             assert st == 200 and len(r["shape_ids"]) == a.n and not r["failures"], (st, r)
         print(json.dumps({"shapes": a.n, "vertices_each": nv, "k": 50, "seconds": times}))

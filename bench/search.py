@@ -10,18 +10,11 @@ shape-DNA; their shapes are not stored, which a search by fingerprint does not n
 
 Usage: python3 bench/search.py [--n 1000,10000,100000] [--queries 200]
 """
-import argparse, json, os, random, sqlite3, struct, subprocess, tempfile, time, urllib.request
+import argparse, json, os, random, sqlite3, struct, subprocess, tempfile, time
+import sys
 
-def call(base, method, path, body=None, ctype="application/json"):
-    data = body if isinstance(body, (bytes, type(None))) else json.dumps(body).encode()
-    req = urllib.request.Request(base + path, data=data, method=method)
-    if data is not None:
-        req.add_header("content-type", ctype)
-    try:
-        with urllib.request.urlopen(req, timeout=120) as r:
-            return r.status, json.loads(r.read() or b"null")
-    except urllib.error.HTTPError as e:
-        return e.code, json.loads(e.read() or b"null")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from kac_http import call, release_kac  # noqa: E402
 
 def start(kac, data):
     env = dict(os.environ, KAC_ADDR="127.0.0.1:0", KAC_DATA_DIR=data, RUST_LOG="error")
@@ -39,10 +32,7 @@ def main():
     ap.add_argument("--n", default="1000,10000,100000")
     ap.add_argument("--queries", type=int, default=200)
     a = ap.parse_args()
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    subprocess.run(["cargo", "build", "--release", "--locked", "--bin", "kac"], cwd=root, check=True,
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    kac = os.path.join(root, "target", "release", "kac")
+    kac = release_kac()
     rng = random.Random(7)
     for n in (int(x) for x in a.n.split(",")):
         work = tempfile.mkdtemp()
