@@ -16,7 +16,11 @@ struct Args {
 }
 
 fn app(dir: &std::path::Path) -> axum::Router {
-    let args = Args::parse_from(["kac", "--data-dir", dir.to_str().unwrap()]);
+    app_with(dir, &[])
+}
+
+fn app_with(dir: &std::path::Path, flags: &[&str]) -> axum::Router {
+    let args = Args::parse_from(["kac", "--data-dir", dir.to_str().unwrap()].iter().chain(flags));
     router(Inner::new(args.config).unwrap())
 }
 
@@ -66,4 +70,104 @@ async fn search_wants_one_query_and_unknown_shapes_are_not_found() {
     assert_eq!((status, p["code"].as_str()), (StatusCode::NOT_FOUND, Some("not-found")));
     let (status, p) = call(&app, post_json("/v1/search", json!({ "fingerprint": [1.0, 2.0], "k": 2 }))).await;
     assert_eq!((status, p["searched"].as_u64()), (StatusCode::OK, Some(0)), "an empty store: {p}");
+}
+
+/// The same JSON, key for key, with numbers equal to `tol` relative (the CLI and the service may use different
+/// thread counts, so sums may round differently); `skip` names keys whose values are allowed to differ.
+fn same_json(a: &Value, b: &Value, path: &str, skip: &[&str], tol: f64) {
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            let (kx, ky): (Vec<_>, Vec<_>) = (x.keys().collect(), y.keys().collect());
+            assert_eq!(kx, ky, "keys at {path}");
+            for (k, v) in x {
+                if !skip.contains(&k.as_str()) {
+                    same_json(v, &y[k], &format!("{path}/{k}"), skip, tol);
+                }
+            }
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            assert_eq!(x.len(), y.len(), "length at {path}");
+            for (i, (u, v)) in x.iter().zip(y).enumerate() {
+                same_json(u, v, &format!("{path}/{i}"), skip, tol);
+            }
+        }
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            assert!((x - y).abs() <= tol * x.abs().max(y.abs()).max(1.0), "{path}: {x} vs {y}");
+        }
+        _ => assert_eq!(a, b, "at {path}"),
+    }
+}
+
+/// One path per request: `kac spectrum` with solver flags and a band prints the service's result for the same
+/// request, field for field (timings, the thread count and whether the cache served it aside; the service adds
+/// `result_id`).
+#[tokio::test]
+async fn the_cli_and_the_service_print_the_same_spectrum() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(2));
+    let file = dir.path().join("ico.off");
+    std::fs::write(&file, &off).unwrap();
+    for (request, flags) in [
+        (
+            json!({ "analysis": "spectrum", "k": 6, "solver": { "method": "sparse", "sigma": -0.1, "block": 4 } }),
+            vec!["-k", "6", "--method", "sparse", "--sigma", "-0.1", "--block", "4"],
+        ),
+        (
+            json!({ "analysis": "spectrum", "band": [1.0, 7.0], "operator": { "mass": "lumped" } }),
+            vec!["--band", "1,7", "--mass", "lumped"],
+        ),
+    ] {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        let (status, service) = call(&app, Request::post(uri).body(Body::from(off.clone())).unwrap()).await;
+        assert_eq!(status, StatusCode::OK, "{service}");
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_kac"))
+            .arg("spectrum")
+            .arg(&file)
+            .args(&flags)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let cli: Value = serde_json::from_slice(&out.stdout).unwrap();
+        // The service names its stored result beside it.
+        let mut summary = service.get("summary").unwrap_or(&service).clone();
+        assert!(summary.as_object_mut().unwrap().remove("result_id").is_some());
+        same_json(&cli, &summary, "", &["timings", "threads", "seconds", "eigenpairs_reused"], 1e-8);
+        assert_eq!(cli["band"], request["band"]);
+    }
+}
+
+fn urlencode(s: &str) -> String {
+    s.bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'_' | b'.' | b'~' => (b as char).to_string(),
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
+}
+
+/// The solver settings a request may carry are bounded: a forced dense solve by unknowns² and a wide Krylov
+/// basis by --max-output-values, a band by --max-k pairs.
+#[tokio::test]
+async fn solver_settings_are_bounded_by_the_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app_with(dir.path(), &["--max-output-values", "10000", "--max-k", "20"]);
+    // 162 vertices: the dense pencil holds 162² = 26,244 values; a 100-column basis 16,200.
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(2));
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(off.clone())).unwrap()
+    };
+    let (status, p) = call(&app, analyze(json!({ "analysis": "spectrum", "solver": { "method": "dense" } }))).await;
+    assert_eq!((status, p["code"].as_str()), (StatusCode::PAYLOAD_TOO_LARGE, Some("output-too-large")), "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("162 × 162"), "{p}");
+    let (status, p) = call(&app, analyze(json!({ "analysis": "hks", "k": 20, "solver": { "subspace": 100 } }))).await;
+    assert_eq!((status, p["code"].as_str()), (StatusCode::PAYLOAD_TOO_LARGE, Some("output-too-large")), "{p}");
+    // The eigenvalues up to 7 are 1 + 3 + 5 (ℓ(ℓ+1) ≤ 6): in reach; up to 100 they are about 100, beyond 20.
+    let (status, r) = call(&app, analyze(json!({ "analysis": "spectrum", "band": [1.0, 7.0] }))).await;
+    assert_eq!((status, r["k"].as_u64()), (StatusCode::OK, Some(8)), "{r}");
+    let (status, p) = call(&app, analyze(json!({ "analysis": "spectrum", "band": [1.0, 100.0] }))).await;
+    assert_eq!((status, p["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-option")), "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("limit of 20"), "{p}");
 }

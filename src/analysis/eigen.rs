@@ -13,6 +13,8 @@ pub fn spectrum_key(op: &OperatorSpec, solver: &SolverSpec) -> String {
 pub struct Eigen {
     pub operator: Operator,
     pub spectrum: Spectrum,
+    /// Seconds spent building the operator.
+    pub assembly_s: f64,
 }
 
 /// Where computed eigenpairs are kept between analyses (the service's cache; the CLI has none). `get` returns
@@ -31,6 +33,39 @@ pub struct Hooks<'a> {
     pub threads: usize,
     /// Told about every eigensolve (for metrics).
     pub on_solve: Option<&'a (dyn Fn(&kac_core::spectrum::Stats) + Sync)>,
+    /// What a request may make the solver hold (the service's limits; none for the CLI).
+    pub limits: SolverLimits,
+}
+
+/// Bounds on what a request may make the solver hold, checked once the operator's size is known.
+#[derive(Clone, Copy, Debug)]
+pub struct SolverLimits {
+    /// Eigenpairs a band may return (the service's --max-k).
+    pub max_pairs: usize,
+    /// Values of any one array held: eigenvectors of a band, the dense pencil (unknowns²), the Krylov basis
+    /// (the service's --max-output-values).
+    pub max_values: usize,
+}
+
+impl Default for SolverLimits {
+    fn default() -> Self {
+        SolverLimits { max_pairs: usize::MAX, max_values: usize::MAX }
+    }
+}
+
+impl SolverLimits {
+    /// A forced dense solve holds the n × n pencil.
+    fn check_dense(&self, solver: &SolverSpec, n: usize) -> Result<(), AnalysisError> {
+        let values = n.saturating_mul(n);
+        if solver.method == SolverMethod::Dense && values > self.max_values {
+            return Err(AnalysisError::TooLarge(format!(
+                "solver.method = dense holds the {n} × {n} pencil ({values} values), above the limit of {} \
+                 (--max-output-values); use auto or sparse",
+                self.max_values
+            )));
+        }
+        Ok(())
+    }
 }
 
 pub fn build_operator(v: &Validated, spec: &OperatorSpec) -> Result<Operator, AnalysisError> {
@@ -79,20 +114,47 @@ pub fn eigenpairs(
         return Ok(e);
     }
     hooks.control.check()?;
+    let t0 = std::time::Instant::now();
     let operator = build_operator(v, spec)?;
+    let assembly_s = t0.elapsed().as_secs_f64();
     hooks.control.check()?;
     let n = operator.pair.n();
     if k == 0 || k > n {
         return Err(AnalysisError::invalid_k(format!("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {n})")));
     }
-    let opts = EigenOptions { k, tol: solver.tol, threads: hooks.threads, verify: solver.verify, ..Default::default() };
-    let spectrum = spectrum::eigs(&operator.pair, &opts, None, hooks.control)?;
+    hooks.limits.check_dense(solver, n)?;
+    let spectrum = spectrum::eigs(&operator.pair, &solver.eigen_options(k, hooks.threads), None, hooks.control)?;
     if let Some(f) = hooks.on_solve {
         f(&spectrum.stats);
     }
-    let e = Arc::new(Eigen { operator, spectrum });
+    let e = Arc::new(Eigen { operator, spectrum, assembly_s });
     if let Some(c) = hooks.cache {
         c.put(&key, e.clone());
     }
     Ok(e)
+}
+
+/// Every eigenpair with λ in [a, b] (not cached: the cache holds the smallest pairs), at most
+/// `hooks.limits.max_pairs` of them and no more eigenvectors than `hooks.limits.max_values` values.
+pub fn band_pairs(
+    v: &Validated,
+    spec: &OperatorSpec,
+    solver: &SolverSpec,
+    band: [f64; 2],
+    hooks: Hooks<'_>,
+) -> Result<Eigen, AnalysisError> {
+    hooks.control.check()?;
+    let t0 = std::time::Instant::now();
+    let operator = build_operator(v, spec)?;
+    let assembly_s = t0.elapsed().as_secs_f64();
+    hooks.control.check()?;
+    let n = operator.pair.n();
+    hooks.limits.check_dense(solver, n)?;
+    let max_pairs = hooks.limits.max_pairs.min(hooks.limits.max_values / n.max(1)).max(1);
+    let opts = solver.eigen_options(0, hooks.threads);
+    let spectrum = spectrum::eigs_band(&operator.pair, band[0], band[1], max_pairs, &opts, hooks.control)?;
+    if let Some(f) = hooks.on_solve {
+        f(&spectrum.stats);
+    }
+    Ok(Eigen { operator, spectrum, assembly_s })
 }

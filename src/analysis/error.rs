@@ -12,6 +12,8 @@ pub enum AnalysisError {
     InvalidK(String),
     /// The analysis does not apply to this kind of shape (`not-applicable`).
     NotApplicable(String),
+    /// The request would make the solver hold more than a limit allows (`output-too-large`).
+    TooLarge(String),
     Operator(operators::OperatorError),
     Eigen(spectrum::EigenError),
     Descriptor(DescriptorError),
@@ -33,6 +35,7 @@ impl AnalysisError {
             AnalysisError::InvalidParameter(_) => "invalid-parameter",
             AnalysisError::InvalidK(_) => "invalid-k",
             AnalysisError::NotApplicable(_) => "not-applicable",
+            AnalysisError::TooLarge(_) => "output-too-large",
             AnalysisError::Operator(e) => e.code(),
             AnalysisError::Eigen(e) => e.code(),
             AnalysisError::Descriptor(e) => e.code(),
@@ -41,7 +44,10 @@ impl AnalysisError {
     /// The request cannot succeed as given (4xx); otherwise a computation failed (5xx / failed job).
     pub fn caller_fault(&self) -> bool {
         match self {
-            AnalysisError::InvalidParameter(_) | AnalysisError::InvalidK(_) | AnalysisError::NotApplicable(_) => true,
+            AnalysisError::InvalidParameter(_)
+            | AnalysisError::InvalidK(_)
+            | AnalysisError::NotApplicable(_)
+            | AnalysisError::TooLarge(_) => true,
             AnalysisError::Operator(e) => e.caller_fault(),
             AnalysisError::Eigen(e) => e.caller_fault(),
             AnalysisError::Descriptor(e) => e.caller_fault(),
@@ -56,9 +62,10 @@ impl AnalysisError {
 impl std::fmt::Display for AnalysisError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            AnalysisError::InvalidParameter(m) | AnalysisError::InvalidK(m) | AnalysisError::NotApplicable(m) => {
-                f.write_str(m)
-            }
+            AnalysisError::InvalidParameter(m)
+            | AnalysisError::InvalidK(m)
+            | AnalysisError::NotApplicable(m)
+            | AnalysisError::TooLarge(m) => f.write_str(m),
             AnalysisError::Operator(e) => e.fmt(f),
             AnalysisError::Eigen(e) => e.fmt(f),
             AnalysisError::Descriptor(e) => e.fmt(f),

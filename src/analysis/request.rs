@@ -80,28 +80,97 @@ pub enum BoundarySpec {
     Dirichlet,
 }
 
-/// Eigensolver parameters shared by every spectral analysis.
-#[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Eigensolver parameters shared by every spectral analysis: one type for the service's `solver` object and the
+/// CLI's solver flags (`--tol`, `--no-verify`, `--method`, `--sigma`, `--block`, `--subspace`). Only `tol` and
+/// `verify` can change the numbers beyond the tolerance; the rest choose how they are computed.
+#[derive(utoipa::ToSchema, clap::Args, Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
 #[serde(default, deny_unknown_fields)]
 pub struct SolverSpec {
     /// Relative residual tolerance (default 1e-10).
+    #[arg(long, default_value_t = kac_core::spectrum::DEFAULT_TOL)]
     pub tol: f64,
     /// Confirm by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the returned ones was missed,
-    /// and solve again for any that were (default true; the result's `solver.completeness`). `false` skips the
-    /// check: the result then says `completeness: null`.
+    /// and solve again for any that were (default true; the result's `solver.completeness`). `false` (the CLI's
+    /// `--no-verify`) skips the check: the result then says `completeness: null`.
     #[serde(skip_serializing_if = "is_true")]
+    #[arg(long = "no-verify", action = clap::ArgAction::SetFalse)]
     pub verify: bool,
+    /// auto (default), dense (every eigenpair of the dense pencil; the service takes it while unknowns² is within
+    /// --max-output-values) or sparse (shift-invert block Lanczos). The CLI's flag is `--solver-method`
+    /// (`kac spectrum` also takes `--method`; `kac heat --method` chooses spectral or implicit).
+    #[serde(skip_serializing_if = "is_auto")]
+    #[arg(id = "solver_method", long = "solver-method", value_enum, default_value_t = SolverMethod::Auto)]
+    pub method: SolverMethod,
+    /// Shift σ of the shift-invert solver: below the spectrum (σ < 0) L − σM is factored by Cholesky, inside it
+    /// by LDLᵀ (default: inside, at 0.7 × Weyl's estimate of λ_k, for meshes, curves and point clouds with k ≥ 8;
+    /// −mean(L_ii/M_ii)/n for graphs and small k).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[arg(long, allow_hyphen_values = true)]
+    pub sigma: Option<f64>,
+    /// Tuning of the sparse solver: right-hand sides per block solve (default 8; 1 to 64).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[arg(long)]
+    pub block: Option<usize>,
+    /// Tuning of the sparse solver: Krylov basis columns kept between restarts (default max(2w, w + 6b,
+    /// min(3w, w + 100)) for w = k + max(b/2, 2); at least w + 2b). The service counts the basis, unknowns ×
+    /// columns, against --max-output-values.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[arg(long)]
+    pub subspace: Option<usize>,
 }
 
 pub(crate) fn is_true(b: &bool) -> bool {
     *b
 }
 
+fn is_auto(m: &SolverMethod) -> bool {
+    *m == SolverMethod::Auto
+}
+
 impl Default for SolverSpec {
     fn default() -> Self {
-        SolverSpec { tol: kac_core::spectrum::DEFAULT_TOL, verify: true }
+        SolverSpec {
+            tol: kac_core::spectrum::DEFAULT_TOL,
+            verify: true,
+            method: SolverMethod::Auto,
+            sigma: None,
+            block: None,
+            subspace: None,
+        }
     }
+}
+
+impl SolverSpec {
+    /// The core's options for k pairs (threads from the caller).
+    pub fn eigen_options(&self, k: usize, threads: usize) -> EigenOptions {
+        EigenOptions {
+            k,
+            tol: self.tol,
+            threads,
+            verify: self.verify,
+            method: match self.method {
+                SolverMethod::Auto => spectrum::Method::Auto,
+                SolverMethod::Dense => spectrum::Method::Dense,
+                SolverMethod::Sparse => spectrum::Method::Sparse,
+            },
+            sigma: self.sigma,
+            block: self.block,
+            subspace: self.subspace,
+            ..Default::default()
+        }
+    }
+}
+
+/// Which eigensolver runs.
+#[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SolverMethod {
+    /// Dense for small problems (or components), sparse otherwise.
+    #[default]
+    Auto,
+    Dense,
+    Sparse,
 }
 
 #[derive(utoipa::ToSchema, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -128,10 +197,14 @@ pub enum EmbedScaling {
 #[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "analysis", rename_all = "kebab-case")]
 pub enum Analysis {
-    /// The k smallest eigenpairs.
+    /// The k smallest eigenpairs (or, with `band`, every pair with λ in [a, b]).
     Spectrum {
         #[serde(default = "k_default")]
         k: usize,
+        /// Every eigenpair with λ in [a, b] instead of the k smallest (k is then ignored); the service caps the
+        /// count at --max-k and the eigenvectors at --max-output-values.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        band: Option<[f64; 2]>,
         /// Return the eigenvectors as a per-vertex array.
         #[serde(default)]
         eigenvectors: bool,
@@ -252,7 +325,7 @@ pub enum Analysis {
     },
 }
 
-pub(crate) fn k_default() -> usize {
+pub fn k_default() -> usize {
     10
 }
 pub(crate) fn k_signature() -> usize {
@@ -280,6 +353,24 @@ impl Analysis {
             Analysis::Embed { .. } => "embed",
             Analysis::Smooth { .. } => "smooth",
             Analysis::Interpolate { .. } => "interpolate",
+        }
+    }
+
+    /// The eigensolver settings of an analysis that solves for eigenpairs.
+    pub fn solver(&self) -> Option<&SolverSpec> {
+        match self {
+            Analysis::Spectrum { solver, .. }
+            | Analysis::Hks { solver, .. }
+            | Analysis::SiHks { solver, .. }
+            | Analysis::Wks { solver, .. }
+            | Analysis::Gps { solver, .. }
+            | Analysis::ShapeDna { solver, .. }
+            | Analysis::Heat { solver, .. }
+            | Analysis::Embed { solver, .. } => Some(solver),
+            Analysis::Geodesic { .. }
+            | Analysis::Trees { .. }
+            | Analysis::Smooth { .. }
+            | Analysis::Interpolate { .. } => None,
         }
     }
 }

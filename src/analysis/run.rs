@@ -59,21 +59,58 @@ pub(crate) fn operator_json(op: &Operator) -> Value {
     })
 }
 
-pub(crate) fn spectrum_json(e: &Eigen, k: usize) -> Value {
+/// The output of a `spectrum` request, one schema for the CLI and the service: the pairs, the operator, the
+/// solver's statistics and settings, and the timings (`read_s` is the caller's: null here). The first `k` pairs
+/// of `e` are reported (all of them for a band). `eigenvectors` names where the eigenvectors went: the array
+/// name here; the CLI puts its file path there.
+pub(crate) fn spectrum_output(
+    v: &Validated,
+    e: &Eigen,
+    k: usize,
+    band: Option<[f64; 2]>,
+    eigenvectors: bool,
+    solver: &SolverSpec,
+    threads: usize,
+) -> Output {
     let s = &e.spectrum;
     let k = k.min(s.values.len());
-    json!({
-        "eigenvalues": &s.values[..k],
-        "residuals": &s.residuals[..k.min(s.residuals.len())],
-        "solver": {
-            "method": s.stats.method, "sigma": s.stats.sigma, "block": s.stats.block, "subspace": s.stats.subspace,
-            "restarts": s.stats.restarts, "block_steps": s.stats.block_steps, "solves": s.stats.solves,
-            "factor_nonzeros": s.stats.factor_nnz, "factorization": s.stats.factorization,
-            "below_sigma": s.stats.below_sigma, "components": s.stats.components, "zero_modes": s.stats.zero_modes,
-            "completeness": s.stats.completeness,
-        },
-        "timings": s.stats.timings,
-    })
+    let st = &s.stats;
+    let t = &st.timings;
+    let mut arrays = vec![];
+    if eigenvectors {
+        let mut a = to_input_rows(v, &e.operator, s.vectors.as_ref().subcols(0, k), "eigenvectors");
+        a.columns = Some(s.values[..k].to_vec());
+        arrays.push(a);
+    }
+    let summary = merge(
+        json!({
+            "k": k,
+            "band": band,
+            "residual_norm": "‖Lφ − λMφ‖₂ / (max(|λ|, |σ|)·‖Mφ‖₂)",
+            "sign_convention": signatures::SIGN_CONVENTION,
+            "eigenvalues": &s.values[..k],
+            "residuals": &s.residuals[..k.min(s.residuals.len())],
+            "eigenvectors": eigenvectors.then_some("eigenvectors"),
+            "solver": {
+                "method": st.method, "sigma": st.sigma, "block": st.block, "subspace": st.subspace,
+                "restarts": st.restarts, "block_steps": st.block_steps, "solves": st.solves,
+                "factor_nonzeros": st.factor_nnz, "factorization": st.factorization,
+                "below_sigma": st.below_sigma, "components": st.components, "zero_modes": st.zero_modes,
+                "completeness": st.completeness, "tol": solver.tol,
+                "threads": if threads == 0 { rayon::current_num_threads() } else { threads },
+            },
+            "timings": {
+                "read_s": null, "assembly_s": e.assembly_s, "symbolic_s": t.symbolic_s, "numeric_s": t.numeric_s,
+                "factorization_s": t.numeric_s, "iteration_s": t.iteration_s, "solve_s": t.solve_s,
+                "orthogonalize_s": t.orthogonalize_s, "rayleigh_ritz_s": t.rayleigh_ritz_s,
+                "restart_s": t.restart_s, "verify_s": t.verify_s, "total_s": e.assembly_s + t.total_s,
+            },
+            // Also at the top level, where results before the check was on by default carried it.
+            "completeness": st.completeness,
+        }),
+        operator_json(&e.operator),
+    );
+    Output { fingerprints: vec![], summary, arrays }
 }
 
 pub(crate) fn merge(mut a: Value, b: Value) -> Value {
@@ -114,27 +151,16 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
     // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
     let reused = std::cell::Cell::new(false);
     let out = match analysis {
-        Analysis::Spectrum { k, eigenvectors, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
-            let mut arrays = vec![];
-            if *eigenvectors {
-                let k = (*k).min(e.spectrum.values.len());
-                let mut a = to_input_rows(v, &e.operator, e.spectrum.vectors.as_ref().subcols(0, k), "eigenvectors");
-                a.columns = Some(e.spectrum.values[..k].to_vec());
-                arrays.push(a);
+        Analysis::Spectrum { k, band, eigenvectors, operator, solver } => match band {
+            Some(band) => {
+                let e = band_pairs(v, operator, solver, *band, hooks)?;
+                spectrum_output(v, &e, e.spectrum.values.len(), Some(*band), *eigenvectors, solver, hooks.threads)
             }
-            let summary = merge(
-                merge(
-                    json!({ "k": k, "residual_norm": "‖Lφ − λMφ‖₂ / (max(|λ|, |σ|)·‖Mφ‖₂)", "sign_convention": signatures::SIGN_CONVENTION }),
-                    operator_json(&e.operator),
-                ),
-                spectrum_json(&e, *k),
-            );
-            // Also at the top level, where results before the check was on by default carried it.
-            let mut summary = summary;
-            summary["completeness"] = json!(e.spectrum.stats.completeness);
-            Output { fingerprints: vec![], summary, arrays }
-        }
+            None => {
+                let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
+                spectrum_output(v, &e, *k, None, *eigenvectors, solver, hooks.threads)
+            }
+        },
         Analysis::Hks { k, options, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             hooks.control.phase("descriptor", 0, 0)?;

@@ -20,15 +20,11 @@ pub struct OutArgs {
     /// Write per-vertex arrays as float64 .npy (rows: input vertices) instead of into the JSON.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Relative residual tolerance of the eigensolver.
-    #[arg(long, default_value_t = kac_core::spectrum::DEFAULT_TOL)]
-    pub tol: f64,
     /// Solver threads (default: all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Skip the eigensolver's completeness check (Sylvester's inertia, with repair; on by default).
-    #[arg(long)]
-    pub no_verify: bool,
+    #[command(flatten)]
+    pub solver: SolverSpec,
 }
 
 fn io_fail(path: &Path, e: impl std::fmt::Display) -> Failure {
@@ -74,7 +70,7 @@ fn run(v: &Validated, a: &Analysis, o: &OutArgs) -> Result<Output, Failure> {
 }
 
 fn solver(o: &OutArgs) -> SolverSpec {
-    SolverSpec { tol: o.tol, verify: !o.no_verify }
+    o.solver.clone()
 }
 
 #[derive(Args)]
@@ -331,7 +327,7 @@ pub struct TreesCmd {
 
 pub fn trees(a: TreesCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
-    let o = OutArgs { out: None, tol: kac_core::spectrum::DEFAULT_TOL, threads: 0, no_verify: false };
+    let o = OutArgs { out: None, threads: 0, solver: SolverSpec::default() };
     emit(run(&v, &Analysis::Trees {}, &o)?, &o)
 }
 
@@ -453,11 +449,8 @@ pub struct CompareCmd {
     /// euclidean, manhattan or canberra.
     #[arg(long, default_value = "euclidean", value_parser = parse_metric)]
     pub metric: Metric,
-    #[arg(long, default_value_t = kac_core::spectrum::DEFAULT_TOL)]
-    pub tol: f64,
-    /// Skip the eigensolver's completeness check (Sylvester's inertia, with repair; on by default).
-    #[arg(long)]
-    pub no_verify: bool,
+    #[command(flatten)]
+    pub solver: SolverSpec,
 }
 
 pub fn compare(a: CompareCmd) -> Result<(), Failure> {
@@ -478,11 +471,7 @@ pub fn compare(a: CompareCmd) -> Result<(), Failure> {
         let shape =
             ShapeArgs { file: path.to_path_buf(), format: None, weld: kac_core::Weld::Exact, keep_degenerate: false };
         let (v, _) = shape.load()?;
-        let an = Analysis::ShapeDna {
-            options: a.dna.options(),
-            operator: a.op.clone(),
-            solver: SolverSpec { tol: a.tol, verify: !a.no_verify },
-        };
+        let an = Analysis::ShapeDna { options: a.dna.options(), operator: a.op.clone(), solver: a.solver.clone() };
         let out = analysis::run(&v, &an, Hooks::default())?;
         Ok(
             json!({ "source": path.display().to_string(), "shape_id": v.id.hex(), "shape_dna": out.summary["shape_dna"], "operator": out.summary["operator"], "mass": out.summary["mass"] }),

@@ -136,6 +136,9 @@ impl ApiError {
             ApiError::Analysis(e) => {
                 let status = if e.is_stop() {
                     StatusCode::CONFLICT
+                } else if matches!(e, crate::analysis::AnalysisError::TooLarge(_)) {
+                    // The same code and status as a limit checked at submission.
+                    StatusCode::PAYLOAD_TOO_LARGE
                 } else if e.caller_fault() {
                     StatusCode::UNPROCESSABLE_ENTITY
                 } else {
@@ -405,6 +408,7 @@ mod tests {
             AnalysisError::invalid_parameter("m"),
             AnalysisError::invalid_k("m"),
             AnalysisError::not_applicable("m"),
+            AnalysisError::TooLarge("m".into()),
             AnalysisError::Operator(OperatorError::NotApplicable { operator: "cotan", kind: "graph" }),
             AnalysisError::Operator(OperatorError::MassNotApplicable { operator: "graph", mass: "lumped" }),
             AnalysisError::Operator(OperatorError::DegenerateElement {

@@ -455,6 +455,7 @@ fn run_job(state: &AppState, job: &Arc<Job>, work: &Work) -> Status {
         control: Control { progress: Some(&progress), stop: Some(&job.stop) },
         cache: Some(&*state.cache),
         threads: state.config.solver_threads,
+        limits: analysis::SolverLimits { max_pairs: state.config.max_k, max_values: state.config.max_output_values },
     };
     let panic_on = state.config.test_panic_analysis.as_deref() == Some(job.name);
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {

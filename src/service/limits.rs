@@ -1,5 +1,7 @@
 //! Limits checked at submission, before anything is allocated or queued: k against --max-k (and k ≥ 1), every
-//! list or grid of a request against --max-samples, the widest per-vertex array against --max-output-values.
+//! list or grid of a request against --max-samples, the widest per-vertex array (or the solver's basis, when
+//! `solver.subspace` or `solver.block` ask for a wide one) against --max-output-values. What only the operator's
+//! size decides (a forced dense solve, a band's pairs) is checked by the runner through `Hooks::limits`.
 
 use super::error::ApiError;
 use super::AppState;
@@ -81,6 +83,11 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
             detail: format!("{name} = {n} is above the limit of {max} (--max-samples, KAC_MAX_SAMPLES)"),
         });
     }
+    // The sparse solver's Krylov basis: at least k + 2·block columns, `subspace` when larger.
+    let columns = match a.solver() {
+        Some(s) => columns.max(s.subspace.unwrap_or(0)).max(s.block.unwrap_or(0).saturating_mul(2)),
+        None => columns,
+    };
     let values = vertices.saturating_mul(columns);
     let max = state.config.max_output_values;
     if values > max {

@@ -211,6 +211,7 @@ fn band_mode_returns_every_eigenvalue_in_the_interval() {
         &o.pair,
         40.0,
         110.0,
+        usize::MAX,
         &EigenOptions { method: Method::Sparse, ..Default::default() },
         Control::default(),
     )
@@ -221,6 +222,23 @@ fn band_mode_returns_every_eigenvalue_in_the_interval() {
     // The same values as the first k of an ordinary solve.
     let all = solve(&sq, opts(Mass::Consistent, Boundary::Dirichlet), 6, Method::Sparse);
     assert_close(&s.values, &all.values[1..6], 1e-10, "band vs k smallest");
+}
+
+#[test]
+fn band_that_needs_more_pairs_than_allowed_is_refused() {
+    // Reaching [40, 110] takes the 6 eigenvalues below 110 (2π² is below the band) and a 7th (13π²) to show
+    // that the band ends: 6 pairs are not enough, 7 are.
+    let sq = mesh(generate::unit_square(40));
+    let o = operators::build(&sq, &opts(Mass::Consistent, Boundary::Dirichlet)).unwrap();
+    let band =
+        |max| kac_core::spectrum::eigs_band(&o.pair, 40.0, 110.0, max, &EigenOptions::default(), Control::default());
+    match band(6) {
+        Err(kac_core::spectrum::EigenError::InvalidOption { name: "band", message }) => {
+            assert!(message.contains("limit of 6"), "{message}")
+        }
+        other => panic!("expected a refused band, got {:?}", other.map(|s| s.values)),
+    }
+    assert_eq!(band(7).unwrap().values.len(), 5);
 }
 
 #[test]

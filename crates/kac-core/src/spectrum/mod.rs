@@ -543,11 +543,13 @@ pub(crate) fn finish(
 /// All eigenpairs with λ in [a, b]. This asks for the smallest k pairs with k doubling (from 16) until the
 /// largest found exceeds b or k reaches the solver's limit; the symbolic analysis is done once and reused, and only
 /// every solve is checked for completeness, the last one's shift lying above b, so the check covers the band. Efficient for
-/// bands near the bottom of the spectrum, which is where shape analysis looks.
+/// bands near the bottom of the spectrum, which is where shape analysis looks. At most `max_pairs` pairs are
+/// solved for (every pair below b is, to reach the band): a band that needs more is refused (`invalid-option`).
 pub fn eigs_band(
     pair: &SparsePair,
     a: f64,
     b: f64,
+    max_pairs: usize,
     options: &EigenOptions,
     control: Control<'_>,
 ) -> Result<Spectrum, EigenError> {
@@ -556,7 +558,8 @@ pub fn eigs_band(
     }
     let n = pair.n();
     let symbolic = factor::Symbolic::analyze(&pair.pattern).map_err(|message| EigenError::Factorization { message })?;
-    let mut k = 16usize.min(n.saturating_sub(1)).max(1);
+    let max_pairs = max_pairs.max(1);
+    let mut k = 16usize.min(n.saturating_sub(1)).min(max_pairs).max(1);
     loop {
         let s = eigs(pair, &EigenOptions { k, ..options.clone() }, Some(&symbolic), control)?;
         let top = s.values.last().copied().unwrap_or(f64::INFINITY);
@@ -571,6 +574,15 @@ pub fn eigs_band(
                 stats: s.stats,
             });
         }
-        k = (2 * k).min(limit);
+        if k >= max_pairs {
+            return Err(EigenError::InvalidOption {
+                name: "band",
+                message: format!(
+                    "the {k} smallest eigenvalues all lie at or below {top:.6e} ≤ b = {b}: reaching the band \
+                     [{a}, {b}] takes more than the limit of {max_pairs} eigenpairs; narrow it or lower b"
+                ),
+            });
+        }
+        k = (2 * k).min(limit).min(max_pairs);
     }
 }
