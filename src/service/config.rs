@@ -9,9 +9,20 @@ pub struct Config {
     /// Address to listen on (port 0: any free port; the chosen address is printed on stdout).
     #[arg(long, env = "KAC_ADDR", default_value = "127.0.0.1:8080")]
     pub addr: String,
-    /// Directory for stored results.
+    /// Directory of the embedded store (`--store sqlite:DIR` names another).
     #[arg(long, env = "KAC_DATA_DIR", default_value = "kac-data")]
     pub data_dir: PathBuf,
+    /// Where shapes, jobs and results live: `sqlite:DIR` (the default, embedded, with DIR = --data-dir: one
+    /// process owns it) or `postgres://USER@HOST:PORT/DB?…` (shared by any number of replicas).
+    #[arg(long, env = "KAC_STORE")]
+    pub store: Option<String>,
+    /// Seconds a job's claim lasts without a heartbeat (renewed every third of it while the job runs): how long a
+    /// job of a replica that died waits before another replica runs it.
+    #[arg(long, env = "KAC_LEASE_S", default_value_t = 30.0)]
+    pub lease_s: f64,
+    /// Connections to PostgreSQL per replica (the pool's size; one more listens for notifications).
+    #[arg(long, env = "KAC_PG_POOL_SIZE", default_value_t = 8)]
+    pub pg_pool_size: usize,
     /// Worker threads running jobs (0: one per core).
     #[arg(long, env = "KAC_WORKERS", default_value_t = 0)]
     pub workers: usize,

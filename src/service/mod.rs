@@ -18,48 +18,58 @@ pub mod strict;
 use config::Config;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use store::{Database, EigenCache, FileResults, FingerprintStore, JobStore, ResultStore, ShapeStore};
+use store::{EigenCache, FingerprintStore, ResultStore, ShapeStore};
 
 pub struct Inner {
     pub config: Config,
     pub shapes: Arc<dyn ShapeStore>,
-    pub job_store: Arc<dyn JobStore>,
     pub results: Arc<dyn ResultStore>,
     pub fingerprints: Arc<dyn FingerprintStore>,
     /// Every stored fingerprint, by family, for `/v1/search`.
     pub index: search::Index,
     pub cache: Arc<EigenCache>,
-    pub jobs: jobs::Jobs,
+    pub jobs: Arc<jobs::Jobs>,
     pub metrics: ops::Metrics,
     pub access: ops::Access,
     pub draining: AtomicBool,
+    /// Jobs enqueued when this process started (those a dead process held included).
+    pub recovered: usize,
 }
 
 pub type AppState = Arc<Inner>;
 
 impl Inner {
+    /// Opens the store, puts back in the queue what a dead process held, and starts this replica's dispatcher
+    /// (claims jobs while a worker is free) and supervisor (heartbeats, cancels, timeouts).
     pub fn new(config: Config) -> std::io::Result<AppState> {
-        std::fs::create_dir_all(&config.data_dir)?;
         let workers = if config.workers == 0 {
             std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
         } else {
             config.workers
         };
-        let db = Arc::new(Database::open(&config.data_dir, config.max_vertices, config.store_cache_bytes)?);
-        let index = search::Index::load(&*db)?;
-        Ok(Arc::new(Inner {
-            shapes: db.clone(),
-            fingerprints: db.clone(),
+        let backend = store::open(&config)?;
+        let index = search::Index::load(&*backend.fingerprints)?;
+        let lease = std::time::Duration::from_secs_f64(config.lease_s.max(0.3));
+        let jobs = Arc::new(jobs::Jobs::new(workers, config.queue_capacity.max(1), backend.queue.clone(), lease));
+        let recovered = jobs::recover(&jobs)?;
+        let state = Arc::new(Inner {
+            shapes: backend.shapes,
+            fingerprints: backend.fingerprints,
             index,
-            job_store: db,
-            results: Arc::new(FileResults::open(&config.data_dir, config.store_cache_bytes)?),
+            results: backend.results,
             cache: Arc::new(EigenCache::new(config.cache_bytes)),
-            jobs: jobs::Jobs::new(workers, config.queue_capacity.max(1)),
+            jobs,
             metrics: ops::Metrics::default(),
             access: ops::Access::new(&config.api_keys(), config.rate_limit_per_minute, config.auth_failures_per_minute),
             draining: AtomicBool::new(false),
+            recovered,
             config,
-        }))
+        });
+        let st = state.clone();
+        std::thread::Builder::new().name("kac-dispatch".into()).spawn(move || jobs::dispatch(st))?;
+        let st = state.clone();
+        std::thread::Builder::new().name("kac-supervise".into()).spawn(move || jobs::supervise(st))?;
+        Ok(state)
     }
 }
 
@@ -75,8 +85,8 @@ pub fn serve(config: Config) -> Result<(), String> {
             .await
             .map_err(|e| format!("cannot listen on {}: {e}", config.addr))?;
         let addr = listener.local_addr().map_err(|e| e.to_string())?;
-        let state = Inner::new(config).map_err(|e| format!("cannot open the data directory: {e}"))?;
-        let recovered = jobs::recover(&state).map_err(|e| format!("cannot recover jobs: {e}"))?;
+        let state = Inner::new(config).map_err(|e| format!("cannot open the store: {e}"))?;
+        let recovered = state.recovered;
         let app = routes::router(state.clone());
         println!("{}", serde_json::json!({ "listening": addr.to_string(), "recovered_jobs": recovered }));
         use std::io::Write;

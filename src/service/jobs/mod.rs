@@ -4,20 +4,21 @@
 //! that job only.
 
 use super::error::{ApiError, Problem};
-use super::store::{ResultStore, StoredResult, StoredShape};
+use super::store::{Enqueued, JobQueue, Lease, ResultStore, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis, Hooks};
 use kac_core::spectrum::{Control, Progress};
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
-use tokio::sync::watch;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::Duration;
+use tokio::sync::{broadcast, watch};
 
 mod runner;
-pub use runner::store_result;
-use runner::{canceled, start};
+use runner::canceled;
+pub use runner::{store_result, supervise};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
@@ -75,12 +76,20 @@ pub struct JobView {
     pub request: serde_json::Value,
 }
 
+/// A job running on this replica: its live view (progress as it happens; the queue gets it at each heartbeat),
+/// its stop flag, and the token of its claim.
 pub struct Job {
     pub view: watch::Sender<JobView>,
     pub stop: AtomicBool,
     pub timed_out: AtomicBool,
     /// The analysis name (`compare` for a comparison).
     pub name: &'static str,
+    /// The claim's token: this replica's id and a counter.
+    pub owner: String,
+    /// Set when the claim was lost (the job then stops and writes nothing).
+    pub lost: AtomicBool,
+    /// When it started running here.
+    pub started: std::time::Instant,
 }
 
 /// What a job computes, handed to the worker with its inputs.
@@ -89,15 +98,6 @@ pub enum Work {
     Analysis(Analysis, Arc<StoredShape>),
     /// Shape-DNA of several stored shapes and the distances between them.
     Compare(super::compare::CompareRequest, Vec<Arc<StoredShape>>),
-}
-
-impl Work {
-    fn name(&self) -> &'static str {
-        match self {
-            Work::Analysis(a, _) => a.name(),
-            Work::Compare(..) => "compare",
-        }
-    }
 }
 
 impl Job {
@@ -142,51 +142,167 @@ pub fn job_id(shape_id: &str, canonical: &serde_json::Value) -> String {
     h.finalize().iter().take(16).map(|b| format!("{b:02x}")).collect()
 }
 
+/// The jobs of this replica: the queue they share with every replica, the pool this replica runs them on, and
+/// the ones running here now.
 pub struct Jobs {
     pub pool: rayon::ThreadPool,
-    pub jobs: Mutex<HashMap<String, Arc<Job>>>,
-    /// Enqueued plus processing.
-    pub active: AtomicUsize,
+    pub workers: usize,
+    pub queue: Arc<dyn JobQueue>,
+    /// Jobs running here, by id.
+    pub running: Mutex<HashMap<String, Arc<Job>>>,
+    /// Enqueued plus processing jobs the queue takes (on all replicas together).
     pub capacity: usize,
+    /// How long a claim lasts without a heartbeat.
+    pub lease: Duration,
+    /// This replica's id (claims are `{replica}:{n}`).
+    pub replica: String,
+    claims: AtomicU64,
+    /// Wakes the dispatcher: a job was enqueued, or a worker became free.
+    wake: (Mutex<bool>, Condvar),
 }
 
 impl Jobs {
-    pub fn new(workers: usize, capacity: usize) -> Self {
+    pub fn new(workers: usize, capacity: usize, queue: Arc<dyn JobQueue>, lease: Duration) -> Self {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(workers)
             .thread_name(|i| format!("kac-worker-{i}"))
             .build()
             .expect("a rayon pool with at least one thread");
-        Jobs { pool, jobs: Mutex::new(HashMap::new()), active: AtomicUsize::new(0), capacity }
+        let replica = {
+            let d = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+            let mut h = Sha256::new();
+            h.update(std::process::id().to_le_bytes());
+            h.update(d.as_nanos().to_le_bytes());
+            h.finalize().iter().take(6).map(|b| format!("{b:02x}")).collect()
+        };
+        Jobs {
+            pool,
+            workers,
+            queue,
+            running: Mutex::new(HashMap::new()),
+            capacity,
+            lease,
+            replica,
+            claims: AtomicU64::new(0),
+            wake: (Mutex::new(false), Condvar::new()),
+        }
     }
-    pub fn get(&self, id: &str) -> Option<Arc<Job>> {
-        self.jobs.lock().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
+    fn local(&self, id: &str) -> Option<Arc<Job>> {
+        self.running.lock().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
     }
-    /// Jobs processing now.
+    /// A job's view: live if it runs here, else as the queue has it.
+    pub fn view(&self, id: &str) -> Result<Option<JobView>, ApiError> {
+        if let Some(j) = self.local(id) {
+            return Ok(Some(j.snapshot()));
+        }
+        self.queue.get(id).map_err(store_error)
+    }
+    /// Jobs processing on this replica now.
     pub fn running(&self) -> usize {
-        self.jobs
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .values()
-            .filter(|j| j.snapshot().status == Status::Processing)
-            .count()
+        self.running.lock().unwrap_or_else(|e| e.into_inner()).len()
     }
-    pub fn list(&self) -> Vec<JobView> {
-        let mut v: Vec<JobView> =
-            self.jobs.lock().unwrap_or_else(|e| e.into_inner()).values().map(|j| j.snapshot()).collect();
-        v.sort_by(|a, b| a.created_at.cmp(&b.created_at).then(a.id.cmp(&b.id)));
-        v
+    /// Every job, oldest first (live views for the ones running here).
+    pub fn list(&self) -> Result<Vec<JobView>, ApiError> {
+        let mut all = self.queue.list().map_err(store_error)?;
+        for v in &mut all {
+            if let Some(j) = self.local(&v.id) {
+                *v = j.snapshot();
+            }
+        }
+        Ok(all)
+    }
+    /// Follows a job's changes.
+    pub fn watch(self: &Arc<Self>, id: &str) -> Watch {
+        Watch { jobs: self.clone(), id: id.to_string(), changes: self.queue.changes(), local: None }
+    }
+    fn notify(&self) {
+        let (flag, cv) = &self.wake;
+        *flag.lock().unwrap_or_else(|e| e.into_inner()) = true;
+        cv.notify_all();
+    }
+    /// Waits until woken or `timeout` passes.
+    fn sleep(&self, timeout: Duration) {
+        let (flag, cv) = &self.wake;
+        let mut woken = flag.lock().unwrap_or_else(|e| e.into_inner());
+        if !*woken {
+            woken = cv.wait_timeout(woken, timeout).unwrap_or_else(|e| e.into_inner()).0;
+        }
+        *woken = false;
+    }
+    fn next_owner(&self) -> String {
+        format!("{}:{}", self.replica, self.claims.fetch_add(1, Ordering::Relaxed))
+    }
+}
+
+/// A storage failure as the client sees it: the store is not ready (503).
+pub fn store_error(e: std::io::Error) -> ApiError {
+    ApiError::NotReady { detail: format!("the store cannot be reached: {e}") }
+}
+
+/// A job's changes, wherever it runs: the live view of a job running here, else the queue's announcements (a
+/// heartbeat of the replica that runs it, or any transition), with a poll every second besides.
+pub struct Watch {
+    jobs: Arc<Jobs>,
+    id: String,
+    changes: broadcast::Receiver<String>,
+    local: Option<watch::Receiver<JobView>>,
+}
+
+impl Watch {
+    /// The job's view now (None: no such job).
+    pub fn current(&mut self) -> Result<Option<JobView>, ApiError> {
+        if self.local.is_none() {
+            self.local = self.jobs.local(&self.id).map(|j| j.view.subscribe());
+        }
+        match &mut self.local {
+            Some(rx) if rx.has_changed().is_ok() => Ok(Some(rx.borrow_and_update().clone())),
+            _ => {
+                self.local = None;
+                self.jobs.queue.get(&self.id).map_err(store_error)
+            }
+        }
+    }
+    /// Returns once the job may have changed.
+    pub async fn changed(&mut self) {
+        let poll = tokio::time::sleep(Duration::from_secs(1));
+        let id = self.id.clone();
+        let changes = &mut self.changes;
+        let announced = async {
+            loop {
+                match changes.recv().await {
+                    Ok(changed) if changed == id => return,
+                    Ok(_) => {}
+                    Err(broadcast::error::RecvError::Lagged(_)) => return,
+                    Err(broadcast::error::RecvError::Closed) => return std::future::pending().await,
+                }
+            }
+        };
+        match &mut self.local {
+            Some(rx) => {
+                tokio::select! {
+                    r = rx.changed() => if r.is_err() { self.local = None },
+                    _ = announced => {},
+                    _ = poll => {},
+                }
+            }
+            None => {
+                tokio::select! {
+                    _ = announced => {},
+                    _ = poll => {},
+                }
+            }
+        }
     }
 }
 
 /// Submits a job, or returns the existing one for the same request (true: newly enqueued).
-pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(Arc<Job>, bool), ApiError> {
+pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(JobView, bool), ApiError> {
     super::limits::check_limits(state, &analysis)?;
     super::limits::check_work(state, &analysis, shape.validated.shape.vertex_count())?;
     let canonical = serde_json::to_value(&analysis).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
     let id = job_id(&shape.id, &canonical);
     let shape_id = shape.id.clone();
-    enqueue(state, id, shape_id, canonical, Work::Analysis(analysis, shape))
+    enqueue(state, id, shape_id, analysis.name(), canonical)
 }
 
 /// Submits a comparison of stored shapes (the request's `shape_ids` resolved, in that order), or returns the
@@ -195,7 +311,7 @@ pub fn submit_compare(
     state: &AppState,
     mut request: super::compare::CompareRequest,
     shapes: Vec<Arc<StoredShape>>,
-) -> Result<(Arc<Job>, bool), ApiError> {
+) -> Result<(JobView, bool), ApiError> {
     if request.k == 0 {
         return Err(ApiError::Analysis(crate::analysis::AnalysisError::invalid_k(
             "k = 0: ask for at least one eigenpair",
@@ -218,153 +334,104 @@ pub fn submit_compare(
     request.shape_ids = Some(shapes.iter().map(|s| s.id.clone()).collect());
     let canonical = serde_json::to_value(&request).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
     let id = job_id("compare", &canonical);
-    enqueue(state, id, String::new(), canonical, Work::Compare(request, shapes))
+    enqueue(state, id, String::new(), "compare", canonical)
 }
 
-/// Enqueues work under its id unless a job with that id is queued, running or done (true: newly enqueued).
+/// Enqueues a request under its id unless a job with that id is queued, running or done (true: newly enqueued).
 fn enqueue(
     state: &AppState,
     id: String,
     shape_id: String,
+    analysis: &str,
     canonical: serde_json::Value,
-    work: Work,
-) -> Result<(Arc<Job>, bool), ApiError> {
+) -> Result<(JobView, bool), ApiError> {
     let jobs = &state.jobs;
-    let job = {
-        let mut map = jobs.jobs.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(j) = map.get(&id) {
-            let st = j.snapshot().status;
-            if !matches!(st, Status::Failed | Status::Canceled) {
-                return Ok((j.clone(), false));
-            }
-        }
-        // Reserve a place in the queue.
-        let active = jobs.active.load(Ordering::SeqCst);
-        if active >= jobs.capacity {
-            return Err(ApiError::QueueFull { capacity: jobs.capacity, retry_after_s: 2 });
-        }
-        jobs.active.fetch_add(1, Ordering::SeqCst);
-        let view = JobView {
-            id: id.clone(),
-            shape_id,
-            analysis: work.name().into(),
-            status: Status::Enqueued,
-            progress: JobProgress { phase: "queued".into(), converged: 0, wanted: 0 },
-            created_at: now(),
-            started_at: None,
-            finished_at: None,
-            error: None,
-            result: None,
-            request: canonical,
-        };
-        let job = Arc::new(Job {
-            view: watch::Sender::new(view),
-            stop: AtomicBool::new(false),
-            timed_out: AtomicBool::new(false),
-            name: work.name(),
-        });
-        map.insert(id.clone(), job.clone());
-        job
+    let view = JobView {
+        id,
+        shape_id,
+        analysis: analysis.into(),
+        status: Status::Enqueued,
+        progress: JobProgress { phase: "queued".into(), converged: 0, wanted: 0 },
+        created_at: now(),
+        started_at: None,
+        finished_at: None,
+        error: None,
+        result: None,
+        request: canonical,
     };
-    state.metrics.jobs_submitted.fetch_add(1, Ordering::Relaxed);
-    persist(state, &job);
-    start(state, job.clone(), work);
-    Ok((job, true))
-}
-
-/// Writes a job's record to the job store (a failure is logged: the job itself goes on).
-pub fn persist(state: &AppState, job: &Job) {
-    // A job replaced under its id (canceled, then submitted again) no longer writes the record: it is the new
-    // job's now.
-    let view = job.snapshot();
-    if !state.jobs.get(&view.id).is_some_and(|current| std::ptr::eq(&*current, job)) {
-        return;
-    }
-    if let Err(e) = state.job_store.save(&view) {
-        tracing::error!(job = %job.snapshot().id, error = %e, "cannot persist the job record");
+    match jobs.queue.enqueue(view, jobs.capacity).map_err(store_error)? {
+        Enqueued::Existing(v) => Ok((v, false)),
+        Enqueued::Full => Err(ApiError::QueueFull { capacity: jobs.capacity, retry_after_s: 2 }),
+        Enqueued::New(v) => {
+            state.metrics.jobs_submitted.fetch_add(1, Ordering::Relaxed);
+            jobs.notify();
+            Ok((v, true))
+        }
     }
 }
 
-/// Cancels a job: an enqueued one at once, a running one at its next stop-flag check.
-pub fn cancel(state: &AppState, job: &Job) {
-    job.stop.store(true, Ordering::SeqCst);
-    let mut changed = false;
-    job.view.send_modify(|v| {
-        if v.status == Status::Enqueued {
-            v.status = Status::Canceled;
-            v.finished_at = Some(now());
-            v.error = Some(canceled());
-            changed = true;
-        }
-    });
-    if changed {
-        persist(state, job);
+/// Cancels a job: an enqueued one at once, a running one at its next stop-flag check (here at once; on another
+/// replica when its heartbeat sees the request, at once on the announcement). None: no such job.
+pub fn cancel(state: &AppState, id: &str) -> Result<Option<JobView>, ApiError> {
+    let view = state.jobs.queue.cancel(id, &canceled()).map_err(store_error)?;
+    if let Some(j) = state.jobs.local(id) {
+        j.stop.store(true, Ordering::SeqCst);
+        return Ok(Some(j.snapshot()));
+    }
+    Ok(view)
+}
+
+/// After a start: the jobs a dead process held go back in the queue (see [`JobQueue::recover`]); the number
+/// enqueued.
+pub fn recover(jobs: &Jobs) -> std::io::Result<usize> {
+    jobs.queue.recover()
+}
+
+/// The work a claimed job names: its request parsed and its shapes read back from the store.
+fn work_of(state: &AppState, view: &JobView) -> Result<Work, &'static str> {
+    if view.analysis == "compare" {
+        let req = serde_json::from_value::<super::compare::CompareRequest>(view.request.clone())
+            .map_err(|_| "the stored request no longer parses")?;
+        let shapes: Option<Vec<_>> = req.shape_ids.iter().flatten().map(|id| state.shapes.get(id)).collect();
+        shapes.map(|s| Work::Compare(req, s)).ok_or("a shape of the comparison is no longer stored")
+    } else {
+        let a = serde_json::from_value::<Analysis>(view.request.clone())
+            .map_err(|_| "the stored request no longer parses")?;
+        let shape = state.shapes.get(&view.shape_id).ok_or("the job's shape is no longer stored")?;
+        Ok(Work::Analysis(a, shape))
     }
 }
 
-/// After a restart: loads every job record; jobs that were enqueued or running are queued again (their shapes
-/// are read back from the store), finished ones are served as they were. Returns the number re-queued.
-pub fn recover(state: &AppState) -> std::io::Result<usize> {
-    let mut requeued = 0;
-    for mut view in state.job_store.load_all()? {
-        let resume = !view.status.terminal();
-        // The analysis name from the stored request alone; shapes are read back only for jobs that resume.
-        let name: &'static str = if view.analysis == "compare" {
-            "compare"
-        } else {
-            serde_json::from_value::<Analysis>(view.request.clone()).map_or("unknown", |a| a.name())
-        };
-        let work: Result<Work, &str> = if !resume {
-            Err("finished")
-        } else if view.analysis == "compare" {
-            match serde_json::from_value::<super::compare::CompareRequest>(view.request.clone()) {
-                Err(_) => Err("the stored request no longer parses"),
-                Ok(req) => {
-                    let shapes: Option<Vec<_>> =
-                        req.shape_ids.iter().flatten().map(|id| state.shapes.get(id)).collect();
-                    shapes.map(|s| Work::Compare(req, s)).ok_or("a shape of the comparison is no longer stored")
-                }
-            }
-        } else {
-            match serde_json::from_value::<Analysis>(view.request.clone()) {
-                Err(_) => Err("the stored request no longer parses"),
-                Ok(a) => match state.shapes.get(&view.shape_id) {
-                    Some(shape) => Ok(Work::Analysis(a, shape)),
-                    None => Err("the job's shape is no longer stored"),
-                },
-            }
-        };
-        let failure = work.as_ref().err().copied();
-        if resume {
-            match failure {
-                Some(why) => {
-                    let (_, p) = ApiError::Internal { detail: format!("not resumed after a restart: {why}") }.problem();
-                    view.status = Status::Failed;
-                    view.finished_at = Some(now());
-                    view.error = Some(p);
-                }
-                None => {
-                    view.status = Status::Enqueued;
-                    view.started_at = None;
-                    view.progress = JobProgress { phase: "requeued after a restart".into(), converged: 0, wanted: 0 };
-                }
+/// The dispatcher of this replica: claims jobs from the queue while a worker is free and starts them on the pool;
+/// every `lease / 3` it also requeues jobs whose lease expired (a replica that died). Runs until the process
+/// drains.
+pub fn dispatch(state: AppState) {
+    let jobs = &state.jobs;
+    let mut last_sweep = std::time::Instant::now() - jobs.lease;
+    loop {
+        if state.draining.load(Ordering::SeqCst) {
+            return;
+        }
+        if last_sweep.elapsed() >= jobs.lease / 3 {
+            last_sweep = std::time::Instant::now();
+            match jobs.queue.requeue_expired() {
+                Ok(ids) if !ids.is_empty() => tracing::warn!(jobs = ?ids, "requeued jobs whose lease expired"),
+                Ok(_) => {}
+                Err(e) => tracing::error!(error = %e, "cannot requeue expired jobs"),
             }
         }
-        let job = Arc::new(Job {
-            view: watch::Sender::new(view.clone()),
-            stop: AtomicBool::new(false),
-            timed_out: AtomicBool::new(false),
-            name,
-        });
-        state.jobs.jobs.lock().unwrap_or_else(|e| e.into_inner()).insert(view.id.clone(), job.clone());
-        if resume {
-            persist(state, &job);
-            if let Ok(work) = work {
-                state.jobs.active.fetch_add(1, Ordering::SeqCst);
-                start(state, job, work);
-                requeued += 1;
+        if jobs.running() >= jobs.workers {
+            jobs.sleep(Duration::from_millis(500));
+            continue;
+        }
+        let owner = jobs.next_owner();
+        match jobs.queue.claim(&owner, jobs.lease) {
+            Ok(Some(view)) => runner::start(&state, view, owner),
+            Ok(None) => jobs.sleep(Duration::from_millis(500)),
+            Err(e) => {
+                tracing::error!(error = %e, "cannot claim a job");
+                jobs.sleep(Duration::from_secs(1));
             }
         }
     }
-    Ok(requeued)
 }

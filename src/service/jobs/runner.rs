@@ -4,35 +4,102 @@
 
 use super::*;
 
-/// Runs a job on the pool, with a timer that stops it when it runs too long. The clock starts when the job starts
-/// running (status `processing`): time spent waiting in the queue does not count against `--job-timeout-s`.
-pub(super) fn start(state: &AppState, job: Arc<Job>, work: Work) {
-    let (st, j) = (state.clone(), job.clone());
-    state.jobs.pool.spawn_fifo(move || execute(&st, &j, &work));
-    let timeout = std::time::Duration::from_secs(state.config.job_timeout_s);
-    tokio::spawn(async move {
-        let mut rx = job.view.subscribe();
-        loop {
-            let status = rx.borrow_and_update().status;
-            if status.terminal() {
-                return;
-            }
-            if status == Status::Processing {
-                break;
-            }
-            if rx.changed().await.is_err() {
-                return;
-            }
-        }
-        tokio::time::sleep(timeout).await;
-        // A job already told to stop (canceled) stays canceled: the timer only stops a job nobody stopped.
-        if !job.snapshot().status.terminal() && !job.stop.load(Ordering::SeqCst) {
-            job.timed_out.store(true, Ordering::SeqCst);
-            job.stop.store(true, Ordering::SeqCst);
+/// Starts a claimed job on the pool.
+pub(super) fn start(state: &AppState, view: JobView, owner: String) {
+    let name: &'static str = if view.analysis == "compare" {
+        "compare"
+    } else {
+        serde_json::from_value::<Analysis>(view.request.clone()).map_or("unknown", |a| a.name())
+    };
+    let id = view.id.clone();
+    let job = Arc::new(Job {
+        view: watch::Sender::new(view),
+        stop: AtomicBool::new(false),
+        timed_out: AtomicBool::new(false),
+        lost: AtomicBool::new(false),
+        name,
+        owner,
+        started: std::time::Instant::now(),
+    });
+    state.jobs.running.lock().unwrap_or_else(|e| e.into_inner()).insert(id.clone(), job.clone());
+    let st = state.clone();
+    state.jobs.pool.spawn_fifo(move || {
+        let started = std::time::Instant::now();
+        let outcome = run_job(&st, &job);
+        st.jobs.running.lock().unwrap_or_else(|e| e.into_inner()).remove(&id);
+        st.jobs.notify();
+        if let Some(outcome) = outcome {
+            st.metrics.record_job(job.name, outcome.name(), started.elapsed().as_secs_f64());
         }
     });
 }
 
+/// The supervisor of this replica's running jobs, every 100 ms: renews each claim (every `lease / 3`, and within a
+/// second of a change of progress, which the beat carries to other replicas), stops a job whose cancel was asked
+/// for on any replica (at once on the queue's announcement) or whose claim was lost, and stops a job that has run
+/// longer than `--job-timeout-s` (the clock starts when it starts running, not when it was queued).
+pub fn supervise(state: AppState) {
+    let jobs = &state.jobs;
+    let mut changes = jobs.queue.changes();
+    let timeout = Duration::from_secs(state.config.job_timeout_s);
+    // Per job: when it was last beaten, and the progress it carried.
+    let mut beats: HashMap<String, (std::time::Instant, JobProgress)> = HashMap::new();
+    loop {
+        std::thread::sleep(Duration::from_millis(100));
+        let mut announced = std::collections::HashSet::new();
+        loop {
+            match changes.try_recv() {
+                Ok(id) => {
+                    announced.insert(id);
+                }
+                Err(broadcast::error::TryRecvError::Lagged(_)) => continue,
+                Err(_) => break,
+            }
+        }
+        let running: Vec<Arc<Job>> = jobs.running.lock().unwrap_or_else(|e| e.into_inner()).values().cloned().collect();
+        beats.retain(|id, _| running.iter().any(|j| j.snapshot().id == *id));
+        for job in running {
+            let view = job.snapshot();
+            if job.started.elapsed() >= timeout && !job.stop.load(Ordering::SeqCst) {
+                // A job already told to stop (canceled) stays canceled: the timer only stops a job nobody stopped.
+                job.timed_out.store(true, Ordering::SeqCst);
+                job.stop.store(true, Ordering::SeqCst);
+            }
+            let due = match beats.get(&view.id) {
+                None => true,
+                Some((at, progress)) => {
+                    at.elapsed() >= jobs.lease / 3
+                        || (at.elapsed() >= Duration::from_secs(1) && progress.phase != view.progress.phase)
+                        || (at.elapsed() >= Duration::from_secs(1) && progress.converged != view.progress.converged)
+                }
+            };
+            if !due && !announced.contains(&view.id) {
+                continue;
+            }
+            match jobs.queue.heartbeat(&view.id, &job.owner, &view.progress, jobs.lease) {
+                Ok(Lease::Held { cancel }) => {
+                    if cancel {
+                        job.stop.store(true, Ordering::SeqCst);
+                    }
+                    beats.insert(view.id.clone(), (std::time::Instant::now(), view.progress.clone()));
+                }
+                Ok(Lease::Lost) => {
+                    tracing::warn!(job = %view.id, "the job's claim was lost: stopping it without a result");
+                    job.lost.store(true, Ordering::SeqCst);
+                    job.stop.store(true, Ordering::SeqCst);
+                }
+                // The store is away for a moment (a restart): the lease runs on, and the next beat tries again.
+                Err(e) => tracing::error!(job = %view.id, error = %e, "cannot renew the job's claim"),
+            }
+        }
+        if state.draining.load(Ordering::SeqCst) && jobs.running() == 0 {
+            return;
+        }
+    }
+}
+
+/// Writes the job's final view: here at once, in the queue while this claim holds it (retried while the store
+/// is away, for as long as the lease would last).
 fn finish(state: &AppState, job: &Job, status: Status, error: Option<Problem>, result: Option<String>) {
     job.view.send_modify(|v| {
         v.status = status;
@@ -43,46 +110,46 @@ fn finish(state: &AppState, job: &Job, status: Status, error: Option<Problem>, r
             v.progress.phase = "done".into();
         }
     });
-    persist(state, job);
-}
-
-fn execute(state: &AppState, job: &Arc<Job>, work: &Work) {
-    let started = std::time::Instant::now();
-    let outcome = run_job(state, job, work);
-    state.jobs.active.fetch_sub(1, Ordering::SeqCst);
-    if outcome.terminal() {
-        state.metrics.record_job(job.name, outcome.name(), started.elapsed().as_secs_f64());
+    let view = job.snapshot();
+    let deadline = std::time::Instant::now() + state.jobs.lease;
+    loop {
+        match state.jobs.queue.finish(&view.id, &job.owner, &view) {
+            Ok(true) => return,
+            Ok(false) => {
+                tracing::warn!(job = %view.id, "the job's claim was lost before it finished: its outcome is not written");
+                return;
+            }
+            Err(e) if std::time::Instant::now() < deadline => {
+                tracing::error!(job = %view.id, error = %e, "cannot write the job's outcome; retrying");
+                std::thread::sleep(Duration::from_millis(500));
+            }
+            Err(e) => {
+                tracing::error!(job = %view.id, error = %e, "cannot write the job's outcome; its lease will expire");
+                return;
+            }
+        }
     }
 }
 
-fn run_job(state: &AppState, job: &Arc<Job>, work: &Work) -> Status {
-    if state.draining.load(Ordering::SeqCst) {
-        // Shutting down: leave it enqueued in the store; the next start runs it.
-        return Status::Enqueued;
-    }
+/// Runs a job; its outcome (None: the claim was lost, nothing written).
+fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
     if job.stop.load(Ordering::SeqCst) {
         return stopped(state, job);
     }
-    // Only an enqueued job starts: a cancel that landed after the flag was read has already ended it.
-    let mut started = false;
-    job.view.send_modify(|v| {
-        if v.status == Status::Enqueued {
-            v.status = Status::Processing;
-            v.started_at = Some(now());
-            v.progress.phase = "operator".into();
-            started = true;
-        }
-    });
-    if !started {
-        return job.snapshot().status;
-    }
-    persist(state, job);
     if state.config.test_job_delay_ms > 0 {
         std::thread::sleep(std::time::Duration::from_millis(state.config.test_job_delay_ms));
         if job.stop.load(Ordering::SeqCst) {
             return stopped(state, job);
         }
     }
+    let work = match work_of(state, &job.snapshot()) {
+        Ok(w) => w,
+        Err(why) => {
+            let (_, p) = ApiError::Internal { detail: format!("the job cannot run: {why}") }.problem();
+            finish(state, job, Status::Failed, Some(p), None);
+            return Some(Status::Failed);
+        }
+    };
     let progress = |p: Progress| {
         job.view.send_modify(|v| {
             v.progress = JobProgress { phase: p.phase.into(), converged: p.converged, wanted: p.wanted };
@@ -101,7 +168,7 @@ fn run_job(state: &AppState, job: &Arc<Job>, work: &Work) -> Status {
         if panic_on {
             panic!("test hook: the '{}' analysis panics", job.name);
         }
-        match work {
+        match &work {
             Work::Analysis(a, shape) => analysis::run(&shape.validated, a, hooks),
             Work::Compare(req, shapes) => crate::service::compare::run(shapes, req, hooks),
         }
@@ -115,13 +182,13 @@ fn run_job(state: &AppState, job: &Arc<Job>, work: &Work) -> Status {
                 .unwrap_or_else(|| "unknown panic".into());
             let (_, p) = ApiError::JobPanicked { detail: msg }.problem();
             finish(state, job, Status::Failed, Some(p), None);
-            Status::Failed
+            Some(Status::Failed)
         }
         Ok(Err(e)) if e.is_stop() => stopped(state, job),
         Ok(Err(e)) => {
             let (_, p) = ApiError::Analysis(e).problem();
             finish(state, job, Status::Failed, Some(p), None);
-            Status::Failed
+            Some(Status::Failed)
         }
         Ok(Ok(out)) => {
             job.view.send_modify(|v| v.progress.phase = "storing".into());
@@ -135,28 +202,31 @@ fn run_job(state: &AppState, job: &Arc<Job>, work: &Work) -> Status {
             match store_result(&*state.results, &id, out) {
                 Ok(_) => {
                     finish(state, job, Status::Succeeded, None, Some(format!("/v1/results/{id}")));
-                    Status::Succeeded
+                    Some(Status::Succeeded)
                 }
                 Err(e) => {
                     let (_, p) =
                         ApiError::Internal { detail: format!("the result could not be stored: {e}") }.problem();
                     finish(state, job, Status::Failed, Some(p), None);
-                    Status::Failed
+                    Some(Status::Failed)
                 }
             }
         }
     }
 }
 
-/// A job that stopped on its flag: failed with `job-timeout` when the timer set it, canceled otherwise.
-fn stopped(state: &AppState, job: &Job) -> Status {
-    if job.timed_out.load(Ordering::SeqCst) {
+/// A job that stopped on its flag: nothing written when its claim was lost, failed with `job-timeout` when the
+/// timer set it, canceled otherwise.
+fn stopped(state: &AppState, job: &Job) -> Option<Status> {
+    if job.lost.load(Ordering::SeqCst) {
+        None
+    } else if job.timed_out.load(Ordering::SeqCst) {
         let (_, p) = ApiError::JobTimeout { seconds: state.config.job_timeout_s }.problem();
         finish(state, job, Status::Failed, Some(p), None);
-        Status::Failed
+        Some(Status::Failed)
     } else {
         finish(state, job, Status::Canceled, Some(canceled()), None);
-        Status::Canceled
+        Some(Status::Canceled)
     }
 }
 

@@ -104,7 +104,9 @@ pub fn render(state: &AppState) -> String {
     let _ = writeln!(out, "kac_connections_open {}", m.connections_open.load(Ordering::Relaxed));
     let _ = writeln!(out, "# HELP kac_queue_depth Jobs enqueued or processing.");
     let _ = writeln!(out, "# TYPE kac_queue_depth gauge");
-    let _ = writeln!(out, "kac_queue_depth {}", state.jobs.active.load(Ordering::SeqCst));
+    let counts = state.jobs.queue.counts().unwrap_or_default();
+    let count = |s: &str| counts.iter().find(|(n, _)| n == s).map_or(0, |c| c.1);
+    let _ = writeln!(out, "kac_queue_depth {}", count("enqueued") + count("processing"));
     let _ = writeln!(out, "# HELP kac_queue_capacity Configured queue capacity.");
     let _ = writeln!(out, "# TYPE kac_queue_capacity gauge");
     let _ = writeln!(out, "kac_queue_capacity {}", state.jobs.capacity);
@@ -112,8 +114,8 @@ pub fn render(state: &AppState) -> String {
     for s in [Status::Enqueued, Status::Processing, Status::Succeeded, Status::Failed, Status::Canceled] {
         by_status.insert(s.name(), 0);
     }
-    for j in state.jobs.list() {
-        *by_status.entry(j.status.name()).or_default() += 1;
+    for (name, value) in by_status.iter_mut() {
+        *value = count(name) as u64;
     }
     let _ = writeln!(out, "# HELP kac_jobs Jobs known to the service by status.");
     let _ = writeln!(out, "# TYPE kac_jobs gauge");

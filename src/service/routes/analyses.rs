@@ -42,7 +42,7 @@ pub(crate) async fn create_job(
     let req: JobRequest = strict_body(&st, body, "JobRequest")?;
     let shape = st.shapes.get(&req.shape_id).ok_or(ApiError::NotFound { what: "shape", id: req.shape_id.clone() })?;
     let (job, created) = jobs::submit(&st, shape, req.analysis)?;
-    Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job.snapshot()))
+    Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job))
 }
 
 #[derive(Deserialize, utoipa::IntoParams)]
@@ -58,10 +58,10 @@ pub struct JobFilter {
 
 /// List jobs, oldest first, with filters.
 #[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobFilter), responses((status = 200, description = "a page of jobs")))]
-pub(crate) async fn list_jobs(State(st): State<AppState>, Query(f): Query<JobFilter>) -> Json<Value> {
+pub(crate) async fn list_jobs(State(st): State<AppState>, Query(f): Query<JobFilter>) -> Result<Json<Value>, ApiError> {
     let all: Vec<JobView> = st
         .jobs
-        .list()
+        .list()?
         .into_iter()
         .filter(|j| f.status.as_deref().is_none_or(|s| j.status.name() == s))
         .filter(|j| f.shape_id.as_deref().is_none_or(|s| j.shape_id == s))
@@ -70,14 +70,14 @@ pub(crate) async fn list_jobs(State(st): State<AppState>, Query(f): Query<JobFil
     let limit = f.limit.unwrap_or(100).min(1000);
     let offset = f.offset.unwrap_or(0);
     let items: Vec<Value> = all.iter().skip(offset).take(limit).map(job_json).collect();
-    Json(json!({ "total": all.len(), "offset": offset, "limit": limit, "items": items }))
+    Ok(Json(json!({ "total": all.len(), "offset": offset, "limit": limit, "items": items })))
 }
 
 /// A job: status, progress, timestamps, error (problem detail) and result link.
 #[utoipa::path(get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path)),
     responses((status = 200, body = JobView), (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_job(State(st): State<AppState>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
-    st.jobs.get(&id).map(|j| Json(job_json(&j.snapshot()))).ok_or(ApiError::NotFound { what: "job", id })
+    st.jobs.view(&id)?.map(|j| Json(job_json(&j))).ok_or(ApiError::NotFound { what: "job", id })
 }
 
 /// Cancel a job (POST `/v1/jobs/{id}/cancel` or DELETE `/v1/jobs/{id}`): an enqueued job never starts, a running
@@ -87,13 +87,12 @@ pub(crate) async fn get_job(State(st): State<AppState>, Path(id): Path<String>) 
               (status = 200, description = "already finished", body = JobView),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let job = st.jobs.get(&id).ok_or(ApiError::NotFound { what: "job", id })?;
-    let view = job.snapshot();
+    let view = st.jobs.view(&id)?.ok_or_else(|| ApiError::NotFound { what: "job", id: id.clone() })?;
     if view.status.terminal() {
         return Ok(job_response(StatusCode::OK, &view));
     }
-    jobs::cancel(&st, &job);
-    Ok(job_response(StatusCode::ACCEPTED, &job.snapshot()))
+    let view = jobs::cancel(&st, &id)?.ok_or(ApiError::NotFound { what: "job", id })?;
+    Ok(job_response(StatusCode::ACCEPTED, &view))
 }
 
 /// Cancel a job (the same as POST `/v1/jobs/{id}/cancel`); the job record stays.
@@ -110,20 +109,33 @@ pub(crate) async fn delete_job(state: State<AppState>, id: Path<String>) -> Resu
     responses((status = 200, description = "text/event-stream of job objects", content_type = "text/event-stream"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn job_events(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let job = st.jobs.get(&id).ok_or(ApiError::NotFound { what: "job", id })?;
-    let rx = job.view.subscribe();
-    let stream = futures_util::stream::unfold((rx, false, true), |(mut rx, done, first)| async move {
-        if done {
-            return None;
-        }
-        if !first && rx.changed().await.is_err() {
-            return None;
-        }
-        let v = rx.borrow_and_update().clone();
-        let terminal = v.status.terminal();
-        let ev = Event::default().event("job").json_data(job_json(&v)).unwrap_or_default();
-        Some((Ok::<_, std::convert::Infallible>(ev), (rx, terminal, false)))
-    });
+    let mut watch = st.jobs.watch(&id);
+    let first = watch.current()?.ok_or(ApiError::NotFound { what: "job", id })?;
+    // One event per change of the job's view, wherever it runs, until it ends.
+    let stream = futures_util::stream::unfold(
+        (watch, Some(first), None::<Value>, false),
+        |(mut w, next, last, done)| async move {
+            if done {
+                return None;
+            }
+            let mut next = next;
+            loop {
+                let view = match next.take() {
+                    Some(view) => view,
+                    None => {
+                        w.changed().await;
+                        w.current().ok().flatten()?
+                    }
+                };
+                let json = job_json(&view);
+                if last.as_ref() == Some(&json) {
+                    continue;
+                }
+                let ev = Event::default().event("job").json_data(&json).unwrap_or_default();
+                return Some((Ok::<_, std::convert::Infallible>(ev), (w, None, Some(json), view.status.terminal())));
+            }
+        },
+    );
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
 }
 
@@ -176,32 +188,37 @@ pub(crate) async fn analyze(
 }
 
 /// Waits until the job ends or `wait` seconds (default 10, at most --max-wait-s) pass; its view then.
-pub(crate) async fn wait_for(st: &AppState, job: &jobs::Job, wait: Option<f64>) -> JobView {
+pub(crate) async fn wait_for(st: &AppState, job: &JobView, wait: Option<f64>) -> Result<JobView, ApiError> {
     let wait = wait.unwrap_or(10.0).clamp(0.0, st.config.max_wait_s as f64);
-    let mut rx = job.view.subscribe();
+    let mut watch = st.jobs.watch(&job.id);
+    let mut last = job.clone();
     let _ = tokio::time::timeout(std::time::Duration::from_secs_f64(wait), async {
         loop {
-            if rx.borrow_and_update().status.terminal() {
+            if last.status.terminal() {
                 break;
             }
-            if rx.changed().await.is_err() {
-                break;
+            watch.changed().await;
+            if let Ok(Some(v)) = watch.current() {
+                last = v;
             }
         }
     })
     .await;
-    job.snapshot()
+    Ok(match watch.current()? {
+        Some(v) => v,
+        None => last,
+    })
 }
 
 /// The synchronous form of a job (`?wait=` seconds, default 10, at most --max-wait-s): its result (200) when it
 /// is ready in time, its problem when it failed or was canceled, else the job (202, to poll or follow).
 pub(crate) async fn answer_within(
     st: &AppState,
-    job: &jobs::Job,
+    job: &JobView,
     wait: Option<f64>,
     headers: &HeaderMap,
 ) -> Result<Response, ApiError> {
-    let view = wait_for(st, job, wait).await;
+    let view = wait_for(st, job, wait).await?;
     match view.status {
         Status::Succeeded => {
             let r = st.results.get(&view.id).ok_or(ApiError::Internal { detail: "the result went missing".into() })?;

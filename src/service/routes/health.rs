@@ -19,7 +19,8 @@ pub(crate) async fn readyz(State(st): State<AppState>) -> Result<Json<Value>, Ap
     if !st.shapes.healthy() {
         return Err(ApiError::NotReady { detail: "the store does not answer".into() });
     }
-    Ok(Json(json!({ "status": "ready", "queue": st.jobs.active.load(Ordering::SeqCst), "capacity": st.jobs.capacity })))
+    let (enqueued, processing) = st.jobs.queue.depth().map_err(jobs::store_error)?;
+    Ok(Json(json!({ "status": "ready", "queue": enqueued + processing, "capacity": st.jobs.capacity })))
 }
 
 /// Prometheus metrics: requests by route and status, latency histograms, queue depth, jobs by status, job

@@ -104,7 +104,7 @@ pub(crate) async fn search(
                     solver: analysis::SolverSpec::default(),
                 };
                 let (job, _) = jobs::submit(&st, shape, dna)?;
-                let view = wait_for(&st, &job, q.wait).await;
+                let view = wait_for(&st, &job, q.wait).await?;
                 match (st.index.get(&family, id), view.status) {
                     (Some(f), _) => f,
                     (None, Status::Succeeded) => {

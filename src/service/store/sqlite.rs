@@ -1,111 +1,12 @@
-//! Storage behind traits, so that a shared backend can replace the embedded one without touching handlers.
-//! This module holds the embedded defaults: shapes in memory, results in memory and as content-addressed JSON
-//! files in the data directory (written atomically: temporary file, fsync, rename), and a byte-bounded cache of
-//! eigenpairs.
+//! The embedded backend: SQLite (bundled build, WAL journal, synchronous FULL) for shape records, fingerprints and
+//! the job queue; uploads and results as content-addressed files in the data directory, written atomically.
 
-use super::jobs::JobView;
-use crate::analysis::{Eigen, SpectrumCache, VertexArray};
-use kac_core::Validated;
-use serde_json::Value;
-use std::collections::HashMap;
+use super::*;
+use crate::service::error::Problem;
+use crate::service::jobs::{now, JobProgress, Status};
+use rusqlite::OptionalExtension;
 use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
-
-/// A map bounded by bytes: the least recently used entries go first. Values are shared (`Arc`).
-pub struct ByteLru<V> {
-    limit: usize,
-    map: HashMap<String, (Arc<V>, usize, u64)>,
-    bytes: usize,
-    clock: u64,
-}
-
-impl<V> ByteLru<V> {
-    pub fn new(limit: usize) -> Self {
-        ByteLru { limit, map: HashMap::new(), bytes: 0, clock: 0 }
-    }
-    pub fn get(&mut self, key: &str) -> Option<Arc<V>> {
-        self.clock += 1;
-        let clock = self.clock;
-        self.map.get_mut(key).map(|(v, _, used)| {
-            *used = clock;
-            v.clone()
-        })
-    }
-    /// Keeps the value unless it alone is larger than the limit.
-    pub fn put(&mut self, key: &str, value: Arc<V>, size: usize) {
-        self.remove(key);
-        if size > self.limit {
-            return;
-        }
-        self.clock += 1;
-        self.map.insert(key.to_string(), (value, size, self.clock));
-        self.bytes += size;
-        while self.bytes > self.limit {
-            let Some(victim) = self.map.iter().min_by_key(|(_, (_, _, used))| *used).map(|(k, _)| k.clone()) else {
-                break;
-            };
-            self.remove(&victim);
-        }
-    }
-    pub fn remove(&mut self, key: &str) {
-        if let Some((_, size, _)) = self.map.remove(key) {
-            self.bytes -= size;
-        }
-    }
-}
-
-/// What is known of a stored shape without parsing it again.
-#[derive(Debug, Clone)]
-pub struct ShapeRecord {
-    pub id: String,
-    pub format: String,
-    pub created_at: String,
-    pub bytes: usize,
-    /// The validation summary (`kac inspect`'s output).
-    pub summary: Value,
-}
-
-/// A stored shape, parsed and validated.
-pub struct StoredShape {
-    pub record: ShapeRecord,
-    pub validated: Validated,
-}
-
-impl std::ops::Deref for StoredShape {
-    type Target = ShapeRecord;
-    fn deref(&self) -> &ShapeRecord {
-        &self.record
-    }
-}
-
-pub trait ShapeStore: Send + Sync {
-    /// Stores the shape (and its original bytes) unless one with its id exists; true if it was new.
-    fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)>;
-    fn get(&self, id: &str) -> Option<Arc<StoredShape>>;
-    /// Records in id order from `offset`, at most `limit`, and the total.
-    fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize);
-    fn remove(&self, id: &str) -> bool;
-    /// Whether the storage answers (for readiness).
-    fn healthy(&self) -> bool;
-}
-
-/// Shape-DNA fingerprints of stored shapes, by family (the parameters they were computed with), kept as shapes
-/// are analysed so that a search compares against every shape the service holds.
-pub trait FingerprintStore: Send + Sync {
-    /// Inserts or replaces one shape's fingerprint in a family, if the shape is still stored (true then).
-    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool>;
-    /// Every fingerprint: (family, shape id, values).
-    fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>>;
-}
-
-/// Job records as clients see them, kept so that a restart loses no accepted job.
-pub trait JobStore: Send + Sync {
-    /// Inserts or replaces a job's record.
-    fn save(&self, job: &JobView) -> std::io::Result<()>;
-    /// Every job, in submission order.
-    fn load_all(&self) -> std::io::Result<Vec<JobView>>;
-}
+use std::time::Duration;
 
 /// The embedded database: SQLite (bundled build, WAL journal, synchronous FULL) for shape and job records, and
 /// the original uploads as content-addressed files (`DIR/shapes/{id}`), parsed again on first use after a
@@ -119,6 +20,30 @@ pub struct Database {
     /// Parsed shapes in memory, bounded by (about) their size.
     parsed: Mutex<ByteLru<StoredShape>>,
     max_vertices: usize,
+    /// Ids of jobs as they change.
+    changes: tokio::sync::broadcast::Sender<String>,
+}
+
+/// The queue's columns on a jobs table of an older version (id and view only): added, and filled from the views.
+fn migrate_jobs(conn: &rusqlite::Connection) -> std::io::Result<()> {
+    let has_status: bool = conn
+        .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'status'")
+        .and_then(|mut st| st.exists([]))
+        .map_err(db_err)?;
+    if !has_status {
+        conn.execute_batch(
+            "BEGIN;
+             ALTER TABLE jobs ADD COLUMN status TEXT NOT NULL DEFAULT 'enqueued';
+             ALTER TABLE jobs ADD COLUMN owner TEXT;
+             ALTER TABLE jobs ADD COLUMN lease_until INTEGER NOT NULL DEFAULT 0;
+             ALTER TABLE jobs ADD COLUMN cancel INTEGER NOT NULL DEFAULT 0;
+             UPDATE jobs SET status = COALESCE(json_extract(view, '$.status'), 'failed');
+             COMMIT;",
+        )
+        .map_err(db_err)?;
+    }
+    conn.execute_batch("CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, seq);").map_err(db_err)?;
+    Ok(())
 }
 
 /// Bytes a parsed shape holds, about: its upload counts twice (geometry plus topology and the report).
@@ -151,7 +76,9 @@ impl Database {
                  PRIMARY KEY (family, shape_id));",
         )
         .map_err(db_err)?;
+        migrate_jobs(&conn)?;
         Ok(Database {
+            changes: tokio::sync::broadcast::channel(1024).0,
             conn: Mutex::new(conn),
             shape_dir,
             id_locks: std::array::from_fn(|_| Mutex::new(())),
@@ -212,7 +139,7 @@ impl ShapeStore for Database {
                     return Ok((true, s));
                 }
             }
-            if let Some(existing) = self.get(&shape.id) {
+            if let Some(existing) = ShapeStore::get(self, &shape.id) {
                 return Ok((false, existing));
             }
         }
@@ -291,55 +218,203 @@ impl FingerprintStore for Database {
     }
 }
 
-impl JobStore for Database {
-    fn save(&self, job: &JobView) -> std::io::Result<()> {
-        let view = serde_json::to_string(job).map_err(std::io::Error::other)?;
-        self.conn()
+fn now_ms() -> i64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis() as i64)
+}
+
+fn view_of(text: &str) -> std::io::Result<JobView> {
+    serde_json::from_str(text).map_err(std::io::Error::other)
+}
+
+fn status_name(v: &JobView) -> &'static str {
+    v.status.name()
+}
+
+/// The job queue on SQLite: one row per job (its view as JSON beside the columns the queue works on), every
+/// transition one statement or transaction under the connection's lock.
+impl JobQueue for Database {
+    fn enqueue(&self, view: JobView, capacity: usize) -> std::io::Result<Enqueued> {
+        let mut c = self.conn();
+        let tx = c.transaction().map_err(db_err)?;
+        let existing: Option<String> =
+            tx.query_row("SELECT view FROM jobs WHERE id = ?1", [&view.id], |r| r.get(0)).optional().map_err(db_err)?;
+        if let Some(text) = &existing {
+            let old = view_of(text)?;
+            if !matches!(old.status, Status::Failed | Status::Canceled) {
+                return Ok(Enqueued::Existing(old));
+            }
+        }
+        let active: i64 = tx
+            .query_row("SELECT COUNT(*) FROM jobs WHERE status IN ('enqueued', 'processing')", [], |r| r.get(0))
+            .map_err(db_err)?;
+        if active as usize >= capacity {
+            return Ok(Enqueued::Full);
+        }
+        let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
+        tx.execute(
+            "INSERT INTO jobs (id, view, status, owner, lease_until, cancel) VALUES (?1, ?2, 'enqueued', NULL, 0, 0)
+             ON CONFLICT(id) DO UPDATE SET view = excluded.view, status = 'enqueued', owner = NULL, lease_until = 0,
+             cancel = 0",
+            rusqlite::params![view.id, text],
+        )
+        .map_err(db_err)?;
+        tx.commit().map_err(db_err)?;
+        drop(c);
+        let _ = self.changes.send(view.id.clone());
+        Ok(Enqueued::New(view))
+    }
+    fn claim(&self, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
+        let mut c = self.conn();
+        let tx = c.transaction().map_err(db_err)?;
+        let next: Option<(String, String)> = tx
+            .query_row("SELECT id, view FROM jobs WHERE status = 'enqueued' ORDER BY seq LIMIT 1", [], |r| {
+                Ok((r.get(0)?, r.get(1)?))
+            })
+            .optional()
+            .map_err(db_err)?;
+        let Some((id, text)) = next else { return Ok(None) };
+        let mut view = view_of(&text)?;
+        view.status = Status::Processing;
+        view.started_at = Some(now());
+        view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
+        let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
+        tx.execute(
+            "UPDATE jobs SET status = 'processing', owner = ?2, lease_until = ?3, cancel = 0, view = ?4 WHERE id = ?1",
+            rusqlite::params![id, owner, now_ms() + lease.as_millis() as i64, text],
+        )
+        .map_err(db_err)?;
+        tx.commit().map_err(db_err)?;
+        drop(c);
+        let _ = self.changes.send(id);
+        Ok(Some(view))
+    }
+    fn heartbeat(&self, id: &str, owner: &str, progress: &JobProgress, lease: Duration) -> std::io::Result<Lease> {
+        let c = self.conn();
+        let row: Option<(String, i64)> = c
+            .query_row(
+                "SELECT view, cancel FROM jobs WHERE id = ?1 AND owner = ?2 AND status = 'processing'",
+                [id, owner],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .optional()
+            .map_err(db_err)?;
+        let Some((text, cancel)) = row else { return Ok(Lease::Lost) };
+        let mut view = view_of(&text)?;
+        view.progress = progress.clone();
+        let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
+        c.execute(
+            "UPDATE jobs SET lease_until = ?3, view = ?4 WHERE id = ?1 AND owner = ?2",
+            rusqlite::params![id, owner, now_ms() + lease.as_millis() as i64, text],
+        )
+        .map_err(db_err)?;
+        Ok(Lease::Held { cancel: cancel != 0 })
+    }
+    fn finish(&self, id: &str, owner: &str, view: &JobView) -> std::io::Result<bool> {
+        let text = serde_json::to_string(view).map_err(std::io::Error::other)?;
+        let n = self
+            .conn()
             .execute(
-                "INSERT INTO jobs (id, view) VALUES (?1, ?2) ON CONFLICT(id) DO UPDATE SET view = excluded.view",
-                rusqlite::params![job.id, view],
+                "UPDATE jobs SET status = ?3, view = ?4, owner = NULL WHERE id = ?1 AND owner = ?2 AND status = 'processing'",
+                rusqlite::params![id, owner, status_name(view), text],
             )
             .map_err(db_err)?;
-        Ok(())
+        if n > 0 {
+            let _ = self.changes.send(id.to_string());
+        }
+        Ok(n > 0)
     }
-    fn load_all(&self) -> std::io::Result<Vec<JobView>> {
+    fn cancel(&self, id: &str, problem: &Problem) -> std::io::Result<Option<JobView>> {
+        let mut c = self.conn();
+        let tx = c.transaction().map_err(db_err)?;
+        let row: Option<String> =
+            tx.query_row("SELECT view FROM jobs WHERE id = ?1", [id], |r| r.get(0)).optional().map_err(db_err)?;
+        let Some(text) = row else { return Ok(None) };
+        let mut view = view_of(&text)?;
+        match view.status {
+            Status::Enqueued => {
+                view.status = Status::Canceled;
+                view.finished_at = Some(now());
+                view.error = Some(problem.clone());
+                let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
+                tx.execute("UPDATE jobs SET status = 'canceled', view = ?2 WHERE id = ?1", rusqlite::params![id, text])
+                    .map_err(db_err)?;
+            }
+            Status::Processing => {
+                tx.execute("UPDATE jobs SET cancel = 1 WHERE id = ?1", [id]).map_err(db_err)?;
+            }
+            _ => return Ok(Some(view)),
+        }
+        tx.commit().map_err(db_err)?;
+        drop(c);
+        let _ = self.changes.send(id.to_string());
+        Ok(Some(view))
+    }
+    fn requeue_expired(&self) -> std::io::Result<Vec<String>> {
+        self.requeue_where("lease_until < ?1", now_ms())
+    }
+    fn recover(&self) -> std::io::Result<usize> {
+        // The data directory belongs to this process: no other worker can hold a claim.
+        self.requeue_where("?1 = ?1", 0)?;
+        Ok(self.depth()?.0)
+    }
+    fn get(&self, id: &str) -> std::io::Result<Option<JobView>> {
+        let text: Option<String> = self
+            .conn()
+            .query_row("SELECT view FROM jobs WHERE id = ?1", [id], |r| r.get(0))
+            .optional()
+            .map_err(db_err)?;
+        text.map(|t| view_of(&t)).transpose()
+    }
+    fn list(&self) -> std::io::Result<Vec<JobView>> {
         let c = self.conn();
         let mut st = c.prepare("SELECT view FROM jobs ORDER BY seq").map_err(db_err)?;
         let rows = st.query_map([], |r| r.get::<_, String>(0)).map_err(db_err)?;
         Ok(rows.flatten().filter_map(|v| serde_json::from_str(&v).ok()).collect())
     }
-}
-
-/// A finished result: the JSON summary, per-vertex arrays, and the serialized body with its strong ETag.
-pub struct StoredResult {
-    pub id: String,
-    pub summary: Value,
-    pub arrays: Vec<VertexArray>,
-    /// The JSON body, shared (not copied) by every response.
-    pub body: axum::body::Bytes,
-    pub etag: String,
-    /// The body without per-vertex values (`?values=false`), made once.
-    pub summary_body: axum::body::Bytes,
-}
-
-impl StoredResult {
-    pub fn new(id: &str, summary: Value, arrays: Vec<VertexArray>, body: Vec<u8>) -> Self {
-        let mut light = summary.clone();
-        if let Some(map) = light.get_mut("arrays").and_then(Value::as_object_mut) {
-            for a in map.values_mut() {
-                if let Some(o) = a.as_object_mut() {
-                    o.remove("values");
-                }
-            }
-        }
-        let summary_body = serde_json::to_vec(&light).unwrap_or_default().into();
-        StoredResult { id: id.to_string(), etag: etag_of(&body), summary, arrays, body: body.into(), summary_body }
+    fn counts(&self) -> std::io::Result<Vec<(String, usize)>> {
+        let c = self.conn();
+        let mut st = c.prepare("SELECT status, COUNT(*) FROM jobs GROUP BY status").map_err(db_err)?;
+        let rows = st.query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, i64>(1)? as usize))).map_err(db_err)?;
+        Ok(rows.flatten().collect())
+    }
+    fn changes(&self) -> tokio::sync::broadcast::Receiver<String> {
+        self.changes.subscribe()
     }
 }
 
-pub trait ResultStore: Send + Sync {
-    fn put(&self, result: StoredResult) -> std::io::Result<Arc<StoredResult>>;
-    fn get(&self, id: &str) -> Option<Arc<StoredResult>>;
+impl Database {
+    /// Puts the processing jobs matching `condition` (with `?1` bound to `arg`) back in the queue.
+    fn requeue_where(&self, condition: &str, arg: i64) -> std::io::Result<Vec<String>> {
+        let mut c = self.conn();
+        let tx = c.transaction().map_err(db_err)?;
+        let rows: Vec<(String, String)> = {
+            let mut st = tx
+                .prepare(&format!("SELECT id, view FROM jobs WHERE status = 'processing' AND {condition}"))
+                .map_err(db_err)?;
+            let rows = st.query_map([arg], |r| Ok((r.get(0)?, r.get(1)?))).map_err(db_err)?;
+            rows.flatten().collect()
+        };
+        let mut ids = vec![];
+        for (id, text) in rows {
+            let mut view = view_of(&text)?;
+            view.status = Status::Enqueued;
+            view.started_at = None;
+            view.progress = JobProgress { phase: "requeued".into(), converged: 0, wanted: 0 };
+            let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
+            tx.execute(
+                "UPDATE jobs SET status = 'enqueued', owner = NULL, lease_until = 0, view = ?2 WHERE id = ?1",
+                rusqlite::params![id, text],
+            )
+            .map_err(db_err)?;
+            ids.push(id);
+        }
+        tx.commit().map_err(db_err)?;
+        drop(c);
+        for id in &ids {
+            let _ = self.changes.send(id.clone());
+        }
+        Ok(ids)
+    }
 }
 
 /// Results as files (`DIR/results/{id}.json`), the recently used ones also in memory (bounded by bytes).
@@ -423,70 +498,5 @@ impl ResultStore for FileResults {
         let r = Arc::new(StoredResult::new(id, summary, arrays, body));
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
         Some(r)
-    }
-}
-
-/// The strong ETag of a body: the first 128 bits of its SHA-256, quoted.
-pub fn etag_of(body: &[u8]) -> String {
-    use sha2::Digest;
-    format!("\"{}\"", sha2::Sha256::digest(body).iter().take(16).map(|b| format!("{b:02x}")).collect::<String>())
-}
-
-/// Eigenpairs by (shape, operator, solver) key, bounded by bytes (least recently used first). An entry with k
-/// pairs serves any request for at most k.
-pub struct EigenCache {
-    inner: Mutex<ByteLru<Eigen>>,
-    pub hits: std::sync::atomic::AtomicU64,
-    pub misses: std::sync::atomic::AtomicU64,
-}
-
-impl EigenCache {
-    pub fn new(limit: usize) -> Self {
-        EigenCache { inner: Mutex::new(ByteLru::new(limit)), hits: Default::default(), misses: Default::default() }
-    }
-    fn size(e: &Eigen) -> usize {
-        let s = &e.spectrum;
-        8 * (s.vectors.nrows() * s.vectors.ncols() + 2 * s.values.len())
-            + 16 * (e.operator.pair.stiffness.len() + e.operator.pair.pattern.row_idx.len())
-    }
-}
-
-impl SpectrumCache for EigenCache {
-    fn get(&self, key: &str, k: usize) -> Option<Arc<Eigen>> {
-        use std::sync::atomic::Ordering::Relaxed;
-        let found =
-            self.inner.lock().unwrap_or_else(|e| e.into_inner()).get(key).filter(|e| e.spectrum.values.len() >= k);
-        if found.is_some() { &self.hits } else { &self.misses }.fetch_add(1, Relaxed);
-        found
-    }
-    fn put(&self, key: &str, eigen: Arc<Eigen>) {
-        let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());
-        // Keep whichever entry holds more pairs.
-        if g.get(key).is_some_and(|old| old.spectrum.values.len() >= eigen.spectrum.values.len()) {
-            return;
-        }
-        let size = Self::size(&eigen);
-        g.put(key, eigen, size);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::ByteLru;
-    use std::sync::Arc;
-
-    #[test]
-    fn byte_lru_evicts_the_least_recently_used_and_skips_oversized_values() {
-        let mut c = ByteLru::new(10);
-        c.put("a", Arc::new(1), 4);
-        c.put("b", Arc::new(2), 4);
-        assert_eq!(c.get("a").as_deref(), Some(&1)); // a is now the most recent
-        c.put("c", Arc::new(3), 4); // 12 > 10: b goes
-        assert!(c.get("b").is_none());
-        assert_eq!((c.get("a").as_deref(), c.get("c").as_deref()), (Some(&1), Some(&3)));
-        c.put("huge", Arc::new(4), 11);
-        assert!(c.get("huge").is_none());
-        c.put("a", Arc::new(5), 2); // replacing frees the old size
-        assert_eq!(c.bytes, 6);
     }
 }

@@ -1,0 +1,225 @@
+//! Storage behind traits, so that a shared backend can replace the embedded one without touching handlers.
+//! This module holds the embedded defaults: shapes in memory, results in memory and as content-addressed JSON
+//! files in the data directory (written atomically: temporary file, fsync, rename), and a byte-bounded cache of
+//! eigenpairs.
+
+use super::jobs::JobView;
+use crate::analysis::{Eigen, SpectrumCache, VertexArray};
+use kac_core::Validated;
+use serde_json::Value;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+mod queue;
+mod sqlite;
+
+/// The stores of one backend.
+pub struct Backend {
+    pub shapes: Arc<dyn ShapeStore>,
+    pub fingerprints: Arc<dyn FingerprintStore>,
+    pub results: Arc<dyn ResultStore>,
+    pub queue: Arc<dyn JobQueue>,
+}
+
+/// Opens the backend `--store` names (default: the embedded one in `--data-dir`).
+pub fn open(config: &super::config::Config) -> std::io::Result<Backend> {
+    let store = config.store.clone().unwrap_or_else(|| format!("sqlite:{}", config.data_dir.display()));
+    if let Some(dir) = store.strip_prefix("sqlite:") {
+        let dir = Path::new(dir);
+        std::fs::create_dir_all(dir)?;
+        let db = Arc::new(Database::open(dir, config.max_vertices, config.store_cache_bytes)?);
+        let results = Arc::new(FileResults::open(dir, config.store_cache_bytes)?);
+        return Ok(Backend { shapes: db.clone(), fingerprints: db.clone(), results, queue: db });
+    }
+    Err(std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!("--store {store}: give sqlite:DIR or postgres://…"),
+    ))
+}
+pub use queue::{Enqueued, JobQueue, Lease};
+pub use sqlite::{write_atomic, Database, FileResults};
+
+/// A map bounded by bytes: the least recently used entries go first. Values are shared (`Arc`).
+pub struct ByteLru<V> {
+    limit: usize,
+    map: HashMap<String, (Arc<V>, usize, u64)>,
+    bytes: usize,
+    clock: u64,
+}
+
+impl<V> ByteLru<V> {
+    pub fn new(limit: usize) -> Self {
+        ByteLru { limit, map: HashMap::new(), bytes: 0, clock: 0 }
+    }
+    pub fn get(&mut self, key: &str) -> Option<Arc<V>> {
+        self.clock += 1;
+        let clock = self.clock;
+        self.map.get_mut(key).map(|(v, _, used)| {
+            *used = clock;
+            v.clone()
+        })
+    }
+    /// Keeps the value unless it alone is larger than the limit.
+    pub fn put(&mut self, key: &str, value: Arc<V>, size: usize) {
+        self.remove(key);
+        if size > self.limit {
+            return;
+        }
+        self.clock += 1;
+        self.map.insert(key.to_string(), (value, size, self.clock));
+        self.bytes += size;
+        while self.bytes > self.limit {
+            let Some(victim) = self.map.iter().min_by_key(|(_, (_, _, used))| *used).map(|(k, _)| k.clone()) else {
+                break;
+            };
+            self.remove(&victim);
+        }
+    }
+    pub fn remove(&mut self, key: &str) {
+        if let Some((_, size, _)) = self.map.remove(key) {
+            self.bytes -= size;
+        }
+    }
+}
+
+/// What is known of a stored shape without parsing it again.
+#[derive(Debug, Clone)]
+pub struct ShapeRecord {
+    pub id: String,
+    pub format: String,
+    pub created_at: String,
+    pub bytes: usize,
+    /// The validation summary (`kac inspect`'s output).
+    pub summary: Value,
+}
+
+/// A stored shape, parsed and validated.
+pub struct StoredShape {
+    pub record: ShapeRecord,
+    pub validated: Validated,
+}
+
+impl std::ops::Deref for StoredShape {
+    type Target = ShapeRecord;
+    fn deref(&self) -> &ShapeRecord {
+        &self.record
+    }
+}
+
+pub trait ShapeStore: Send + Sync {
+    /// Stores the shape (and its original bytes) unless one with its id exists; true if it was new.
+    fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)>;
+    fn get(&self, id: &str) -> Option<Arc<StoredShape>>;
+    /// Records in id order from `offset`, at most `limit`, and the total.
+    fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize);
+    fn remove(&self, id: &str) -> bool;
+    /// Whether the storage answers (for readiness).
+    fn healthy(&self) -> bool;
+}
+
+/// Shape-DNA fingerprints of stored shapes, by family (the parameters they were computed with), kept as shapes
+/// are analysed so that a search compares against every shape the service holds.
+pub trait FingerprintStore: Send + Sync {
+    /// Inserts or replaces one shape's fingerprint in a family, if the shape is still stored (true then).
+    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool>;
+    /// Every fingerprint: (family, shape id, values).
+    fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>>;
+}
+
+/// A finished result: the JSON summary, per-vertex arrays, and the serialized body with its strong ETag.
+pub struct StoredResult {
+    pub id: String,
+    pub summary: Value,
+    pub arrays: Vec<VertexArray>,
+    /// The JSON body, shared (not copied) by every response.
+    pub body: axum::body::Bytes,
+    pub etag: String,
+    /// The body without per-vertex values (`?values=false`), made once.
+    pub summary_body: axum::body::Bytes,
+}
+
+impl StoredResult {
+    pub fn new(id: &str, summary: Value, arrays: Vec<VertexArray>, body: Vec<u8>) -> Self {
+        let mut light = summary.clone();
+        if let Some(map) = light.get_mut("arrays").and_then(Value::as_object_mut) {
+            for a in map.values_mut() {
+                if let Some(o) = a.as_object_mut() {
+                    o.remove("values");
+                }
+            }
+        }
+        let summary_body = serde_json::to_vec(&light).unwrap_or_default().into();
+        StoredResult { id: id.to_string(), etag: etag_of(&body), summary, arrays, body: body.into(), summary_body }
+    }
+}
+
+pub trait ResultStore: Send + Sync {
+    fn put(&self, result: StoredResult) -> std::io::Result<Arc<StoredResult>>;
+    fn get(&self, id: &str) -> Option<Arc<StoredResult>>;
+}
+
+/// The strong ETag of a body: the first 128 bits of its SHA-256, quoted.
+pub fn etag_of(body: &[u8]) -> String {
+    use sha2::Digest;
+    format!("\"{}\"", sha2::Sha256::digest(body).iter().take(16).map(|b| format!("{b:02x}")).collect::<String>())
+}
+
+/// Eigenpairs by (shape, operator, solver) key, bounded by bytes (least recently used first). An entry with k
+/// pairs serves any request for at most k.
+pub struct EigenCache {
+    inner: Mutex<ByteLru<Eigen>>,
+    pub hits: std::sync::atomic::AtomicU64,
+    pub misses: std::sync::atomic::AtomicU64,
+}
+
+impl EigenCache {
+    pub fn new(limit: usize) -> Self {
+        EigenCache { inner: Mutex::new(ByteLru::new(limit)), hits: Default::default(), misses: Default::default() }
+    }
+    fn size(e: &Eigen) -> usize {
+        let s = &e.spectrum;
+        8 * (s.vectors.nrows() * s.vectors.ncols() + 2 * s.values.len())
+            + 16 * (e.operator.pair.stiffness.len() + e.operator.pair.pattern.row_idx.len())
+    }
+}
+
+impl SpectrumCache for EigenCache {
+    fn get(&self, key: &str, k: usize) -> Option<Arc<Eigen>> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let found =
+            self.inner.lock().unwrap_or_else(|e| e.into_inner()).get(key).filter(|e| e.spectrum.values.len() >= k);
+        if found.is_some() { &self.hits } else { &self.misses }.fetch_add(1, Relaxed);
+        found
+    }
+    fn put(&self, key: &str, eigen: Arc<Eigen>) {
+        let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        // Keep whichever entry holds more pairs.
+        if g.get(key).is_some_and(|old| old.spectrum.values.len() >= eigen.spectrum.values.len()) {
+            return;
+        }
+        let size = Self::size(&eigen);
+        g.put(key, eigen, size);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ByteLru;
+    use std::sync::Arc;
+
+    #[test]
+    fn byte_lru_evicts_the_least_recently_used_and_skips_oversized_values() {
+        let mut c = ByteLru::new(10);
+        c.put("a", Arc::new(1), 4);
+        c.put("b", Arc::new(2), 4);
+        assert_eq!(c.get("a").as_deref(), Some(&1)); // a is now the most recent
+        c.put("c", Arc::new(3), 4); // 12 > 10: b goes
+        assert!(c.get("b").is_none());
+        assert_eq!((c.get("a").as_deref(), c.get("c").as_deref()), (Some(&1), Some(&3)));
+        c.put("huge", Arc::new(4), 11);
+        assert!(c.get("huge").is_none());
+        c.put("a", Arc::new(5), 2); // replacing frees the old size
+        assert_eq!(c.bytes, 6);
+    }
+}
