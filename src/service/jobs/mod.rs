@@ -270,7 +270,8 @@ impl Watch {
         let announced = async {
             loop {
                 match changes.recv().await {
-                    Ok(changed) if changed == id => return,
+                    // `*`: the store may have missed changes (it reconnected).
+                    Ok(changed) if changed == id || changed == "*" => return,
                     Ok(_) => {}
                     Err(broadcast::error::RecvError::Lagged(_)) => return,
                     Err(broadcast::error::RecvError::Closed) => return std::future::pending().await,

@@ -107,6 +107,15 @@ pub fn render(state: &AppState) -> String {
     let counts = state.jobs.queue.counts().unwrap_or_default();
     let count = |s: &str| counts.iter().find(|(n, _)| n == s).map_or(0, |c| c.1);
     let _ = writeln!(out, "kac_queue_depth {}", count("enqueued") + count("processing"));
+    if let Some((size, idle, waiting)) = state.shapes.pool_status() {
+        let _ = writeln!(out, "# HELP kac_store_pool_connections Connections of the store's pool, by state.");
+        let _ = writeln!(out, "# TYPE kac_store_pool_connections gauge");
+        let _ = writeln!(out, "kac_store_pool_connections{{state=\"idle\"}} {idle}");
+        let _ = writeln!(out, "kac_store_pool_connections{{state=\"in_use\"}} {}", size.saturating_sub(idle));
+        let _ = writeln!(out, "# HELP kac_store_pool_waiting Callers waiting for a connection of the store's pool.");
+        let _ = writeln!(out, "# TYPE kac_store_pool_waiting gauge");
+        let _ = writeln!(out, "kac_store_pool_waiting {waiting}");
+    }
     let _ = writeln!(out, "# HELP kac_queue_capacity Configured queue capacity.");
     let _ = writeln!(out, "# TYPE kac_queue_capacity gauge");
     let _ = writeln!(out, "kac_queue_capacity {}", state.jobs.capacity);

@@ -11,8 +11,10 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+mod postgres;
 mod queue;
 mod sqlite;
+pub use postgres::Postgres;
 
 /// The stores of one backend.
 pub struct Backend {
@@ -31,6 +33,10 @@ pub fn open(config: &super::config::Config) -> std::io::Result<Backend> {
         let db = Arc::new(Database::open(dir, config.max_vertices, config.store_cache_bytes)?);
         let results = Arc::new(FileResults::open(dir, config.store_cache_bytes)?);
         return Ok(Backend { shapes: db.clone(), fingerprints: db.clone(), results, queue: db });
+    }
+    if store.starts_with("postgres://") || store.starts_with("postgresql://") {
+        let pg = Arc::new(Postgres::open(&store, config.pg_pool_size, config.max_vertices, config.store_cache_bytes)?);
+        return Ok(Backend { shapes: pg.clone(), fingerprints: pg.clone(), results: pg.clone(), queue: pg });
     }
     Err(std::io::Error::new(
         std::io::ErrorKind::InvalidInput,
@@ -116,6 +122,10 @@ pub trait ShapeStore: Send + Sync {
     fn remove(&self, id: &str) -> bool;
     /// Whether the storage answers (for readiness).
     fn healthy(&self) -> bool;
+    /// A connection pool's size, idle connections and waiting callers, where the store has one.
+    fn pool_status(&self) -> Option<(usize, usize, usize)> {
+        None
+    }
 }
 
 /// Shape-DNA fingerprints of stored shapes, by family (the parameters they were computed with), kept as shapes
@@ -152,6 +162,49 @@ impl StoredResult {
         let summary_body = serde_json::to_vec(&light).unwrap_or_default().into();
         StoredResult { id: id.to_string(), etag: etag_of(&body), summary, arrays, body: body.into(), summary_body }
     }
+}
+
+impl StoredResult {
+    /// A stored body read back: its summary and the arrays whose values it carries.
+    pub fn parse(id: &str, body: Vec<u8>) -> Option<Self> {
+        let summary: Value = serde_json::from_slice(&body).ok()?;
+        let mut arrays = vec![];
+        if let Some(map) = summary.get("arrays").and_then(Value::as_object) {
+            for (name, a) in map {
+                let rows = a["rows"].as_u64()? as usize;
+                let cols = a["cols"].as_u64()? as usize;
+                let data: Vec<f64> = a["values"]
+                    .as_array()?
+                    .iter()
+                    .flat_map(|r| r.as_array().cloned().unwrap_or_default())
+                    .map(|v| v.as_f64().unwrap_or(f64::NAN))
+                    .collect();
+                let columns =
+                    a["columns"].as_array().map(|c| c.iter().map(|v| v.as_f64().unwrap_or(f64::NAN)).collect());
+                let Some(name) = crate::analysis::ARRAY_NAMES.iter().copied().find(|n| n == name) else { continue };
+                arrays.push(VertexArray { name, rows, cols, data, columns });
+            }
+        }
+        Some(StoredResult::new(id, summary, arrays, body))
+    }
+}
+
+/// Bytes a result holds in memory, about.
+pub(crate) fn result_size(r: &StoredResult) -> usize {
+    r.body.len() + r.summary_body.len() + r.arrays.iter().map(|a| 8 * a.data.len()).sum::<usize>()
+}
+
+/// Bytes a parsed shape holds, about: its upload counts twice (geometry plus topology and the report).
+pub(crate) fn shape_size(s: &StoredShape) -> usize {
+    2 * s.bytes + 48 * s.validated.shape.vertex_count()
+}
+
+/// A stored upload parsed and validated again (after a restart, or on another replica).
+pub(crate) fn parse_shape(record: ShapeRecord, bytes: &[u8], max_vertices: usize) -> Option<StoredShape> {
+    let format = kac_core::Format::from_name(&record.format)?;
+    let read = kac_core::ReadOptions { max_vertices: max_vertices.max(1), ..Default::default() };
+    let validated = kac_core::load_bytes(bytes, format, &read, &Default::default()).ok()?;
+    Some(StoredShape { record, validated })
 }
 
 pub trait ResultStore: Send + Sync {

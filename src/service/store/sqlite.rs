@@ -46,11 +46,6 @@ fn migrate_jobs(conn: &rusqlite::Connection) -> std::io::Result<()> {
     Ok(())
 }
 
-/// Bytes a parsed shape holds, about: its upload counts twice (geometry plus topology and the report).
-fn shape_size(s: &StoredShape) -> usize {
-    2 * s.bytes + 48 * s.validated.shape.vertex_count()
-}
-
 const ID_LOCKS: usize = 64;
 
 fn db_err(e: rusqlite::Error) -> std::io::Error {
@@ -151,10 +146,7 @@ impl ShapeStore for Database {
         }
         let record = self.record(id)?;
         let bytes = std::fs::read(self.shape_dir.join(id)).ok()?;
-        let format = kac_core::Format::from_name(&record.format)?;
-        let read = kac_core::ReadOptions { max_vertices: self.max_vertices.max(1), ..Default::default() };
-        let validated = kac_core::load_bytes(&bytes, format, &read, &Default::default()).ok()?;
-        let s = Arc::new(StoredShape { record, validated });
+        let s = Arc::new(parse_shape(record, &bytes, self.max_vertices)?);
         // Cached only if still stored: a removal that ran while this parsed must not be undone by the cache.
         let _id = self.id_lock(id);
         self.record(id)?;
@@ -431,10 +423,6 @@ impl FileResults {
     }
 }
 
-fn result_size(r: &StoredResult) -> usize {
-    r.body.len() + r.summary_body.len() + r.arrays.iter().map(|a| 8 * a.data.len()).sum::<usize>()
-}
-
 /// Writes a file atomically: a temporary file beside it (named uniquely, so simultaneous writers of one path never
 /// share one), fsync, rename, fsync of the directory. Readers see the old file or the whole new one, never a part,
 /// and a crash at any moment leaves one of the two.
@@ -461,9 +449,46 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     Ok(())
 }
 
+/// Creates a file with these bytes unless it exists (false then): the bytes go to a temporary file beside it
+/// (fsync), which is hard-linked to the path (the link fails if the path exists, so of simultaneous writers one
+/// wins and the others leave it as it is), then removed; the directory is synced.
+pub fn write_once(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
+    if path.exists() {
+        return Ok(false);
+    }
+    static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = path.with_extension(format!("new.{}.{seq}", std::process::id()));
+    let linked = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        match std::fs::hard_link(&tmp, path) {
+            Ok(()) => Ok(true),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(false),
+            Err(e) => Err(e),
+        }
+    })();
+    let _ = std::fs::remove_file(&tmp);
+    if linked? {
+        if let Some(dir) = path.parent() {
+            if let Ok(d) = std::fs::File::open(dir) {
+                let _ = d.sync_all();
+            }
+        }
+        return Ok(true);
+    }
+    Ok(false)
+}
+
 impl ResultStore for FileResults {
     fn put(&self, result: StoredResult) -> std::io::Result<Arc<StoredResult>> {
-        write_atomic(&self.dir.join(format!("{}.json", result.id)), &result.body)?;
+        // Written once: a result already stored under the id (the same request computed again) stays.
+        if !write_once(&self.dir.join(format!("{}.json", result.id)), &result.body)? {
+            if let Some(stored) = self.get(&result.id) {
+                return Ok(stored);
+            }
+        }
         let r = Arc::new(result);
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(&r.id, r.clone(), result_size(&r));
         Ok(r)
@@ -477,25 +502,7 @@ impl ResultStore for FileResults {
             return None;
         }
         let body = std::fs::read(self.dir.join(format!("{id}.json"))).ok()?;
-        let summary: Value = serde_json::from_slice(&body).ok()?;
-        let mut arrays = vec![];
-        if let Some(map) = summary.get("arrays").and_then(Value::as_object) {
-            for (name, a) in map {
-                let rows = a["rows"].as_u64()? as usize;
-                let cols = a["cols"].as_u64()? as usize;
-                let data: Vec<f64> = a["values"]
-                    .as_array()?
-                    .iter()
-                    .flat_map(|r| r.as_array().cloned().unwrap_or_default())
-                    .map(|v| v.as_f64().unwrap_or(f64::NAN))
-                    .collect();
-                let columns =
-                    a["columns"].as_array().map(|c| c.iter().map(|v| v.as_f64().unwrap_or(f64::NAN)).collect());
-                let Some(name) = crate::analysis::ARRAY_NAMES.iter().copied().find(|n| n == name) else { continue };
-                arrays.push(VertexArray { name, rows, cols, data, columns });
-            }
-        }
-        let r = Arc::new(StoredResult::new(id, summary, arrays, body));
+        let r = Arc::new(StoredResult::parse(id, body)?);
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
         Some(r)
     }

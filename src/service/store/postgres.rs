@@ -1,0 +1,654 @@
+//! The shared backend: PostgreSQL holds shapes, fingerprints, results and the job queue for any number of
+//! replicas. Uploads and results are blobs in 1 MiB chunks (rows of `blobs`), written in the transaction that
+//! records them, so a record never names a missing blob. Jobs are claimed with `FOR UPDATE SKIP LOCKED` and a
+//! lease; every transition is announced with `NOTIFY kac_jobs, id` in its transaction, and each replica LISTENs on
+//! a connection of its own. Schema migrations are versioned and applied at start under an advisory lock, so
+//! replicas starting together migrate once.
+//!
+//! The service calls the store synchronously (handlers and workers alike); the client runs on a runtime of its
+//! own, and a call waits for its answer (inside the service's runtime by `block_in_place`, so the runtime's
+//! other tasks go on).
+
+use super::*;
+use crate::service::error::Problem;
+use crate::service::jobs::{now, JobProgress, Status};
+use deadpool_postgres::{Manager, ManagerConfig, Pool, RecyclingMethod};
+use std::future::Future;
+use std::time::Duration;
+use tokio::sync::broadcast;
+use tokio_postgres::NoTls;
+
+/// Bytes per blob row.
+const CHUNK: usize = 1 << 20;
+
+/// The schema, one migration per version, applied in order and recorded in `schema_migrations`.
+const MIGRATIONS: &[(i32, &str)] = &[(
+    1,
+    "CREATE TABLE shapes (
+         id text PRIMARY KEY, format text NOT NULL, created_at text NOT NULL, bytes bigint NOT NULL,
+         summary text NOT NULL);
+     CREATE TABLE blobs (
+         kind text NOT NULL, id text NOT NULL, seq integer NOT NULL, data bytea NOT NULL,
+         PRIMARY KEY (kind, id, seq));
+     CREATE TABLE results (
+         id text PRIMARY KEY, bytes bigint NOT NULL, chunks integer NOT NULL, etag text NOT NULL,
+         created_at timestamptz NOT NULL DEFAULT now());
+     CREATE TABLE fingerprints (
+         family text NOT NULL, shape_id text NOT NULL, fingerprint bytea NOT NULL,
+         PRIMARY KEY (family, shape_id));
+     CREATE SEQUENCE jobs_order;
+     CREATE TABLE jobs (
+         id text PRIMARY KEY, seq bigint NOT NULL DEFAULT nextval('jobs_order'), status text NOT NULL,
+         view text NOT NULL, owner text, lease_until timestamptz, cancel boolean NOT NULL DEFAULT false);
+     CREATE INDEX jobs_enqueued ON jobs (seq) WHERE status = 'enqueued';
+     CREATE INDEX jobs_processing ON jobs (lease_until) WHERE status = 'processing';
+     CREATE INDEX jobs_status ON jobs (status);",
+)];
+
+/// The advisory lock that serializes migrations (and queue admissions, as a transaction lock of its own key).
+const MIGRATION_LOCK: i64 = 0x6b61_6301;
+const ENQUEUE_LOCK: i64 = 0x6b61_6302;
+
+type PgResult<T> = std::result::Result<T, String>;
+
+fn pg(e: impl std::fmt::Display) -> String {
+    format!("postgres: {e}")
+}
+
+pub struct Postgres {
+    rt: Option<tokio::runtime::Runtime>,
+    pool: Pool,
+    changes: broadcast::Sender<String>,
+    parsed: Mutex<ByteLru<StoredShape>>,
+    results: Mutex<ByteLru<StoredResult>>,
+    max_vertices: usize,
+}
+
+impl Drop for Postgres {
+    fn drop(&mut self) {
+        // Allowed anywhere, also inside another runtime.
+        if let Some(rt) = self.rt.take() {
+            rt.shutdown_background();
+        }
+    }
+}
+
+impl Postgres {
+    /// Connects (a pool of `pool_size`, and one connection that listens), and migrates the schema.
+    pub fn open(url: &str, pool_size: usize, max_vertices: usize, cache_bytes: usize) -> std::io::Result<Self> {
+        let config: tokio_postgres::Config =
+            url.parse().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("{url}: {e}")))?;
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("kac-postgres")
+            .enable_all()
+            .build()?;
+        let manager =
+            Manager::from_config(config.clone(), NoTls, ManagerConfig { recycling_method: RecyclingMethod::Fast });
+        let pool = Pool::builder(manager)
+            .max_size(pool_size.max(1))
+            .runtime(deadpool_postgres::Runtime::Tokio1)
+            .wait_timeout(Some(Duration::from_secs(10)))
+            .create_timeout(Some(Duration::from_secs(5)))
+            .recycle_timeout(Some(Duration::from_secs(5)))
+            .build()
+            .map_err(std::io::Error::other)?;
+        let changes = broadcast::channel(4096).0;
+        let store = Postgres {
+            rt: Some(rt),
+            pool,
+            changes,
+            parsed: Mutex::new(ByteLru::new(cache_bytes)),
+            results: Mutex::new(ByteLru::new(cache_bytes)),
+            max_vertices,
+        };
+        store.run(|pool| async move { migrate(&pool).await })?;
+        let (tx, rt) = (store.changes.clone(), store.rt.as_ref().expect("the runtime lives as long as the store"));
+        rt.spawn(listen(config, tx));
+        Ok(store)
+    }
+
+    /// Runs `f` with the pool on the store's runtime and waits for its answer.
+    fn run<T, F, Fut>(&self, f: F) -> std::io::Result<T>
+    where
+        T: Send + 'static,
+        F: FnOnce(Pool) -> Fut,
+        Fut: Future<Output = PgResult<T>> + Send + 'static,
+    {
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        let fut = f(self.pool.clone());
+        self.rt.as_ref().expect("the runtime lives as long as the store").spawn(async move {
+            let _ = tx.send(fut.await);
+        });
+        let wait = || rx.recv();
+        let answer = match tokio::runtime::Handle::try_current() {
+            Ok(h) if h.runtime_flavor() == tokio::runtime::RuntimeFlavor::MultiThread => {
+                tokio::task::block_in_place(wait)
+            }
+            _ => wait(),
+        };
+        answer.map_err(|_| std::io::Error::other("postgres: the query's task ended"))?.map_err(std::io::Error::other)
+    }
+
+    /// The pool's size, idle connections and callers waiting (for `/metrics`).
+    pub fn pool_status(&self) -> (usize, usize, usize) {
+        let s = self.pool.status();
+        (s.size, s.available, s.waiting)
+    }
+}
+
+/// Applies the missing migrations, one transaction each, under the migration lock.
+async fn migrate(pool: &Pool) -> PgResult<()> {
+    let mut c = pool.get().await.map_err(pg)?;
+    c.execute("SELECT pg_advisory_lock($1)", &[&MIGRATION_LOCK]).await.map_err(pg)?;
+    let result = async {
+        c.batch_execute(
+            "CREATE TABLE IF NOT EXISTS schema_migrations (
+                 version integer PRIMARY KEY, applied_at timestamptz NOT NULL DEFAULT now())",
+        )
+        .await
+        .map_err(pg)?;
+        for &(version, sql) in MIGRATIONS {
+            let done = c
+                .query_opt("SELECT 1 FROM schema_migrations WHERE version = $1", &[&version])
+                .await
+                .map_err(pg)?
+                .is_some();
+            if done {
+                continue;
+            }
+            let tx = c.transaction().await.map_err(pg)?;
+            tx.batch_execute(sql).await.map_err(|e| format!("migration {version}: {e}"))?;
+            tx.execute("INSERT INTO schema_migrations (version) VALUES ($1)", &[&version]).await.map_err(pg)?;
+            tx.commit().await.map_err(pg)?;
+            tracing::info!(version, "applied a schema migration");
+        }
+        Ok(())
+    }
+    .await;
+    let _ = c.execute("SELECT pg_advisory_unlock($1)", &[&MIGRATION_LOCK]).await;
+    result
+}
+
+/// Listens for `kac_jobs` notifications on a connection of its own and forwards the job ids; reconnects (every
+/// half second) while the server is away, and announces `*` after a reconnection (changes may have been missed).
+async fn listen(config: tokio_postgres::Config, tx: broadcast::Sender<String>) {
+    loop {
+        match config.connect(NoTls).await {
+            Ok((client, mut connection)) => {
+                let (ntx, mut nrx) = tokio::sync::mpsc::unbounded_channel();
+                let conn = tokio::spawn(async move {
+                    let mut messages = futures_util::stream::poll_fn(move |cx| connection.poll_message(cx));
+                    use futures_util::StreamExt;
+                    while let Some(Ok(m)) = messages.next().await {
+                        if let tokio_postgres::AsyncMessage::Notification(n) = m {
+                            let _ = ntx.send(n.payload().to_string());
+                        }
+                    }
+                });
+                if client.batch_execute("LISTEN kac_jobs").await.is_ok() {
+                    let _ = tx.send("*".into());
+                    while let Some(id) = nrx.recv().await {
+                        let _ = tx.send(id);
+                    }
+                }
+                conn.abort();
+            }
+            Err(e) => tracing::warn!(error = %e, "cannot listen for job changes; retrying"),
+        }
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    }
+}
+
+fn to_i64(n: usize) -> i64 {
+    i64::try_from(n).unwrap_or(i64::MAX)
+}
+
+fn view_of(text: &str) -> PgResult<JobView> {
+    serde_json::from_str(text).map_err(|e| format!("a stored job view does not parse: {e}"))
+}
+
+fn text_of(v: &JobView) -> PgResult<String> {
+    serde_json::to_string(v).map_err(|e| e.to_string())
+}
+
+/// A blob's chunks, inserted in the caller's transaction.
+async fn put_blob(tx: &deadpool_postgres::Transaction<'_>, kind: &str, id: &str, bytes: &[u8]) -> PgResult<i32> {
+    let st = tx.prepare_cached("INSERT INTO blobs (kind, id, seq, data) VALUES ($1, $2, $3, $4)").await.map_err(pg)?;
+    let mut n = 0i32;
+    for chunk in bytes.chunks(CHUNK) {
+        tx.execute(&st, &[&kind, &id, &n, &chunk]).await.map_err(pg)?;
+        n += 1;
+    }
+    Ok(n)
+}
+
+async fn get_blob(c: &deadpool_postgres::Client, kind: &str, id: &str) -> PgResult<Vec<u8>> {
+    let rows =
+        c.query("SELECT data FROM blobs WHERE kind = $1 AND id = $2 ORDER BY seq", &[&kind, &id]).await.map_err(pg)?;
+    let mut out = Vec::with_capacity(rows.iter().map(|r| r.get::<_, &[u8]>(0).len()).sum());
+    for r in &rows {
+        out.extend_from_slice(r.get::<_, &[u8]>(0));
+    }
+    Ok(out)
+}
+
+fn record_of(r: &tokio_postgres::Row) -> ShapeRecord {
+    ShapeRecord {
+        id: r.get(0),
+        format: r.get(1),
+        created_at: r.get(2),
+        bytes: r.get::<_, i64>(3) as usize,
+        summary: serde_json::from_str(r.get::<_, &str>(4)).unwrap_or(Value::Null),
+    }
+}
+
+impl ShapeStore for Postgres {
+    fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)> {
+        let r = shape.record.clone();
+        let bytes = original.to_vec();
+        // The record and its upload in one transaction; a concurrent upload of the same id waits on the key and
+        // then finds it stored.
+        let inserted = self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let n = tx
+                .execute(
+                    "INSERT INTO shapes (id, format, created_at, bytes, summary) VALUES ($1, $2, $3, $4, $5)
+                     ON CONFLICT (id) DO NOTHING",
+                    &[&r.id, &r.format, &r.created_at, &to_i64(r.bytes), &r.summary.to_string()],
+                )
+                .await
+                .map_err(pg)?;
+            if n == 0 {
+                return Ok(false);
+            }
+            tx.execute("DELETE FROM blobs WHERE kind = 'shape' AND id = $1", &[&r.id]).await.map_err(pg)?;
+            put_blob(&tx, "shape", &r.id, &bytes).await?;
+            tx.commit().await.map_err(pg)?;
+            Ok(true)
+        })?;
+        if inserted {
+            let s = Arc::new(shape);
+            self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(&s.id, s.clone(), shape_size(&s));
+            return Ok((true, s));
+        }
+        match ShapeStore::get(self, &shape.id) {
+            Some(s) => Ok((false, s)),
+            None => Err(std::io::Error::other("the stored shape cannot be read back")),
+        }
+    }
+    fn get(&self, id: &str) -> Option<Arc<StoredShape>> {
+        if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
+            return Some(s);
+        }
+        let key = id.to_string();
+        let (record, bytes) = self
+            .run(move |pool| async move {
+                let c = pool.get().await.map_err(pg)?;
+                let Some(row) = c
+                    .query_opt("SELECT id, format, created_at, bytes, summary FROM shapes WHERE id = $1", &[&key])
+                    .await
+                    .map_err(pg)?
+                else {
+                    return Ok(None);
+                };
+                Ok(Some((record_of(&row), get_blob(&c, "shape", &key).await?)))
+            })
+            .ok()
+            .flatten()?;
+        let s = Arc::new(parse_shape(record, &bytes, self.max_vertices)?);
+        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(id, s.clone(), shape_size(&s));
+        Some(s)
+    }
+    fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize) {
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let total: i64 = c.query_one("SELECT COUNT(*) FROM shapes", &[]).await.map_err(pg)?.get(0);
+            let rows = c
+                .query(
+                    "SELECT id, format, created_at, bytes, summary FROM shapes ORDER BY id LIMIT $1 OFFSET $2",
+                    &[&to_i64(limit), &to_i64(offset)],
+                )
+                .await
+                .map_err(pg)?;
+            Ok((rows.iter().map(record_of).collect(), total as usize))
+        })
+        .unwrap_or_default()
+    }
+    fn remove(&self, id: &str) -> bool {
+        let key = id.to_string();
+        let removed = self
+            .run(move |pool| async move {
+                let mut c = pool.get().await.map_err(pg)?;
+                let tx = c.transaction().await.map_err(pg)?;
+                let n = tx.execute("DELETE FROM shapes WHERE id = $1", &[&key]).await.map_err(pg)?;
+                tx.execute("DELETE FROM blobs WHERE kind = 'shape' AND id = $1", &[&key]).await.map_err(pg)?;
+                tx.execute("DELETE FROM fingerprints WHERE shape_id = $1", &[&key]).await.map_err(pg)?;
+                tx.commit().await.map_err(pg)?;
+                Ok(n > 0)
+            })
+            .unwrap_or(false);
+        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
+        removed
+    }
+    fn healthy(&self) -> bool {
+        self.run(|pool| async move {
+            let probe = async {
+                let c = pool.get().await.map_err(pg)?;
+                c.query_one("SELECT 1", &[]).await.map_err(pg)?;
+                Ok(())
+            };
+            tokio::time::timeout(Duration::from_secs(2), probe)
+                .await
+                .map_err(|_| "postgres: no answer in 2 s".to_string())?
+        })
+        .is_ok()
+    }
+    fn pool_status(&self) -> Option<(usize, usize, usize)> {
+        Some(Postgres::pool_status(self))
+    }
+}
+
+impl FingerprintStore for Postgres {
+    fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool> {
+        let blob: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let (family, shape_id) = (family.to_string(), shape_id.to_string());
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let n = c
+                .execute(
+                    "INSERT INTO fingerprints (family, shape_id, fingerprint)
+                     SELECT $1, $2, $3 WHERE EXISTS (SELECT 1 FROM shapes WHERE id = $2)
+                     ON CONFLICT (family, shape_id) DO UPDATE SET fingerprint = excluded.fingerprint",
+                    &[&family, &shape_id, &blob],
+                )
+                .await
+                .map_err(pg)?;
+            Ok(n > 0)
+        })
+    }
+    fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>> {
+        self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let rows = c.query("SELECT family, shape_id, fingerprint FROM fingerprints", &[]).await.map_err(pg)?;
+            Ok(rows
+                .iter()
+                .map(|r| {
+                    let blob: &[u8] = r.get(2);
+                    let values =
+                        blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect();
+                    (r.get(0), r.get(1), values)
+                })
+                .collect())
+        })
+    }
+}
+
+impl ResultStore for Postgres {
+    fn put(&self, result: StoredResult) -> std::io::Result<Arc<StoredResult>> {
+        let r = Arc::new(result);
+        let (id, etag, body) = (r.id.clone(), r.etag.clone(), r.body.clone());
+        // Written once: a second write of the same id (the same request computed again after a lost claim) finds
+        // the row and writes nothing.
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let n = tx
+                .execute(
+                    "INSERT INTO results (id, bytes, chunks, etag) VALUES ($1, $2, $3, $4) ON CONFLICT (id) DO NOTHING",
+                    &[&id, &to_i64(body.len()), &(body.len().div_ceil(CHUNK) as i32), &etag],
+                )
+                .await
+                .map_err(pg)?;
+            if n > 0 {
+                put_blob(&tx, "result", &id, &body).await?;
+                tx.commit().await.map_err(pg)?;
+            }
+            Ok(())
+        })?;
+        self.results.lock().unwrap_or_else(|e| e.into_inner()).put(&r.id, r.clone(), result_size(&r));
+        Ok(r)
+    }
+    fn get(&self, id: &str) -> Option<Arc<StoredResult>> {
+        if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
+            return Some(r);
+        }
+        let key = id.to_string();
+        let body = self
+            .run(move |pool| async move {
+                let c = pool.get().await.map_err(pg)?;
+                let exists = c.query_opt("SELECT 1 FROM results WHERE id = $1", &[&key]).await.map_err(pg)?.is_some();
+                if !exists {
+                    return Ok(None);
+                }
+                Ok(Some(get_blob(&c, "result", &key).await?))
+            })
+            .ok()
+            .flatten()?;
+        let r = Arc::new(StoredResult::parse(id, body)?);
+        self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
+        Some(r)
+    }
+}
+
+/// `UPDATE … SET lease_until = now() + lease`: the lease in seconds as a bind parameter.
+fn secs(d: Duration) -> f64 {
+    d.as_secs_f64()
+}
+
+impl JobQueue for Postgres {
+    fn enqueue(&self, view: JobView, capacity: usize) -> std::io::Result<Enqueued> {
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            // Admissions one at a time, so that the capacity holds across replicas.
+            tx.execute("SELECT pg_advisory_xact_lock($1)", &[&ENQUEUE_LOCK]).await.map_err(pg)?;
+            if let Some(row) =
+                tx.query_opt("SELECT view FROM jobs WHERE id = $1 FOR UPDATE", &[&view.id]).await.map_err(pg)?
+            {
+                let old = view_of(row.get(0))?;
+                if !matches!(old.status, Status::Failed | Status::Canceled) {
+                    return Ok(Enqueued::Existing(old));
+                }
+            }
+            let active: i64 = tx
+                .query_one("SELECT COUNT(*) FROM jobs WHERE status IN ('enqueued', 'processing')", &[])
+                .await
+                .map_err(pg)?
+                .get(0);
+            if active as usize >= capacity {
+                return Ok(Enqueued::Full);
+            }
+            tx.execute(
+                "INSERT INTO jobs (id, status, view) VALUES ($1, 'enqueued', $2)
+                 ON CONFLICT (id) DO UPDATE SET status = 'enqueued', view = excluded.view, owner = NULL,
+                 lease_until = NULL, cancel = false, seq = nextval('jobs_order')",
+                &[&view.id, &text_of(&view)?],
+            )
+            .await
+            .map_err(pg)?;
+            tx.execute("SELECT pg_notify('kac_jobs', $1)", &[&view.id]).await.map_err(pg)?;
+            tx.commit().await.map_err(pg)?;
+            Ok(Enqueued::New(view))
+        })
+    }
+    fn claim(&self, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
+        let owner = owner.to_string();
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let Some(row) = tx
+                .query_opt(
+                    "SELECT id, view FROM jobs WHERE status = 'enqueued' ORDER BY seq LIMIT 1 FOR UPDATE SKIP LOCKED",
+                    &[],
+                )
+                .await
+                .map_err(pg)?
+            else {
+                return Ok(None);
+            };
+            let id: String = row.get(0);
+            let mut view = view_of(row.get(1))?;
+            view.status = Status::Processing;
+            view.started_at = Some(now());
+            view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
+            tx.execute(
+                "UPDATE jobs SET status = 'processing', owner = $2, cancel = false, view = $3,
+                 lease_until = now() + make_interval(secs => $4) WHERE id = $1",
+                &[&id, &owner, &text_of(&view)?, &secs(lease)],
+            )
+            .await
+            .map_err(pg)?;
+            tx.execute("SELECT pg_notify('kac_jobs', $1)", &[&id]).await.map_err(pg)?;
+            tx.commit().await.map_err(pg)?;
+            Ok(Some(view))
+        })
+    }
+    fn heartbeat(&self, id: &str, owner: &str, progress: &JobProgress, lease: Duration) -> std::io::Result<Lease> {
+        let (id, owner, progress) = (id.to_string(), owner.to_string(), progress.clone());
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let Some(row) = tx
+                .query_opt(
+                    "SELECT view, cancel FROM jobs WHERE id = $1 AND owner = $2 AND status = 'processing' FOR UPDATE",
+                    &[&id, &owner],
+                )
+                .await
+                .map_err(pg)?
+            else {
+                return Ok(Lease::Lost);
+            };
+            let mut view = view_of(row.get(0))?;
+            let cancel: bool = row.get(1);
+            let moved = view.progress.phase != progress.phase || view.progress.converged != progress.converged;
+            view.progress = progress;
+            tx.execute(
+                "UPDATE jobs SET view = $2, lease_until = now() + make_interval(secs => $3) WHERE id = $1",
+                &[&id, &text_of(&view)?, &secs(lease)],
+            )
+            .await
+            .map_err(pg)?;
+            if moved {
+                tx.execute("SELECT pg_notify('kac_jobs', $1)", &[&id]).await.map_err(pg)?;
+            }
+            tx.commit().await.map_err(pg)?;
+            Ok(Lease::Held { cancel })
+        })
+    }
+    fn finish(&self, id: &str, owner: &str, view: &JobView) -> std::io::Result<bool> {
+        let (id, owner, view) = (id.to_string(), owner.to_string(), view.clone());
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let n = tx
+                .execute(
+                    "UPDATE jobs SET status = $3, view = $4, owner = NULL, lease_until = NULL
+                     WHERE id = $1 AND owner = $2 AND status = 'processing'",
+                    &[&id, &owner, &view.status.name(), &text_of(&view)?],
+                )
+                .await
+                .map_err(pg)?;
+            if n > 0 {
+                tx.execute("SELECT pg_notify('kac_jobs', $1)", &[&id]).await.map_err(pg)?;
+            }
+            tx.commit().await.map_err(pg)?;
+            Ok(n > 0)
+        })
+    }
+    fn cancel(&self, id: &str, problem: &Problem) -> std::io::Result<Option<JobView>> {
+        let (id, problem) = (id.to_string(), problem.clone());
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let Some(row) = tx.query_opt("SELECT view FROM jobs WHERE id = $1 FOR UPDATE", &[&id]).await.map_err(pg)?
+            else {
+                return Ok(None);
+            };
+            let mut view = view_of(row.get(0))?;
+            match view.status {
+                Status::Enqueued => {
+                    view.status = Status::Canceled;
+                    view.finished_at = Some(now());
+                    view.error = Some(problem);
+                    tx.execute(
+                        "UPDATE jobs SET status = 'canceled', view = $2 WHERE id = $1",
+                        &[&id, &text_of(&view)?],
+                    )
+                    .await
+                    .map_err(pg)?;
+                }
+                Status::Processing => {
+                    tx.execute("UPDATE jobs SET cancel = true WHERE id = $1", &[&id]).await.map_err(pg)?;
+                }
+                _ => return Ok(Some(view)),
+            }
+            tx.execute("SELECT pg_notify('kac_jobs', $1)", &[&id]).await.map_err(pg)?;
+            tx.commit().await.map_err(pg)?;
+            Ok(Some(view))
+        })
+    }
+    fn requeue_expired(&self) -> std::io::Result<Vec<String>> {
+        self.run(|pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let rows = tx
+                .query(
+                    "SELECT id, view FROM jobs WHERE status = 'processing' AND lease_until < now()
+                     FOR UPDATE SKIP LOCKED",
+                    &[],
+                )
+                .await
+                .map_err(pg)?;
+            let mut ids = vec![];
+            for row in rows {
+                let id: String = row.get(0);
+                let mut view = view_of(row.get(1))?;
+                view.status = Status::Enqueued;
+                view.started_at = None;
+                view.progress = JobProgress { phase: "requeued".into(), converged: 0, wanted: 0 };
+                tx.execute(
+                    "UPDATE jobs SET status = 'enqueued', owner = NULL, lease_until = NULL, view = $2 WHERE id = $1",
+                    &[&id, &text_of(&view)?],
+                )
+                .await
+                .map_err(pg)?;
+                tx.execute("SELECT pg_notify('kac_jobs', $1)", &[&id]).await.map_err(pg)?;
+                ids.push(id);
+            }
+            tx.commit().await.map_err(pg)?;
+            Ok(ids)
+        })
+    }
+    fn recover(&self) -> std::io::Result<usize> {
+        // Other replicas may be running jobs: only claims whose lease expired are taken back.
+        self.requeue_expired()?;
+        Ok(self.depth()?.0)
+    }
+    fn get(&self, id: &str) -> std::io::Result<Option<JobView>> {
+        let id = id.to_string();
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let row = c.query_opt("SELECT view FROM jobs WHERE id = $1", &[&id]).await.map_err(pg)?;
+            row.map(|r| view_of(r.get(0))).transpose()
+        })
+    }
+    fn list(&self) -> std::io::Result<Vec<JobView>> {
+        self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let rows = c.query("SELECT view FROM jobs ORDER BY seq", &[]).await.map_err(pg)?;
+            Ok(rows.iter().filter_map(|r| view_of(r.get(0)).ok()).collect())
+        })
+    }
+    fn counts(&self) -> std::io::Result<Vec<(String, usize)>> {
+        self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let rows = c.query("SELECT status, COUNT(*) FROM jobs GROUP BY status", &[]).await.map_err(pg)?;
+            Ok(rows.iter().map(|r| (r.get::<_, String>(0), r.get::<_, i64>(1) as usize)).collect())
+        })
+    }
+    fn changes(&self) -> broadcast::Receiver<String> {
+        self.changes.subscribe()
+    }
+}

@@ -1,0 +1,200 @@
+//! The store conformance tests: one behaviour list run against each backend (the embedded SQLite store here, a
+//! real PostgreSQL cluster started by the test for the shared one). Shapes are stored once per id and read back
+//! parsed; fingerprints only for stored shapes; results written once; the job queue admits one job per id within
+//! its capacity, hands each job to one claim, fences a finish by its claim, cancels, requeues expired claims and
+//! announces every change.
+
+#[path = "support/pg.rs"]
+mod pg;
+
+use clap::Parser;
+use kac::service::config::Config;
+use kac::service::error::ApiError;
+use kac::service::jobs::{JobProgress, JobView, Status};
+use kac::service::store::{self, Backend, Enqueued, Lease, ShapeRecord, StoredResult, StoredShape};
+use serde_json::json;
+use std::time::Duration;
+
+#[derive(Parser)]
+struct Args {
+    #[command(flatten)]
+    config: Config,
+}
+
+fn backend(dir: &std::path::Path, store_url: Option<&str>) -> Backend {
+    let mut args = vec!["kac".to_string(), "--data-dir".into(), dir.display().to_string()];
+    if let Some(url) = store_url {
+        args.extend(["--store".into(), url.to_string()]);
+    }
+    store::open(&Args::parse_from(args).config).unwrap()
+}
+
+fn shape(level: u32) -> (StoredShape, Vec<u8>) {
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(level)).into_bytes();
+    let validated =
+        kac_core::load_bytes(&off, kac_core::Format::Off, &Default::default(), &Default::default()).unwrap();
+    let record = ShapeRecord {
+        id: validated.id.hex(),
+        format: "off".into(),
+        created_at: "2026-01-01T00:00:00.000Z".into(),
+        bytes: off.len(),
+        summary: json!({ "vertices": validated.shape.vertex_count() }),
+    };
+    (StoredShape { record, validated }, off)
+}
+
+fn job(id: &str) -> JobView {
+    JobView {
+        id: id.into(),
+        shape_id: "s".into(),
+        analysis: "spectrum".into(),
+        status: Status::Enqueued,
+        progress: JobProgress { phase: "queued".into(), converged: 0, wanted: 0 },
+        created_at: "2026-01-01T00:00:00.000Z".into(),
+        started_at: None,
+        finished_at: None,
+        error: None,
+        result: None,
+        request: json!({ "analysis": "spectrum", "k": 3 }),
+    }
+}
+
+fn problem() -> kac::service::error::Problem {
+    ApiError::Canceled.problem().1
+}
+
+/// Every behaviour of the store interface, on one backend. `reopen` opens the same store again (a restart, or
+/// another replica).
+fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
+    // Shapes: stored once per id, read back (parsed again by a fresh store), listed, removed.
+    let (s, off) = shape(2);
+    let id = s.id.clone();
+    let (new, stored) = b.shapes.insert(s, &off).unwrap();
+    assert!(new);
+    let (again, existing) = b.shapes.insert(shape(2).0, &off).unwrap();
+    assert!(!again, "a second insert of the same id stores nothing");
+    assert_eq!(existing.id, stored.id);
+    let other = reopen();
+    let read = other.shapes.get(&id).expect("read back by a fresh store");
+    assert_eq!(read.validated.shape.vertex_count(), 162);
+    let (page, total) = other.shapes.list(0, 10);
+    assert_eq!((page.len(), total, page[0].id.as_str()), (1, 1, id.as_str()));
+    assert!(b.shapes.healthy());
+
+    // Fingerprints: kept for stored shapes only, replaced per (family, shape), gone with the shape.
+    assert!(b.fingerprints.put_fingerprint("fam", &id, &[1.0, 2.5]).unwrap());
+    assert!(b.fingerprints.put_fingerprint("fam", &id, &[1.0, 3.5]).unwrap());
+    assert!(!b.fingerprints.put_fingerprint("fam", "not-stored", &[1.0]).unwrap());
+    assert_eq!(other.fingerprints.load_fingerprints().unwrap(), vec![("fam".into(), id.clone(), vec![1.0, 3.5])]);
+
+    // Results: written once; a second write of the id changes nothing; read back by a fresh store.
+    let body = serde_json::to_vec(&json!({ "k": 1, "eigenvalues": [0.0] })).unwrap();
+    let r = b.results.put(StoredResult::new("abc1", json!({}), vec![], body.clone())).unwrap();
+    let second = serde_json::to_vec(&json!({ "k": 2 })).unwrap();
+    b.results.put(StoredResult::new("abc1", json!({}), vec![], second)).unwrap();
+    let back = reopen().results.get("abc1").expect("read back");
+    assert_eq!((&back.body[..], &back.etag), (&body[..], &r.etag), "the first write stays");
+    assert!(reopen().results.get("abc2").is_none());
+
+    // Removal takes the shape's fingerprints with it.
+    assert!(b.shapes.remove(&id));
+    assert!(!b.shapes.remove(&id));
+    assert!(reopen().shapes.get(&id).is_none());
+    assert!(reopen().fingerprints.load_fingerprints().unwrap().is_empty());
+
+    // The queue: one job per id, within capacity.
+    let q = &b.queue;
+    let mut changes = q.changes();
+    assert!(matches!(q.enqueue(job("j1"), 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job("j1"), 2).unwrap(), Enqueued::Existing(v) if v.status == Status::Enqueued));
+    assert!(matches!(q.enqueue(job("j2"), 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job("j3"), 2).unwrap(), Enqueued::Full));
+    assert_eq!(q.depth().unwrap(), (2, 0));
+    // Claims in submission order, each job to one claim.
+    let lease = Duration::from_secs(30);
+    let c1 = q.claim("r1:1", lease).unwrap().unwrap();
+    assert_eq!((c1.id.as_str(), c1.status, c1.started_at.is_some()), ("j1", Status::Processing, true));
+    let c2 = reopen().queue.claim("r2:1", lease).unwrap().unwrap();
+    assert_eq!(c2.id, "j2", "another replica gets the next job, not the claimed one");
+    assert!(q.claim("r1:2", lease).unwrap().is_none());
+    // Heartbeats carry progress and see a cancel asked for anywhere.
+    let p = JobProgress { phase: "iterating".into(), converged: 2, wanted: 3 };
+    assert_eq!(q.heartbeat("j1", "r1:1", &p, lease).unwrap(), Lease::Held { cancel: false });
+    assert_eq!(reopen().queue.get("j1").unwrap().unwrap().progress.converged, 2);
+    assert_eq!(q.heartbeat("j1", "r9:9", &p, lease).unwrap(), Lease::Lost, "not this claim's job");
+    let v = reopen().queue.cancel("j2", &problem()).unwrap().unwrap();
+    assert_eq!(v.status, Status::Processing, "a running job is asked to stop");
+    assert_eq!(q.heartbeat("j2", "r2:1", &p, lease).unwrap(), Lease::Held { cancel: true });
+    // A finish is fenced by its claim.
+    let mut done = c1.clone();
+    done.status = Status::Succeeded;
+    done.result = Some("/v1/results/j1".into());
+    assert!(!q.finish("j1", "r2:1", &done).unwrap(), "another claim cannot finish it");
+    assert!(q.finish("j1", "r1:1", &done).unwrap());
+    assert!(!q.finish("j1", "r1:1", &done).unwrap(), "finished once");
+    assert_eq!(reopen().queue.get("j1").unwrap().unwrap().status, Status::Succeeded);
+    assert!(matches!(q.enqueue(job("j1"), 9).unwrap(), Enqueued::Existing(v) if v.status == Status::Succeeded));
+    // An enqueued job is canceled at once, and may be enqueued again.
+    assert!(matches!(q.enqueue(job("j4"), 9).unwrap(), Enqueued::New(_)));
+    let v = q.cancel("j4", &problem()).unwrap().unwrap();
+    assert_eq!((v.status, v.error.as_ref().map(|p| p.code.as_str())), (Status::Canceled, Some("canceled")));
+    assert!(q.cancel("nope", &problem()).unwrap().is_none());
+    assert!(matches!(q.enqueue(job("j4"), 9).unwrap(), Enqueued::New(v) if v.status == Status::Enqueued));
+    // An expired claim goes back in the queue; its holder has lost it.
+    let c4 = q.claim("r1:3", Duration::from_millis(200)).unwrap().unwrap();
+    assert_eq!(c4.id, "j4");
+    std::thread::sleep(Duration::from_millis(1200));
+    assert_eq!(reopen().queue.requeue_expired().unwrap(), vec!["j4".to_string()]);
+    assert_eq!(q.heartbeat("j4", "r1:3", &p, lease).unwrap(), Lease::Lost);
+    assert!(!q.finish("j4", "r1:3", &done).unwrap());
+    assert_eq!(q.claim("r2:2", lease).unwrap().unwrap().id, "j4", "claimed again");
+    // Counts and the list.
+    let counts = q.counts().unwrap();
+    let of = |s: &str| counts.iter().find(|(n, _)| n == s).map_or(0, |c| c.1);
+    assert_eq!((of("succeeded"), of("processing")), (1, 2));
+    let ids: Vec<String> = q.list().unwrap().into_iter().map(|v| v.id).collect();
+    assert_eq!(ids.len(), 3);
+    // Every transition was announced.
+    let mut seen = std::collections::HashSet::new();
+    let t = std::time::Instant::now();
+    while seen.len() < 3 && t.elapsed() < Duration::from_secs(5) {
+        match changes.try_recv() {
+            Ok(id) => {
+                seen.insert(id);
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+    assert!(["j1", "j2", "j4"].iter().all(|id| seen.contains(*id)), "announced: {seen:?}");
+}
+
+#[test]
+fn the_embedded_store_conforms() {
+    let dir = tempfile::tempdir().unwrap();
+    let b = backend(dir.path(), None);
+    conformance(&b, &|| backend(dir.path(), None));
+}
+
+#[test]
+#[ignore = "needs PostgreSQL's server (scripts/test-all.sh installs it and runs this)"]
+fn the_postgres_store_conforms() {
+    let cluster = pg::Cluster::start("conformance");
+    let url = cluster.database("conformance");
+    let dir = tempfile::tempdir().unwrap();
+    let b = backend(dir.path(), Some(&url));
+    conformance(&b, &|| backend(dir.path(), Some(&url)));
+}
+
+#[test]
+#[ignore = "needs PostgreSQL's server (scripts/test-all.sh installs it and runs this)"]
+fn replicas_starting_together_migrate_once() {
+    let cluster = pg::Cluster::start("migrate");
+    let url = cluster.database("migrate");
+    let dir = tempfile::tempdir().unwrap();
+    let opened: Vec<Backend> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..3).map(|_| s.spawn(|| backend(dir.path(), Some(&url)))).collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert_eq!(opened.len(), 3);
+    assert_eq!(cluster.query("migrate", "SELECT count(*) FROM schema_migrations"), "1");
+}
