@@ -13,6 +13,7 @@ use kac::service::error::ApiError;
 use kac::service::jobs::{JobProgress, JobView, Status};
 use kac::service::store::{self, Backend, Enqueued, Lease, ShapeRecord, StoredResult, StoredShape};
 use serde_json::json;
+use std::sync::Arc;
 use std::time::Duration;
 
 #[derive(Parser)]
@@ -75,9 +76,9 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert!(!again, "a second insert of the same id stores nothing");
     assert_eq!(existing.id, stored.id);
     let other = reopen();
-    let read = other.shapes.get(&id).expect("read back by a fresh store");
+    let read = other.shapes.get(&id).unwrap().expect("read back by a fresh store");
     assert_eq!(read.validated.shape.vertex_count(), 162);
-    let (page, total) = other.shapes.list(0, 10);
+    let (page, total) = other.shapes.list(0, 10).unwrap();
     assert_eq!((page.len(), total, page[0].id.as_str()), (1, 1, id.as_str()));
     assert!(b.shapes.healthy());
 
@@ -89,17 +90,17 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
 
     // Results: written once; a second write of the id changes nothing; read back by a fresh store.
     let body = serde_json::to_vec(&json!({ "k": 1, "eigenvalues": [0.0] })).unwrap();
-    let r = b.results.put(StoredResult::new("abc1", json!({}), vec![], body.clone())).unwrap();
+    let r = b.results.put(Arc::new(StoredResult::new("abc1", json!({}), vec![], body.clone()))).unwrap();
     let second = serde_json::to_vec(&json!({ "k": 2 })).unwrap();
-    b.results.put(StoredResult::new("abc1", json!({}), vec![], second)).unwrap();
-    let back = reopen().results.get("abc1").expect("read back");
+    b.results.put(Arc::new(StoredResult::new("abc1", json!({}), vec![], second))).unwrap();
+    let back = reopen().results.get("abc1").unwrap().expect("read back");
     assert_eq!((&back.body[..], &back.etag), (&body[..], &r.etag), "the first write stays");
-    assert!(reopen().results.get("abc2").is_none());
+    assert!(reopen().results.get("abc2").unwrap().is_none());
 
     // Removal takes the shape's fingerprints with it.
-    assert!(b.shapes.remove(&id));
-    assert!(!b.shapes.remove(&id));
-    assert!(reopen().shapes.get(&id).is_none());
+    assert!(b.shapes.remove(&id).unwrap());
+    assert!(!b.shapes.remove(&id).unwrap());
+    assert!(reopen().shapes.get(&id).unwrap().is_none());
     assert!(reopen().fingerprints.load_fingerprints().unwrap().is_empty());
 
     // The queue: one job per id, within capacity.

@@ -79,9 +79,18 @@ impl Cluster {
         assert!(ok || what == "stop", "pg_ctl {what}: see {}", self.dir.join("log").display());
     }
     /// Stops and starts the server (connections are dropped; the data stays).
-    #[allow(dead_code)] // used by the replica test, not by the conformance tests
+    #[allow(dead_code)] // used by the replica tests, not by the conformance tests
     pub fn restart(&self) {
         self.ctl("restart");
+    }
+    /// Stops the server (`start_again` brings it back with its data).
+    #[allow(dead_code)]
+    pub fn stop(&self) {
+        self.ctl("stop");
+    }
+    #[allow(dead_code)]
+    pub fn start_again(&self) {
+        self.ctl("start");
     }
     /// A new empty database on the cluster; its URL.
     pub fn database(&self, name: &str) -> String {

@@ -4,7 +4,7 @@
 //! that job only.
 
 use super::error::{ApiError, Problem};
-use super::store::{Enqueued, JobQueue, Lease, ResultStore, StoredResult, StoredShape};
+use super::store::{Enqueued, JobQueue, Lease, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis, Hooks};
 use kac_core::spectrum::{Control, Progress};
@@ -18,7 +18,7 @@ use tokio::sync::{broadcast, watch};
 
 mod runner;
 use runner::canceled;
-pub use runner::{store_result, supervise};
+pub use runner::{result_of, supervise};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
@@ -388,18 +388,35 @@ pub fn recover(jobs: &Jobs) -> std::io::Result<usize> {
     jobs.queue.recover()
 }
 
+/// Why a claimed job's work cannot be made.
+enum NoWork {
+    /// Its request or shapes are gone: the job fails.
+    Gone(&'static str),
+    /// The store cannot be read now: the job is left to its lease, and another claim tries again.
+    Store(std::io::Error),
+}
+
 /// The work a claimed job names: its request parsed and its shapes read back from the store.
-fn work_of(state: &AppState, view: &JobView) -> Result<Work, &'static str> {
+fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
+    let shape = |id: &str, gone: &'static str| match state.shapes.get(id) {
+        Ok(Some(s)) => Ok(s),
+        Ok(None) => Err(NoWork::Gone(gone)),
+        Err(e) => Err(NoWork::Store(e)),
+    };
     if view.analysis == "compare" {
         let req = serde_json::from_value::<super::compare::CompareRequest>(view.request.clone())
-            .map_err(|_| "the stored request no longer parses")?;
-        let shapes: Option<Vec<_>> = req.shape_ids.iter().flatten().map(|id| state.shapes.get(id)).collect();
-        shapes.map(|s| Work::Compare(req, s)).ok_or("a shape of the comparison is no longer stored")
+            .map_err(|_| NoWork::Gone("the stored request no longer parses"))?;
+        let shapes = req
+            .shape_ids
+            .iter()
+            .flatten()
+            .map(|id| shape(id, "a shape of the comparison is no longer stored"))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Work::Compare(req, shapes))
     } else {
         let a = serde_json::from_value::<Analysis>(view.request.clone())
-            .map_err(|_| "the stored request no longer parses")?;
-        let shape = state.shapes.get(&view.shape_id).ok_or("the job's shape is no longer stored")?;
-        Ok(Work::Analysis(a, shape))
+            .map_err(|_| NoWork::Gone("the stored request no longer parses"))?;
+        Ok(Work::Analysis(a, shape(&view.shape_id, "the job's shape is no longer stored")?))
     }
 }
 

@@ -136,18 +136,25 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
     if job.stop.load(Ordering::SeqCst) {
         return stopped(state, job);
     }
-    if state.config.test_job_delay_ms > 0 {
-        std::thread::sleep(std::time::Duration::from_millis(state.config.test_job_delay_ms));
+    // Testing only: a wait before computing, in short steps that see the stop flag.
+    let delay = std::time::Instant::now() + Duration::from_millis(state.config.test_job_delay_ms);
+    while std::time::Instant::now() < delay {
+        std::thread::sleep(Duration::from_millis(20).min(delay.saturating_duration_since(std::time::Instant::now())));
         if job.stop.load(Ordering::SeqCst) {
             return stopped(state, job);
         }
     }
     let work = match work_of(state, &job.snapshot()) {
         Ok(w) => w,
-        Err(why) => {
+        Err(NoWork::Gone(why)) => {
             let (_, p) = ApiError::Internal { detail: format!("the job cannot run: {why}") }.problem();
             finish(state, job, Status::Failed, Some(p), None);
             return Some(Status::Failed);
+        }
+        Err(NoWork::Store(e)) => {
+            tracing::error!(job = %job.snapshot().id, error = %e, "cannot read the job's shapes; leaving it to its lease");
+            job.lost.store(true, Ordering::SeqCst);
+            return None;
         }
     };
     let progress = |p: Progress| {
@@ -199,16 +206,35 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
                 }
             }
             let id = job.snapshot().id;
-            match store_result(&*state.results, &id, out) {
-                Ok(_) => {
-                    finish(state, job, Status::Succeeded, None, Some(format!("/v1/results/{id}")));
-                    Some(Status::Succeeded)
-                }
-                Err(e) => {
-                    let (_, p) =
-                        ApiError::Internal { detail: format!("the result could not be stored: {e}") }.problem();
-                    finish(state, job, Status::Failed, Some(p), None);
-                    Some(Status::Failed)
+            // A store that is away for a moment (a restart) is waited for, as long as a lease lasts; then the claim
+            // is given up and the job runs again elsewhere, never failed for it.
+            let deadline = std::time::Instant::now() + state.jobs.lease;
+            let result = result_of(&out, &id).map(Arc::new);
+            loop {
+                match result
+                    .as_ref()
+                    .map_err(|e| std::io::Error::other(e.to_string()))
+                    .and_then(|r| state.results.put(r.clone()))
+                {
+                    Ok(_) => {
+                        finish(state, job, Status::Succeeded, None, Some(format!("/v1/results/{id}")));
+                        return Some(Status::Succeeded);
+                    }
+                    Err(e) if result.is_err() => {
+                        let (_, p) =
+                            ApiError::Internal { detail: format!("the result could not be stored: {e}") }.problem();
+                        finish(state, job, Status::Failed, Some(p), None);
+                        return Some(Status::Failed);
+                    }
+                    Err(e) if std::time::Instant::now() < deadline && !job.lost.load(Ordering::SeqCst) => {
+                        tracing::error!(job = %id, error = %e, "cannot store the result; retrying");
+                        std::thread::sleep(Duration::from_millis(500));
+                    }
+                    Err(e) => {
+                        tracing::error!(job = %id, error = %e, "cannot store the result; leaving the job to its lease");
+                        job.lost.store(true, Ordering::SeqCst);
+                        return None;
+                    }
                 }
             }
         }
@@ -234,9 +260,9 @@ pub(super) fn canceled() -> Problem {
     ApiError::Canceled.problem().1
 }
 
-/// Serializes a result (summary with every array inline) and stores it with its strong ETag.
-pub fn store_result(results: &dyn ResultStore, id: &str, out: analysis::Output) -> std::io::Result<Arc<StoredResult>> {
-    let mut summary = out.summary;
+/// Serializes a result (summary with every array inline), with its strong ETag.
+pub fn result_of(out: &analysis::Output, id: &str) -> std::io::Result<StoredResult> {
+    let mut summary = out.summary.clone();
     let mut arrays = serde_json::Map::new();
     for a in &out.arrays {
         arrays.insert(
@@ -256,5 +282,5 @@ pub fn store_result(results: &dyn ResultStore, id: &str, out: analysis::Output) 
         }
     }
     let body = serde_json::to_vec(&summary).map_err(std::io::Error::other)?;
-    results.put(StoredResult::new(id, summary, out.arrays, body))
+    Ok(StoredResult::new(id, summary, out.arrays.clone(), body))
 }

@@ -40,7 +40,11 @@ pub(crate) async fn create_job(
     body: Result<Json<Value>, JsonRejection>,
 ) -> Result<Response, ApiError> {
     let req: JobRequest = strict_body(&st, body, "JobRequest")?;
-    let shape = st.shapes.get(&req.shape_id).ok_or(ApiError::NotFound { what: "shape", id: req.shape_id.clone() })?;
+    let shape = st
+        .shapes
+        .get(&req.shape_id)
+        .map_err(store_error)?
+        .ok_or(ApiError::NotFound { what: "shape", id: req.shape_id.clone() })?;
     let (job, created) = jobs::submit(&st, shape, req.analysis)?;
     Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job))
 }
@@ -221,7 +225,11 @@ pub(crate) async fn answer_within(
     let view = wait_for(st, job, wait).await?;
     match view.status {
         Status::Succeeded => {
-            let r = st.results.get(&view.id).ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
+            let r = st
+                .results
+                .get(&view.id)
+                .map_err(store_error)?
+                .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
             Ok(with_location(result_response(&r, headers, true), &format!("/v1/results/{}", view.id)))
         }
         Status::Failed | Status::Canceled => {

@@ -16,7 +16,7 @@ pub(crate) use shapes::*;
 
 use super::compare::CompareRequest;
 use super::error::{problem_response, ApiError, CODES};
-use super::jobs::{self, JobView, Status};
+use super::jobs::{self, store_error, JobView, Status};
 use super::search::SearchRequest;
 use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;

@@ -53,7 +53,7 @@ pub(crate) async fn get_result(
     Query(q): Query<ResultQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let r = st.results.get(&id).ok_or(ApiError::NotFound { what: "result", id })?;
+    let r = st.results.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "result", id })?;
     Ok(result_response(&r, &headers, q.values.unwrap_or(true)))
 }
 
@@ -75,7 +75,7 @@ pub(crate) async fn get_array(
     Query(q): Query<ArrayQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let r = st.results.get(&id).ok_or(ApiError::NotFound { what: "result", id: id.clone() })?;
+    let r = st.results.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "result", id: id.clone() })?;
     let (name, ext) = file.rsplit_once('.').ok_or(ApiError::NotFound { what: "array", id: file.clone() })?;
     let a = r.arrays.iter().find(|a| a.name == name).ok_or(ApiError::NotFound { what: "array", id: file.clone() })?;
     let col = q.column.unwrap_or(0);
@@ -95,7 +95,11 @@ pub(crate) async fn get_array(
                 return Err(ApiError::invalid_request(format!("column {col} does not exist ({} columns)", a.cols)));
             }
             let shape_id = r.summary["shape_id"].as_str().unwrap_or("").to_string();
-            let shape = st.shapes.get(&shape_id).ok_or(ApiError::NotFound { what: "shape", id: shape_id })?;
+            let shape = st
+                .shapes
+                .get(&shape_id)
+                .map_err(store_error)?
+                .ok_or(ApiError::NotFound { what: "shape", id: shape_id })?;
             (coloured_ply(&shape, a, col), "application/x-ply")
         }
         _ => return Err(ApiError::NotFound { what: "array format", id: file }),

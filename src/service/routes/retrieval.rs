@@ -37,9 +37,22 @@ pub(crate) async fn compare(
         }
         Some(ids) => ids
             .iter()
-            .map(|id| st.shapes.get(id).ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() }))
+            .map(|id| {
+                st.shapes
+                    .get(id)
+                    .map_err(store_error)?
+                    .ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() })
+            })
             .collect::<Result<_, _>>()?,
-        None => st.shapes.list(0, max).0.iter().filter_map(|r| st.shapes.get(&r.id)).collect(),
+        None => {
+            let (records, _) = st.shapes.list(0, max).map_err(store_error)?;
+            let mut shapes = vec![];
+            for r in &records {
+                // A shape removed since the listing is left out.
+                shapes.extend(st.shapes.get(&r.id).map_err(store_error)?);
+            }
+            shapes
+        }
     };
     let (job, _) = jobs::submit_compare(&st, req, shapes)?;
     answer_within(&st, &job, q.wait, &headers).await
@@ -97,7 +110,11 @@ pub(crate) async fn search(
         (Some(id), None) => match st.index.get(&family, id) {
             Some(f) => f,
             None => {
-                let shape = st.shapes.get(id).ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() })?;
+                let shape = st
+                    .shapes
+                    .get(id)
+                    .map_err(store_error)?
+                    .ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() })?;
                 let dna = Analysis::ShapeDna {
                     options: req.options(),
                     operator: req.operator.clone(),
@@ -113,6 +130,7 @@ pub(crate) async fn search(
                         let r = st
                             .results
                             .get(&view.id)
+                            .map_err(store_error)?
                             .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
                         let values: Vec<f64> = serde_json::from_value(r.summary["shape_dna"]["values"].clone())
                             .map_err(|e| ApiError::Internal {

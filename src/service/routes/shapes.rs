@@ -202,12 +202,12 @@ pub struct Page {
 
 /// List stored shapes (id order).
 #[utoipa::path(get, path = "/v1/shapes", tag = "shapes", params(Page), responses((status = 200, description = "a page of shapes")))]
-pub(crate) async fn list_shapes(State(st): State<AppState>, Query(p): Query<Page>) -> Json<Value> {
+pub(crate) async fn list_shapes(State(st): State<AppState>, Query(p): Query<Page>) -> Result<Json<Value>, ApiError> {
     let limit = p.limit.unwrap_or(100).min(1000);
     let offset = p.offset.unwrap_or(0);
-    let (items, total) = st.shapes.list(offset, limit);
+    let (items, total) = st.shapes.list(offset, limit).map_err(store_error)?;
     let items: Vec<ShapeResource> = items.iter().map(shape_resource).collect();
-    Json(json!({ "total": total, "offset": offset, "limit": limit, "items": items }))
+    Ok(Json(json!({ "total": total, "offset": offset, "limit": limit, "items": items })))
 }
 
 /// A stored shape with its validation summary.
@@ -218,7 +218,11 @@ pub(crate) async fn get_shape(
     State(st): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<ShapeResource>, ApiError> {
-    st.shapes.get(&id).map(|s| Json(shape_resource(&s))).ok_or(ApiError::NotFound { what: "shape", id })
+    st.shapes
+        .get(&id)
+        .map_err(store_error)?
+        .map(|s| Json(shape_resource(&s)))
+        .ok_or(ApiError::NotFound { what: "shape", id })
 }
 
 /// Delete a stored shape (its finished results stay available by id).
@@ -226,7 +230,7 @@ pub(crate) async fn get_shape(
     responses((status = 204, description = "deleted"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn delete_shape(State(st): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
-    if st.shapes.remove(&id) {
+    if st.shapes.remove(&id).map_err(store_error)? {
         st.index.remove_shape(&id);
         Ok(StatusCode::NO_CONTENT)
     } else {

@@ -116,10 +116,12 @@ impl std::ops::Deref for StoredShape {
 pub trait ShapeStore: Send + Sync {
     /// Stores the shape (and its original bytes) unless one with its id exists; true if it was new.
     fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)>;
-    fn get(&self, id: &str) -> Option<Arc<StoredShape>>;
+    /// The shape, parsed (None: not stored; an error: the store cannot be read now).
+    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredShape>>>;
     /// Records in id order from `offset`, at most `limit`, and the total.
-    fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize);
-    fn remove(&self, id: &str) -> bool;
+    fn list(&self, offset: usize, limit: usize) -> std::io::Result<(Vec<ShapeRecord>, usize)>;
+    /// Removes the shape and its fingerprints (false: it was not stored).
+    fn remove(&self, id: &str) -> std::io::Result<bool>;
     /// Whether the storage answers (for readiness).
     fn healthy(&self) -> bool;
     /// A connection pool's size, idle connections and waiting callers, where the store has one.
@@ -208,8 +210,10 @@ pub(crate) fn parse_shape(record: ShapeRecord, bytes: &[u8], max_vertices: usize
 }
 
 pub trait ResultStore: Send + Sync {
-    fn put(&self, result: StoredResult) -> std::io::Result<Arc<StoredResult>>;
-    fn get(&self, id: &str) -> Option<Arc<StoredResult>>;
+    /// Stores a result unless one is stored under its id; the stored one.
+    fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>>;
+    /// The result (None: not stored; an error: the store cannot be read now).
+    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>>;
 }
 
 /// The strong ETag of a body: the first 128 bits of its SHA-256, quoted.

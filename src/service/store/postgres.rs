@@ -39,7 +39,8 @@ const MIGRATIONS: &[(i32, &str)] = &[(
      CREATE SEQUENCE jobs_order;
      CREATE TABLE jobs (
          id text PRIMARY KEY, seq bigint NOT NULL DEFAULT nextval('jobs_order'), status text NOT NULL,
-         view text NOT NULL, owner text, lease_until timestamptz, cancel boolean NOT NULL DEFAULT false);
+         view text NOT NULL, owner text, lease_until timestamptz, cancel boolean NOT NULL DEFAULT false,
+         claims integer NOT NULL DEFAULT 0);
      CREATE INDEX jobs_enqueued ON jobs (seq) WHERE status = 'enqueued';
      CREATE INDEX jobs_processing ON jobs (lease_until) WHERE status = 'processing';
      CREATE INDEX jobs_status ON jobs (status);",
@@ -273,35 +274,36 @@ impl ShapeStore for Postgres {
             self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(&s.id, s.clone(), shape_size(&s));
             return Ok((true, s));
         }
-        match ShapeStore::get(self, &shape.id) {
+        match ShapeStore::get(self, &shape.id)? {
             Some(s) => Ok((false, s)),
-            None => Err(std::io::Error::other("the stored shape cannot be read back")),
+            None => Err(std::io::Error::other("the stored shape was removed while it was stored again")),
         }
     }
-    fn get(&self, id: &str) -> Option<Arc<StoredShape>> {
+    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredShape>>> {
         if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
-            return Some(s);
+            return Ok(Some(s));
         }
         let key = id.to_string();
-        let (record, bytes) = self
-            .run(move |pool| async move {
-                let c = pool.get().await.map_err(pg)?;
-                let Some(row) = c
-                    .query_opt("SELECT id, format, created_at, bytes, summary FROM shapes WHERE id = $1", &[&key])
-                    .await
-                    .map_err(pg)?
-                else {
-                    return Ok(None);
-                };
-                Ok(Some((record_of(&row), get_blob(&c, "shape", &key).await?)))
-            })
-            .ok()
-            .flatten()?;
-        let s = Arc::new(parse_shape(record, &bytes, self.max_vertices)?);
+        let stored = self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let Some(row) = c
+                .query_opt("SELECT id, format, created_at, bytes, summary FROM shapes WHERE id = $1", &[&key])
+                .await
+                .map_err(pg)?
+            else {
+                return Ok(None);
+            };
+            Ok(Some((record_of(&row), get_blob(&c, "shape", &key).await?)))
+        })?;
+        let Some((record, bytes)) = stored else { return Ok(None) };
+        let s = Arc::new(
+            parse_shape(record, &bytes, self.max_vertices)
+                .ok_or_else(|| std::io::Error::other(format!("the stored shape {id} does not parse")))?,
+        );
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(id, s.clone(), shape_size(&s));
-        Some(s)
+        Ok(Some(s))
     }
-    fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize) {
+    fn list(&self, offset: usize, limit: usize) -> std::io::Result<(Vec<ShapeRecord>, usize)> {
         self.run(move |pool| async move {
             let c = pool.get().await.map_err(pg)?;
             let total: i64 = c.query_one("SELECT COUNT(*) FROM shapes", &[]).await.map_err(pg)?.get(0);
@@ -314,23 +316,20 @@ impl ShapeStore for Postgres {
                 .map_err(pg)?;
             Ok((rows.iter().map(record_of).collect(), total as usize))
         })
-        .unwrap_or_default()
     }
-    fn remove(&self, id: &str) -> bool {
+    fn remove(&self, id: &str) -> std::io::Result<bool> {
         let key = id.to_string();
-        let removed = self
-            .run(move |pool| async move {
-                let mut c = pool.get().await.map_err(pg)?;
-                let tx = c.transaction().await.map_err(pg)?;
-                let n = tx.execute("DELETE FROM shapes WHERE id = $1", &[&key]).await.map_err(pg)?;
-                tx.execute("DELETE FROM blobs WHERE kind = 'shape' AND id = $1", &[&key]).await.map_err(pg)?;
-                tx.execute("DELETE FROM fingerprints WHERE shape_id = $1", &[&key]).await.map_err(pg)?;
-                tx.commit().await.map_err(pg)?;
-                Ok(n > 0)
-            })
-            .unwrap_or(false);
+        let removed = self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let n = tx.execute("DELETE FROM shapes WHERE id = $1", &[&key]).await.map_err(pg)?;
+            tx.execute("DELETE FROM blobs WHERE kind = 'shape' AND id = $1", &[&key]).await.map_err(pg)?;
+            tx.execute("DELETE FROM fingerprints WHERE shape_id = $1", &[&key]).await.map_err(pg)?;
+            tx.commit().await.map_err(pg)?;
+            Ok(n > 0)
+        })?;
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
-        removed
+        Ok(removed)
     }
     fn healthy(&self) -> bool {
         self.run(|pool| async move {
@@ -386,8 +385,8 @@ impl FingerprintStore for Postgres {
 }
 
 impl ResultStore for Postgres {
-    fn put(&self, result: StoredResult) -> std::io::Result<Arc<StoredResult>> {
-        let r = Arc::new(result);
+    fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>> {
+        let r = result;
         let (id, etag, body) = (r.id.clone(), r.etag.clone(), r.body.clone());
         // Written once: a second write of the same id (the same request computed again after a lost claim) finds
         // the row and writes nothing.
@@ -410,25 +409,26 @@ impl ResultStore for Postgres {
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(&r.id, r.clone(), result_size(&r));
         Ok(r)
     }
-    fn get(&self, id: &str) -> Option<Arc<StoredResult>> {
+    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>> {
         if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
-            return Some(r);
+            return Ok(Some(r));
         }
         let key = id.to_string();
-        let body = self
-            .run(move |pool| async move {
-                let c = pool.get().await.map_err(pg)?;
-                let exists = c.query_opt("SELECT 1 FROM results WHERE id = $1", &[&key]).await.map_err(pg)?.is_some();
-                if !exists {
-                    return Ok(None);
-                }
-                Ok(Some(get_blob(&c, "result", &key).await?))
-            })
-            .ok()
-            .flatten()?;
-        let r = Arc::new(StoredResult::parse(id, body)?);
+        let body = self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let exists = c.query_opt("SELECT 1 FROM results WHERE id = $1", &[&key]).await.map_err(pg)?.is_some();
+            if !exists {
+                return Ok(None);
+            }
+            Ok(Some(get_blob(&c, "result", &key).await?))
+        })?;
+        let Some(body) = body else { return Ok(None) };
+        let r = Arc::new(
+            StoredResult::parse(id, body)
+                .ok_or_else(|| std::io::Error::other(format!("the stored result {id} does not parse")))?,
+        );
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
-        Some(r)
+        Ok(Some(r))
     }
 }
 
@@ -494,7 +494,7 @@ impl JobQueue for Postgres {
             view.started_at = Some(now());
             view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
             tx.execute(
-                "UPDATE jobs SET status = 'processing', owner = $2, cancel = false, view = $3,
+                "UPDATE jobs SET status = 'processing', owner = $2, cancel = false, view = $3, claims = claims + 1,
                  lease_until = now() + make_interval(secs => $4) WHERE id = $1",
                 &[&id, &owner, &text_of(&view)?, &secs(lease)],
             )

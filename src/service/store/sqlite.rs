@@ -89,9 +89,11 @@ impl Database {
         let h = id.bytes().take(8).fold(0usize, |h, b| h.wrapping_mul(31).wrapping_add(b as usize));
         self.id_locks[h % ID_LOCKS].lock().unwrap_or_else(|e| e.into_inner())
     }
-    fn record(&self, id: &str) -> Option<ShapeRecord> {
+    fn record(&self, id: &str) -> std::io::Result<Option<ShapeRecord>> {
         let c = self.conn();
-        c.query_row("SELECT id, format, created_at, bytes, summary FROM shapes WHERE id = ?1", [id], row_record).ok()
+        c.query_row("SELECT id, format, created_at, bytes, summary FROM shapes WHERE id = ?1", [id], row_record)
+            .optional()
+            .map_err(db_err)
     }
 }
 
@@ -116,7 +118,7 @@ impl ShapeStore for Database {
                 // One writer per id from the check to the record: the first upload's file and record win
                 // together, and every other caller gets the stored shape (in the first one's format) back.
                 let _id = self.id_lock(&shape.id);
-                if force || self.record(&shape.id).is_none() || !path.exists() {
+                if force || self.record(&shape.id)?.is_none() || !path.exists() {
                     // The upload first (atomically), then its record: a crash between leaves an unreferenced file
                     // only, which the next upload of that id replaces.
                     write_atomic(&path, original)?;
@@ -134,45 +136,50 @@ impl ShapeStore for Database {
                     return Ok((true, s));
                 }
             }
-            if let Some(existing) = ShapeStore::get(self, &shape.id) {
+            if let Some(existing) = ShapeStore::get(self, &shape.id)? {
                 return Ok((false, existing));
             }
         }
         unreachable!("the forced round stores the shape or returns its error")
     }
-    fn get(&self, id: &str) -> Option<Arc<StoredShape>> {
+    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredShape>>> {
         if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
-            return Some(s);
+            return Ok(Some(s));
         }
-        let record = self.record(id)?;
-        let bytes = std::fs::read(self.shape_dir.join(id)).ok()?;
-        let s = Arc::new(parse_shape(record, &bytes, self.max_vertices)?);
+        let Some(record) = self.record(id)? else { return Ok(None) };
+        // A record whose upload was lost (or no longer parses) is not a stored shape: the next upload of the id
+        // stores it again.
+        let bytes = match std::fs::read(self.shape_dir.join(id)) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        let Some(s) = parse_shape(record, &bytes, self.max_vertices) else { return Ok(None) };
+        let s = Arc::new(s);
         // Cached only if still stored: a removal that ran while this parsed must not be undone by the cache.
         let _id = self.id_lock(id);
-        self.record(id)?;
-        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(id, s.clone(), shape_size(&s));
-        Some(s)
-    }
-    fn list(&self, offset: usize, limit: usize) -> (Vec<ShapeRecord>, usize) {
-        let c = self.conn();
-        let total: i64 = c.query_row("SELECT COUNT(*) FROM shapes", [], |r| r.get(0)).unwrap_or(0);
-        let mut out = vec![];
-        if let Ok(mut st) =
-            c.prepare("SELECT id, format, created_at, bytes, summary FROM shapes ORDER BY id LIMIT ?1 OFFSET ?2")
-        {
-            if let Ok(rows) = st.query_map([limit as i64, offset as i64], row_record) {
-                out = rows.flatten().collect();
-            }
+        if self.record(id)?.is_none() {
+            return Ok(None);
         }
-        (out, total as usize)
+        self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(id, s.clone(), shape_size(&s));
+        Ok(Some(s))
     }
-    fn remove(&self, id: &str) -> bool {
+    fn list(&self, offset: usize, limit: usize) -> std::io::Result<(Vec<ShapeRecord>, usize)> {
+        let c = self.conn();
+        let total: i64 = c.query_row("SELECT COUNT(*) FROM shapes", [], |r| r.get(0)).map_err(db_err)?;
+        let mut st = c
+            .prepare("SELECT id, format, created_at, bytes, summary FROM shapes ORDER BY id LIMIT ?1 OFFSET ?2")
+            .map_err(db_err)?;
+        let rows = st.query_map([limit as i64, offset as i64], row_record).map_err(db_err)?;
+        Ok((rows.collect::<Result<_, _>>().map_err(db_err)?, total as usize))
+    }
+    fn remove(&self, id: &str) -> std::io::Result<bool> {
         let _id = self.id_lock(id);
-        let n = self.conn().execute("DELETE FROM shapes WHERE id = ?1", [id]).unwrap_or(0);
-        let _ = self.conn().execute("DELETE FROM fingerprints WHERE shape_id = ?1", [id]);
+        let n = self.conn().execute("DELETE FROM shapes WHERE id = ?1", [id]).map_err(db_err)?;
+        self.conn().execute("DELETE FROM fingerprints WHERE shape_id = ?1", [id]).map_err(db_err)?;
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
         let _ = std::fs::remove_file(self.shape_dir.join(id));
-        n > 0
+        Ok(n > 0)
     }
     fn healthy(&self) -> bool {
         self.conn().query_row("SELECT 1", [], |r| r.get::<_, i64>(0)).is_ok()
@@ -482,28 +489,35 @@ pub fn write_once(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
 }
 
 impl ResultStore for FileResults {
-    fn put(&self, result: StoredResult) -> std::io::Result<Arc<StoredResult>> {
+    fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>> {
         // Written once: a result already stored under the id (the same request computed again) stays.
         if !write_once(&self.dir.join(format!("{}.json", result.id)), &result.body)? {
-            if let Some(stored) = self.get(&result.id) {
+            if let Some(stored) = self.get(&result.id)? {
                 return Ok(stored);
             }
         }
-        let r = Arc::new(result);
+        let r = result;
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(&r.id, r.clone(), result_size(&r));
         Ok(r)
     }
-    fn get(&self, id: &str) -> Option<Arc<StoredResult>> {
+    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>> {
         if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
-            return Some(r);
+            return Ok(Some(r));
         }
         // After a restart: read the file back (its arrays carry their values).
         if !id.bytes().all(|b| b.is_ascii_hexdigit()) {
-            return None;
+            return Ok(None);
         }
-        let body = std::fs::read(self.dir.join(format!("{id}.json"))).ok()?;
-        let r = Arc::new(StoredResult::parse(id, body)?);
+        let body = match std::fs::read(self.dir.join(format!("{id}.json"))) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        let r = Arc::new(
+            StoredResult::parse(id, body)
+                .ok_or_else(|| std::io::Error::other(format!("the stored result {id} does not parse")))?,
+        );
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
-        Some(r)
+        Ok(Some(r))
     }
 }
