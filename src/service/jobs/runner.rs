@@ -66,7 +66,11 @@ pub fn supervise(state: AppState) {
                 job.stop.store(true, Ordering::SeqCst);
             }
             let due = match beats.get(&view.id) {
-                None => true,
+                // The claim itself set the lease: the first beat is due a third of a lease later.
+                None => {
+                    beats.insert(view.id.clone(), (std::time::Instant::now(), view.progress.clone()));
+                    false
+                }
                 Some((at, progress)) => {
                     at.elapsed() >= jobs.lease / 3
                         || (at.elapsed() >= Duration::from_secs(1) && progress.phase != view.progress.phase)
