@@ -301,3 +301,43 @@ fn readiness_follows_the_database_and_a_stopped_database_is_503_not_404() {
     }
     assert_eq!(call(agent().get(&r.url(&format!("/v1/shapes/{id}"))).call()).unwrap().0, 200);
 }
+
+#[test]
+#[ignore = "needs PostgreSQL's server (scripts/test-all.sh installs it and runs this)"]
+fn a_search_on_one_replica_sees_fingerprints_and_removals_made_on_another() {
+    let cluster = pg::Cluster::start("search");
+    let url = cluster.database("kac");
+    let a = Replica::start(Some(&url), &["--workers", "1"]);
+    let b = Replica::start(Some(&url), &["--workers", "1"]);
+    // Shapes and their fingerprints made through A, after B loaded its (empty) index.
+    let mut ids = vec![];
+    for l in [1, 2, 3] {
+        let (_, s, _) = call(agent().post(&a.url("/v1/shapes?format=off")).send_bytes(&off(l))).unwrap();
+        let id = s["id"].as_str().unwrap().to_string();
+        let req = json!({ "analysis": "shape-dna", "options": { "k": 5 } });
+        let uri = format!(
+            "/v1/analyze?wait=60&format=off&analysis={}",
+            form_urlencoded::byte_serialize(req.to_string().as_bytes()).collect::<String>()
+        );
+        let (st, r, _) = call(agent().post(&a.url(&uri)).send_bytes(&off(l))).unwrap();
+        assert_eq!(st, 200, "{r}");
+        ids.push(id);
+    }
+    let search = |shape: &str| {
+        let (st, r, _) =
+            call(agent().post(&b.url("/v1/search")).send_json(json!({ "shape_id": shape, "k": 5 }))).unwrap();
+        assert_eq!(st, 200, "{r}");
+        r
+    };
+    let r = search(&ids[2]);
+    assert_eq!(r["searched"], 3, "{r}");
+    let found: Vec<&str> =
+        r["neighbours"].as_array().unwrap().iter().map(|n| n["shape_id"].as_str().unwrap()).collect();
+    assert_eq!(found.len(), 2, "{r}");
+    // Removed through A: gone from B's answers.
+    let (st, _, _) = call(agent().delete(&a.url(&format!("/v1/shapes/{}", ids[0]))).call()).unwrap();
+    assert_eq!(st, 204);
+    let r = search(&ids[2]);
+    assert_eq!(r["searched"], 2, "{r}");
+    assert!(!r.to_string().contains(&ids[0]), "{r}");
+}

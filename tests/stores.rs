@@ -82,7 +82,9 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert_eq!((page.len(), total, page[0].id.as_str()), (1, 1, id.as_str()));
     assert!(b.shapes.healthy());
 
-    // Fingerprints: kept for stored shapes only, replaced per (family, shape), gone with the shape.
+    // Fingerprints: kept for stored shapes only, replaced per (family, shape), gone with the shape; every change
+    // logged for other replicas' indexes.
+    let log = b.fingerprints.fingerprint_log_end().unwrap();
     assert!(b.fingerprints.put_fingerprint("fam", &id, &[1.0, 2.5]).unwrap());
     assert!(b.fingerprints.put_fingerprint("fam", &id, &[1.0, 3.5]).unwrap());
     assert!(!b.fingerprints.put_fingerprint("fam", "not-stored", &[1.0]).unwrap());
@@ -102,6 +104,17 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert!(!b.shapes.remove(&id).unwrap());
     assert!(reopen().shapes.get(&id).unwrap().is_none());
     assert!(reopen().fingerprints.load_fingerprints().unwrap().is_empty());
+    let (changes, end) = reopen().fingerprints.fingerprint_changes(log).unwrap();
+    assert_eq!(
+        changes,
+        vec![
+            ("fam".to_string(), id.clone(), Some(vec![1.0, 2.5])),
+            ("fam".to_string(), id.clone(), Some(vec![1.0, 3.5])),
+            (String::new(), id.clone(), None),
+        ]
+    );
+    assert_eq!(b.fingerprints.fingerprint_log_end().unwrap(), end);
+    assert_eq!(b.fingerprints.fingerprint_changes(end).unwrap(), (vec![], end));
 
     // The queue: one job per id, within capacity.
     let q = &b.queue;
@@ -196,6 +209,10 @@ fn replicas_starting_together_migrate_once() {
         let handles: Vec<_> = (0..3).map(|_| s.spawn(|| backend(dir.path(), Some(&url)))).collect();
         handles.into_iter().map(|h| h.join().unwrap()).collect()
     });
+    // Every open succeeded (a second run of a migration would fail on its tables), each version applied once.
     assert_eq!(opened.len(), 3);
-    assert_eq!(cluster.query("migrate", "SELECT count(*) FROM schema_migrations"), "1");
+    assert_eq!(
+        cluster.query("migrate", "SELECT string_agg(version::text, ',' ORDER BY version) FROM schema_migrations"),
+        "1,2"
+    );
 }

@@ -102,20 +102,39 @@ impl Family {
     }
 }
 
-/// The in-memory index of every stored fingerprint, by family.
+/// The in-memory index of every stored fingerprint, by family, and how far it has followed the store's log of
+/// fingerprint changes (which other replicas write too).
 #[derive(Default)]
 pub struct Index {
     families: RwLock<HashMap<String, Family>>,
+    synced: std::sync::Mutex<i64>,
 }
 
 impl Index {
     /// The index of everything the store holds.
     pub fn load(store: &dyn FingerprintStore) -> std::io::Result<Index> {
         let index = Index::default();
+        // The log's end first: a change made while the table is read is applied again by the next sync, which is
+        // harmless (a put replaces, a removal forgets).
+        *index.synced.lock().unwrap_or_else(|e| e.into_inner()) = store.fingerprint_log_end()?;
         for (family, id, values) in store.load_fingerprints()? {
             index.insert(&Fingerprint { family, shape_id: id, values });
         }
         Ok(index)
+    }
+    /// Applies the changes the store logged since the last sync (fingerprints other replicas computed, shapes
+    /// they removed); one indexed query when there are none.
+    pub fn sync(&self, store: &dyn FingerprintStore) -> std::io::Result<()> {
+        let mut synced = self.synced.lock().unwrap_or_else(|e| e.into_inner());
+        let (changes, end) = store.fingerprint_changes(*synced)?;
+        for (family, shape_id, values) in changes {
+            match values {
+                Some(values) => self.insert(&Fingerprint { family, shape_id, values }),
+                None => self.remove_shape(&shape_id),
+            }
+        }
+        *synced = end;
+        Ok(())
     }
     fn insert(&self, f: &Fingerprint) {
         let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());

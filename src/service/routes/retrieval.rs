@@ -85,6 +85,8 @@ pub(crate) async fn search(
         return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
     }
     let req: SearchRequest = strict_body(&st, body, "SearchRequest")?;
+    // What other replicas computed or removed since the last search.
+    st.index.sync(&*st.fingerprints).map_err(store_error)?;
     if req.k == 0 {
         return Err(ApiError::Analysis(analysis::AnalysisError::invalid_k(
             "k = 0: a fingerprint has at least one value",

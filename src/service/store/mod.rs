@@ -137,6 +137,21 @@ pub trait FingerprintStore: Send + Sync {
     fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool>;
     /// Every fingerprint: (family, shape id, values).
     fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>>;
+    /// The end of the log of fingerprint changes (every put, and every removed shape), for [`fingerprint_changes`].
+    ///
+    /// [`fingerprint_changes`]: FingerprintStore::fingerprint_changes
+    fn fingerprint_log_end(&self) -> std::io::Result<i64>;
+    /// The changes logged after position `after`, in order, and the position of the last: (family, shape id,
+    /// values) for a fingerprint kept, (empty, shape id, None) for a removed shape. Other replicas' indexes follow
+    /// the store through it.
+    fn fingerprint_changes(&self, after: i64) -> std::io::Result<(Vec<FingerprintChange>, i64)>;
+}
+
+/// One entry of the fingerprint log: a fingerprint kept (`values`), or a removed shape (`None`).
+pub type FingerprintChange = (String, String, Option<Vec<f64>>);
+
+pub(crate) fn f64s_of(blob: &[u8]) -> Vec<f64> {
+    blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect()
 }
 
 /// A finished result: the JSON summary, per-vertex arrays, and the serialized body with its strong ETag.

@@ -22,9 +22,10 @@ use tokio_postgres::NoTls;
 const CHUNK: usize = 1 << 20;
 
 /// The schema, one migration per version, applied in order and recorded in `schema_migrations`.
-const MIGRATIONS: &[(i32, &str)] = &[(
-    1,
-    "CREATE TABLE shapes (
+const MIGRATIONS: &[(i32, &str)] = &[
+    (
+        1,
+        "CREATE TABLE shapes (
          id text PRIMARY KEY, format text NOT NULL, created_at text NOT NULL, bytes bigint NOT NULL,
          summary text NOT NULL);
      CREATE TABLE blobs (
@@ -44,7 +45,13 @@ const MIGRATIONS: &[(i32, &str)] = &[(
      CREATE INDEX jobs_enqueued ON jobs (seq) WHERE status = 'enqueued';
      CREATE INDEX jobs_processing ON jobs (lease_until) WHERE status = 'processing';
      CREATE INDEX jobs_status ON jobs (status);",
-)];
+    ),
+    (
+        2,
+        "CREATE TABLE fingerprint_log (
+             seq bigserial PRIMARY KEY, family text NOT NULL, shape_id text NOT NULL, fingerprint bytea);",
+    ),
+];
 
 /// The advisory lock that serializes migrations (and queue admissions, as a transaction lock of its own key).
 const MIGRATION_LOCK: i64 = 0x6b61_6301;
@@ -325,6 +332,11 @@ impl ShapeStore for Postgres {
             let n = tx.execute("DELETE FROM shapes WHERE id = $1", &[&key]).await.map_err(pg)?;
             tx.execute("DELETE FROM blobs WHERE kind = 'shape' AND id = $1", &[&key]).await.map_err(pg)?;
             tx.execute("DELETE FROM fingerprints WHERE shape_id = $1", &[&key]).await.map_err(pg)?;
+            if n > 0 {
+                tx.execute("INSERT INTO fingerprint_log (family, shape_id) VALUES ('', $1)", &[&key])
+                    .await
+                    .map_err(pg)?;
+            }
             tx.commit().await.map_err(pg)?;
             Ok(n > 0)
         })?;
@@ -354,8 +366,9 @@ impl FingerprintStore for Postgres {
         let blob: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
         let (family, shape_id) = (family.to_string(), shape_id.to_string());
         self.run(move |pool| async move {
-            let c = pool.get().await.map_err(pg)?;
-            let n = c
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let n = tx
                 .execute(
                     "INSERT INTO fingerprints (family, shape_id, fingerprint)
                      SELECT $1, $2, $3 WHERE EXISTS (SELECT 1 FROM shapes WHERE id = $2)
@@ -364,6 +377,15 @@ impl FingerprintStore for Postgres {
                 )
                 .await
                 .map_err(pg)?;
+            if n > 0 {
+                tx.execute(
+                    "INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES ($1, $2, $3)",
+                    &[&family, &shape_id, &blob],
+                )
+                .await
+                .map_err(pg)?;
+            }
+            tx.commit().await.map_err(pg)?;
             Ok(n > 0)
         })
     }
@@ -371,15 +393,29 @@ impl FingerprintStore for Postgres {
         self.run(|pool| async move {
             let c = pool.get().await.map_err(pg)?;
             let rows = c.query("SELECT family, shape_id, fingerprint FROM fingerprints", &[]).await.map_err(pg)?;
-            Ok(rows
-                .iter()
-                .map(|r| {
-                    let blob: &[u8] = r.get(2);
-                    let values =
-                        blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect();
-                    (r.get(0), r.get(1), values)
-                })
-                .collect())
+            Ok(rows.iter().map(|r| (r.get(0), r.get(1), f64s_of(r.get(2)))).collect())
+        })
+    }
+    fn fingerprint_log_end(&self) -> std::io::Result<i64> {
+        self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            Ok(c.query_one("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", &[]).await.map_err(pg)?.get(0))
+        })
+    }
+    fn fingerprint_changes(&self, after: i64) -> std::io::Result<(Vec<FingerprintChange>, i64)> {
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let rows = c
+                .query(
+                    "SELECT seq, family, shape_id, fingerprint FROM fingerprint_log WHERE seq > $1 ORDER BY seq",
+                    &[&after],
+                )
+                .await
+                .map_err(pg)?;
+            let end = rows.last().map_or(after, |r| r.get(0));
+            let changes =
+                rows.iter().map(|r| (r.get(1), r.get(2), r.get::<_, Option<&[u8]>>(3).map(f64s_of))).collect();
+            Ok((changes, end))
         })
     }
 }

@@ -68,7 +68,10 @@ impl Database {
                  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, view TEXT NOT NULL);
              CREATE TABLE IF NOT EXISTS fingerprints (
                  family TEXT NOT NULL, shape_id TEXT NOT NULL, fingerprint BLOB NOT NULL,
-                 PRIMARY KEY (family, shape_id));",
+                 PRIMARY KEY (family, shape_id));
+             CREATE TABLE IF NOT EXISTS fingerprint_log (
+                 seq INTEGER PRIMARY KEY AUTOINCREMENT, family TEXT NOT NULL, shape_id TEXT NOT NULL,
+                 fingerprint BLOB);",
         )
         .map_err(db_err)?;
         migrate_jobs(&conn)?;
@@ -177,6 +180,11 @@ impl ShapeStore for Database {
         let _id = self.id_lock(id);
         let n = self.conn().execute("DELETE FROM shapes WHERE id = ?1", [id]).map_err(db_err)?;
         self.conn().execute("DELETE FROM fingerprints WHERE shape_id = ?1", [id]).map_err(db_err)?;
+        if n > 0 {
+            self.conn()
+                .execute("INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES ('', ?1, NULL)", [id])
+                .map_err(db_err)?;
+        }
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
         let _ = std::fs::remove_file(self.shape_dir.join(id));
         Ok(n > 0)
@@ -192,8 +200,9 @@ impl FingerprintStore for Database {
         // shape deleted while its analysis ran leaves no fingerprint behind.
         let blob: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
         let _id = self.id_lock(shape_id);
-        let n = self
-            .conn()
+        let mut c = self.conn();
+        let tx = c.transaction().map_err(db_err)?;
+        let n = tx
             .execute(
                 "INSERT INTO fingerprints (family, shape_id, fingerprint)
                  SELECT ?1, ?2, ?3 WHERE EXISTS (SELECT 1 FROM shapes WHERE id = ?2)
@@ -201,19 +210,45 @@ impl FingerprintStore for Database {
                 rusqlite::params![family, shape_id, blob],
             )
             .map_err(db_err)?;
+        if n > 0 {
+            tx.execute(
+                "INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES (?1, ?2, ?3)",
+                rusqlite::params![family, shape_id, blob],
+            )
+            .map_err(db_err)?;
+        }
+        tx.commit().map_err(db_err)?;
         Ok(n > 0)
     }
     fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>> {
         let c = self.conn();
         let mut st = c.prepare("SELECT family, shape_id, fingerprint FROM fingerprints").map_err(db_err)?;
+        let rows =
+            st.query_map([], |r| Ok((r.get(0)?, r.get(1)?, f64s_of(&r.get::<_, Vec<u8>>(2)?)))).map_err(db_err)?;
+        rows.collect::<Result<_, _>>().map_err(db_err)
+    }
+    fn fingerprint_log_end(&self) -> std::io::Result<i64> {
+        self.conn().query_row("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", [], |r| r.get(0)).map_err(db_err)
+    }
+    fn fingerprint_changes(&self, after: i64) -> std::io::Result<(Vec<FingerprintChange>, i64)> {
+        let c = self.conn();
+        let mut st = c
+            .prepare("SELECT seq, family, shape_id, fingerprint FROM fingerprint_log WHERE seq > ?1 ORDER BY seq")
+            .map_err(db_err)?;
+        let mut end = after;
         let rows = st
-            .query_map([], |r| {
-                let blob: Vec<u8> = r.get(2)?;
-                let values = blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect();
-                Ok((r.get(0)?, r.get(1)?, values))
+            .query_map([after], |r| {
+                let blob: Option<Vec<u8>> = r.get(3)?;
+                Ok((r.get::<_, i64>(0)?, (r.get(1)?, r.get(2)?, blob.map(|b| f64s_of(&b)))))
             })
             .map_err(db_err)?;
-        Ok(rows.flatten().collect())
+        let mut out = vec![];
+        for row in rows {
+            let (seq, change) = row.map_err(db_err)?;
+            end = seq;
+            out.push(change);
+        }
+        Ok((out, end))
     }
 }
 
