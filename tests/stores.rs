@@ -8,6 +8,7 @@
 mod pg;
 
 use clap::Parser;
+use kac::analysis::VertexArray;
 use kac::service::config::Config;
 use kac::service::error::ApiError;
 use kac::service::jobs::{JobProgress, JobView, Status};
@@ -90,13 +91,32 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert!(!b.fingerprints.put_fingerprint("fam", "not-stored", &[1.0]).unwrap());
     assert_eq!(other.fingerprints.load_fingerprints().unwrap(), vec![("fam".into(), id.clone(), vec![1.0, 3.5])]);
 
-    // Results: written once; a second write of the id changes nothing; read back by a fresh store.
-    let body = serde_json::to_vec(&json!({ "k": 1, "eigenvalues": [0.0] })).unwrap();
-    let r = b.results.put(Arc::new(StoredResult::new("abc1", json!({}), vec![], body.clone()))).unwrap();
-    let second = serde_json::to_vec(&json!({ "k": 2 })).unwrap();
-    b.results.put(Arc::new(StoredResult::new("abc1", json!({}), vec![], second))).unwrap();
-    let back = reopen().results.get("abc1").unwrap().expect("read back");
-    assert_eq!((&back.body[..], &back.etag), (&body[..], &r.etag), "the first write stays");
+    // Results: written once; a second write of the id changes nothing; read back by a fresh store, numbers exact
+    // (NaN included), body and ETag the same; a large one (several blob chunks, a streamed body) as well.
+    let result = |id: &str, rows: usize, shift: f64| {
+        let data: Vec<f64> = (0..rows * 2).map(|i| if i == 3 { f64::NAN } else { (i as f64).sqrt() + shift }).collect();
+        let a = VertexArray { name: "eigenvectors", rows, cols: 2, data, columns: Some(vec![0.0, 2.0]) };
+        let summary = json!({ "k": 2, "eigenvalues": [0.0, 2.0], "arrays": { "eigenvectors": { "rows": rows, "cols": 2, "columns": [0.0, 2.0] } } });
+        Arc::new(StoredResult::new(id, summary, vec![a]))
+    };
+    let body = |r: &StoredResult| r.chunks().flat_map(|c| c.to_vec()).collect::<Vec<u8>>();
+    for (id, rows) in [("abc1", 3), ("abc3", 300_000)] {
+        let first = result(id, rows, 0.0);
+        let first_body = body(&first);
+        let stored = b.results.put(first.clone()).unwrap();
+        assert_eq!(stored.etag, first.etag);
+        let again = b.results.put(result(id, rows, 1.0)).unwrap();
+        assert_eq!(again.etag, first.etag, "the first write stays");
+        let back = reopen().results.get(id).unwrap().expect("read back");
+        assert_eq!(back.etag, first.etag);
+        let (x, y) = (&back.arrays[0].data, &first.arrays[0].data);
+        assert!(x.iter().zip(y).all(|(a, b)| a.to_bits() == b.to_bits()) && x.len() == y.len());
+        assert_eq!(body(&back), first_body);
+        let parsed: serde_json::Value = serde_json::from_slice(&first_body).unwrap();
+        assert_eq!(parsed["arrays"]["eigenvectors"]["values"][1][1], json!(null), "NaN is null");
+        assert_eq!(parsed["arrays"]["eigenvectors"]["values"].as_array().unwrap().len(), rows);
+        assert_eq!(first.small_body().is_some(), first_body.len() <= kac::service::store::SMALL_BODY);
+    }
     assert!(reopen().results.get("abc2").unwrap().is_none());
 
     // Removal takes the shape's fingerprints with it.

@@ -213,22 +213,12 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
             // A store that is away for a moment (a restart) is waited for, as long as a lease lasts; then the claim
             // is given up and the job runs again elsewhere, never failed for it.
             let deadline = std::time::Instant::now() + state.jobs.lease;
-            let result = result_of(&out, &id).map(Arc::new);
+            let result = Arc::new(result_of(out, &id));
             loop {
-                match result
-                    .as_ref()
-                    .map_err(|e| std::io::Error::other(e.to_string()))
-                    .and_then(|r| state.results.put(r.clone()))
-                {
+                match state.results.put(result.clone()) {
                     Ok(_) => {
                         finish(state, job, Status::Succeeded, None, Some(format!("/v1/results/{id}")));
                         return Some(Status::Succeeded);
-                    }
-                    Err(e) if result.is_err() => {
-                        let (_, p) =
-                            ApiError::Internal { detail: format!("the result could not be stored: {e}") }.problem();
-                        finish(state, job, Status::Failed, Some(p), None);
-                        return Some(Status::Failed);
                     }
                     Err(e) if std::time::Instant::now() < deadline && !job.lost.load(Ordering::SeqCst) => {
                         tracing::error!(job = %id, error = %e, "cannot store the result; retrying");
@@ -264,9 +254,10 @@ pub(super) fn canceled() -> Problem {
     ApiError::Canceled.problem().1
 }
 
-/// Serializes a result (summary with every array inline), with its strong ETag.
-pub fn result_of(out: &analysis::Output, id: &str) -> std::io::Result<StoredResult> {
-    let mut summary = out.summary.clone();
+/// A result to store: the summary with each array's shape and links (its values are written into the body per
+/// response), and the arrays themselves.
+pub fn result_of(out: analysis::Output, id: &str) -> StoredResult {
+    let mut summary = out.summary;
     let mut arrays = serde_json::Map::new();
     for a in &out.arrays {
         arrays.insert(
@@ -275,7 +266,6 @@ pub fn result_of(out: &analysis::Output, id: &str) -> std::io::Result<StoredResu
                 "rows": a.rows, "cols": a.cols, "columns": a.columns,
                 "npy": format!("/v1/results/{id}/arrays/{}.npy", a.name),
                 "ply": format!("/v1/results/{id}/arrays/{}.ply", a.name),
-                "values": a.to_json(),
             }),
         );
     }
@@ -285,6 +275,5 @@ pub fn result_of(out: &analysis::Output, id: &str) -> std::io::Result<StoredResu
             o.insert("arrays".into(), serde_json::Value::Object(arrays));
         }
     }
-    let body = serde_json::to_vec(&summary).map_err(std::io::Error::other)?;
-    Ok(StoredResult::new(id, summary, out.arrays.clone(), body))
+    StoredResult::new(id, summary, out.arrays)
 }

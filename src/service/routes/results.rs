@@ -24,19 +24,20 @@ pub(crate) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
         .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"))
 }
 
-pub(crate) fn result_body(r: &StoredResult, values: bool) -> (Bytes, String) {
-    if values {
-        (r.body.clone(), r.etag.clone())
-    } else {
-        (r.summary_body.clone(), format!("\"{}-summary\"", r.etag.trim_matches('"')))
-    }
-}
-
-pub(crate) fn result_response(r: &StoredResult, headers: &HeaderMap, values: bool) -> Response {
-    let (body, etag) = result_body(r, values);
+/// A result's body: the summary alone (`values=false`), the whole body kept in memory when small, else the
+/// body written out chunk by chunk as it is sent (a large result is never held as text).
+pub(crate) fn result_response(r: &Arc<StoredResult>, headers: &HeaderMap, values: bool) -> Response {
+    let etag = if values { r.etag.clone() } else { format!("\"{}-summary\"", r.etag.trim_matches('"')) };
     if not_modified(headers, &etag) {
         return immutable(StatusCode::NOT_MODIFIED.into_response(), &etag);
     }
+    let body = match (values, r.small_body()) {
+        (false, _) => axum::body::Body::from(r.summary_body.clone()),
+        (true, Some(b)) => axum::body::Body::from(b.clone()),
+        (true, None) => axum::body::Body::from_stream(futures_util::stream::iter(
+            r.clone().into_chunks().map(Ok::<_, std::convert::Infallible>),
+        )),
+    };
     let mut resp = (StatusCode::OK, body).into_response();
     resp.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static("application/json"));
     immutable(resp, &etag)
@@ -83,13 +84,14 @@ pub(crate) async fn get_array(
     if not_modified(&headers, &etag) {
         return Ok(immutable(StatusCode::NOT_MODIFIED.into_response(), &etag));
     }
-    let (body, ct): (Vec<u8>, &'static str) = match ext {
-        "npy" => (kac_core::io::npy::encode_f64(a.rows, a.cols, &a.data), "application/octet-stream"),
-        "json" => (
-            serde_json::to_vec(&json!({ "rows": a.rows, "cols": a.cols, "columns": a.columns, "values": a.to_json() }))
-                .unwrap_or_default(),
-            "application/json",
-        ),
+    let stream = |chunks: Box<dyn Iterator<Item = Bytes> + Send>| {
+        axum::body::Body::from_stream(futures_util::stream::iter(chunks.map(Ok::<_, std::convert::Infallible>)))
+    };
+    // Arrays are written out in pieces as they are sent, never whole beside their numbers.
+    let i = r.arrays.iter().position(|x| x.name == a.name).unwrap_or(0);
+    let (body, ct): (axum::body::Body, &'static str) = match ext {
+        "npy" => (stream(Box::new(r.clone().array_npy_chunks(i))), "application/octet-stream"),
+        "json" => (stream(Box::new(r.clone().array_json_chunks(i))), "application/json"),
         "ply" => {
             if col >= a.cols {
                 return Err(ApiError::invalid_request(format!("column {col} does not exist ({} columns)", a.cols)));
@@ -100,7 +102,7 @@ pub(crate) async fn get_array(
                 .get(&shape_id)
                 .map_err(store_error)?
                 .ok_or(ApiError::NotFound { what: "shape", id: shape_id })?;
-            (coloured_ply(&shape, a, col), "application/x-ply")
+            (axum::body::Body::from(coloured_ply(&shape, a, col)), "application/x-ply")
         }
         _ => return Err(ApiError::NotFound { what: "array format", id: file }),
     };

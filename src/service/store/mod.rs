@@ -13,8 +13,11 @@ use std::sync::{Arc, Mutex};
 
 mod postgres;
 mod queue;
+mod result;
 mod sqlite;
 pub use postgres::Postgres;
+pub(crate) use result::result_size;
+pub use result::{StoredResult, SMALL_BODY};
 
 /// The stores of one backend.
 pub struct Backend {
@@ -154,63 +157,6 @@ pub(crate) fn f64s_of(blob: &[u8]) -> Vec<f64> {
     blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect()
 }
 
-/// A finished result: the JSON summary, per-vertex arrays, and the serialized body with its strong ETag.
-pub struct StoredResult {
-    pub id: String,
-    pub summary: Value,
-    pub arrays: Vec<VertexArray>,
-    /// The JSON body, shared (not copied) by every response.
-    pub body: axum::body::Bytes,
-    pub etag: String,
-    /// The body without per-vertex values (`?values=false`), made once.
-    pub summary_body: axum::body::Bytes,
-}
-
-impl StoredResult {
-    pub fn new(id: &str, summary: Value, arrays: Vec<VertexArray>, body: Vec<u8>) -> Self {
-        let mut light = summary.clone();
-        if let Some(map) = light.get_mut("arrays").and_then(Value::as_object_mut) {
-            for a in map.values_mut() {
-                if let Some(o) = a.as_object_mut() {
-                    o.remove("values");
-                }
-            }
-        }
-        let summary_body = serde_json::to_vec(&light).unwrap_or_default().into();
-        StoredResult { id: id.to_string(), etag: etag_of(&body), summary, arrays, body: body.into(), summary_body }
-    }
-}
-
-impl StoredResult {
-    /// A stored body read back: its summary and the arrays whose values it carries.
-    pub fn parse(id: &str, body: Vec<u8>) -> Option<Self> {
-        let summary: Value = serde_json::from_slice(&body).ok()?;
-        let mut arrays = vec![];
-        if let Some(map) = summary.get("arrays").and_then(Value::as_object) {
-            for (name, a) in map {
-                let rows = a["rows"].as_u64()? as usize;
-                let cols = a["cols"].as_u64()? as usize;
-                let data: Vec<f64> = a["values"]
-                    .as_array()?
-                    .iter()
-                    .flat_map(|r| r.as_array().cloned().unwrap_or_default())
-                    .map(|v| v.as_f64().unwrap_or(f64::NAN))
-                    .collect();
-                let columns =
-                    a["columns"].as_array().map(|c| c.iter().map(|v| v.as_f64().unwrap_or(f64::NAN)).collect());
-                let Some(name) = crate::analysis::ARRAY_NAMES.iter().copied().find(|n| n == name) else { continue };
-                arrays.push(VertexArray { name, rows, cols, data, columns });
-            }
-        }
-        Some(StoredResult::new(id, summary, arrays, body))
-    }
-}
-
-/// Bytes a result holds in memory, about.
-pub(crate) fn result_size(r: &StoredResult) -> usize {
-    r.body.len() + r.summary_body.len() + r.arrays.iter().map(|a| 8 * a.data.len()).sum::<usize>()
-}
-
 /// Bytes a parsed shape holds, about: its upload counts twice (geometry plus topology and the report).
 pub(crate) fn shape_size(s: &StoredShape) -> usize {
     2 * s.bytes + 48 * s.validated.shape.vertex_count()
@@ -229,12 +175,6 @@ pub trait ResultStore: Send + Sync {
     fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>>;
     /// The result (None: not stored; an error: the store cannot be read now).
     fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>>;
-}
-
-/// The strong ETag of a body: the first 128 bits of its SHA-256, quoted.
-pub fn etag_of(body: &[u8]) -> String {
-    use sha2::Digest;
-    format!("\"{}\"", sha2::Sha256::digest(body).iter().take(16).map(|b| format!("{b:02x}")).collect::<String>())
 }
 
 /// Eigenpairs by (shape, operator, solver) key, bounded by bytes (least recently used first). An entry with k

@@ -32,8 +32,8 @@ const MIGRATIONS: &[(i32, &str)] = &[
          kind text NOT NULL, id text NOT NULL, seq integer NOT NULL, data bytea NOT NULL,
          PRIMARY KEY (kind, id, seq));
      CREATE TABLE results (
-         id text PRIMARY KEY, bytes bigint NOT NULL, chunks integer NOT NULL, etag text NOT NULL,
-         created_at timestamptz NOT NULL DEFAULT now());
+         id text PRIMARY KEY, meta text NOT NULL, values_count bigint NOT NULL, chunks integer NOT NULL,
+         etag text NOT NULL, created_at timestamptz NOT NULL DEFAULT now());
      CREATE TABLE fingerprints (
          family text NOT NULL, shape_id text NOT NULL, fingerprint bytea NOT NULL,
          PRIMARY KEY (family, shape_id));
@@ -420,51 +420,125 @@ impl FingerprintStore for Postgres {
     }
 }
 
+/// A result is a row (its ETag, summary and arrays' shapes) and its numbers as `values` blobs: little-endian
+/// float64 in 1 MiB chunks, written in the row's transaction and read back chunk by chunk into the arrays.
 impl ResultStore for Postgres {
     fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>> {
-        let r = result;
-        let (id, etag, body) = (r.id.clone(), r.etag.clone(), r.body.clone());
+        let r = result.clone();
         // Written once: a second write of the same id (the same request computed again after a lost claim) finds
         // the row and writes nothing.
-        self.run(move |pool| async move {
+        let written = self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
             let tx = c.transaction().await.map_err(pg)?;
+            let meta = r.meta().to_string();
+            let chunks = (r.values() * 8).div_ceil(CHUNK) as i32;
             let n = tx
                 .execute(
-                    "INSERT INTO results (id, bytes, chunks, etag) VALUES ($1, $2, $3, $4) ON CONFLICT (id) DO NOTHING",
-                    &[&id, &to_i64(body.len()), &(body.len().div_ceil(CHUNK) as i32), &etag],
+                    "INSERT INTO results (id, meta, values_count, chunks, etag) VALUES ($1, $2, $3, $4, $5)
+                     ON CONFLICT (id) DO NOTHING",
+                    &[&r.id, &meta, &to_i64(r.values()), &chunks, &r.etag],
                 )
                 .await
                 .map_err(pg)?;
-            if n > 0 {
-                put_blob(&tx, "result", &id, &body).await?;
-                tx.commit().await.map_err(pg)?;
+            if n == 0 {
+                return Ok(false);
             }
-            Ok(())
+            let st = tx
+                .prepare_cached("INSERT INTO blobs (kind, id, seq, data) VALUES ('values', $1, $2, $3)")
+                .await
+                .map_err(pg)?;
+            for (seq, chunk) in r.value_chunks(CHUNK).enumerate() {
+                tx.execute(&st, &[&r.id, &(seq as i32), &chunk]).await.map_err(pg)?;
+            }
+            tx.commit().await.map_err(pg)?;
+            Ok(true)
         })?;
-        self.results.lock().unwrap_or_else(|e| e.into_inner()).put(&r.id, r.clone(), result_size(&r));
-        Ok(r)
+        if written {
+            self.results.lock().unwrap_or_else(|e| e.into_inner()).put(
+                &result.id,
+                result.clone(),
+                result_size(&result),
+            );
+            return Ok(result);
+        }
+        ResultStore::get(self, &result.id)?.ok_or_else(|| std::io::Error::other("the stored result went missing"))
     }
     fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>> {
         if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
             return Ok(Some(r));
         }
         let key = id.to_string();
-        let body = self.run(move |pool| async move {
+        let Some(meta) = self.run(move |pool| async move {
             let c = pool.get().await.map_err(pg)?;
-            let exists = c.query_opt("SELECT 1 FROM results WHERE id = $1", &[&key]).await.map_err(pg)?.is_some();
-            if !exists {
-                return Ok(None);
+            let row = c.query_opt("SELECT meta FROM results WHERE id = $1", &[&key]).await.map_err(pg)?;
+            Ok(row.map(|r| r.get::<_, String>(0)))
+        })?
+        else {
+            return Ok(None);
+        };
+        let meta: Value = serde_json::from_str(&meta).map_err(std::io::Error::other)?;
+        // The numbers arrive chunk by chunk and are copied into the arrays as they come: never the whole twice.
+        let (tx, rx) = std::sync::mpsc::sync_channel::<PgResult<Vec<u8>>>(4);
+        let key = id.to_string();
+        let pool = self.pool.clone();
+        self.rt.as_ref().expect("the runtime lives as long as the store").spawn(async move {
+            let stream = async {
+                let c = pool.get().await.map_err(pg)?;
+                let rows = c
+                    .query_raw(
+                        "SELECT data FROM blobs WHERE kind = 'values' AND id = $1 ORDER BY seq",
+                        std::iter::once(&key as &(dyn tokio_postgres::types::ToSql + Sync)),
+                    )
+                    .await
+                    .map_err(pg)?;
+                use futures_util::StreamExt;
+                let mut rows = std::pin::pin!(rows);
+                while let Some(row) = rows.next().await {
+                    let row = row.map_err(pg)?;
+                    if tx.send(Ok(row.get::<_, Vec<u8>>(0))).is_err() {
+                        return Ok(());
+                    }
+                }
+                Ok::<(), String>(())
+            };
+            if let Err(e) = stream.await {
+                let _ = tx.send(Err(e));
             }
-            Ok(Some(get_blob(&c, "result", &key).await?))
-        })?;
-        let Some(body) = body else { return Ok(None) };
-        let r = Arc::new(
-            StoredResult::parse(id, body)
-                .ok_or_else(|| std::io::Error::other(format!("the stored result {id} does not parse")))?,
-        );
+        });
+        let mut reader = ChunkReader { rx, chunk: vec![], at: 0 };
+        let read = |data: &mut [f64]| super::sqlite::read_values(&mut reader, data);
+        let r = match tokio::runtime::Handle::try_current() {
+            Ok(h) if h.runtime_flavor() == tokio::runtime::RuntimeFlavor::MultiThread => {
+                tokio::task::block_in_place(|| StoredResult::from_meta(id, &meta, read))
+            }
+            _ => StoredResult::from_meta(id, &meta, read),
+        }?;
+        let r = Arc::new(r);
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
         Ok(Some(r))
+    }
+}
+
+/// The bytes of blob chunks as they arrive, as a reader.
+struct ChunkReader {
+    rx: std::sync::mpsc::Receiver<PgResult<Vec<u8>>>,
+    chunk: Vec<u8>,
+    at: usize,
+}
+
+impl std::io::Read for ChunkReader {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        while self.at == self.chunk.len() {
+            match self.rx.recv() {
+                Ok(Ok(c)) => (self.chunk, self.at) = (c, 0),
+                Ok(Err(e)) => return Err(std::io::Error::other(e)),
+                Err(_) => return Ok(0),
+            }
+        }
+        let n = buf.len().min(self.chunk.len() - self.at);
+        buf[..n].copy_from_slice(&self.chunk[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
     }
 }
 

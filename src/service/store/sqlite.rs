@@ -523,36 +523,90 @@ pub fn write_once(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
     Ok(false)
 }
 
+/// A result's files: `{id}.result.json` (its ETag, summary and arrays' shapes; written once, last) and
+/// `{id}.{etag}.f64` (the numbers, little-endian float64, written first; named by the ETag, so two writers of one
+/// id never write one file). `{id}.json` is a result written by an earlier version (its whole body).
 impl ResultStore for FileResults {
     fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>> {
-        // Written once: a result already stored under the id (the same request computed again) stays.
-        if !write_once(&self.dir.join(format!("{}.json", result.id)), &result.body)? {
-            if let Some(stored) = self.get(&result.id)? {
-                return Ok(stored);
+        let meta_path = self.dir.join(format!("{}.result.json", result.id));
+        if !meta_path.exists() && !self.dir.join(format!("{}.json", result.id)).exists() {
+            let values_path = self.dir.join(format!("{}.{}.f64", result.id, result.etag.trim_matches('"')));
+            write_values(&values_path, &result)?;
+            let meta = serde_json::to_vec(&result.meta()).map_err(std::io::Error::other)?;
+            if write_once(&meta_path, &meta)? {
+                self.results.lock().unwrap_or_else(|e| e.into_inner()).put(
+                    &result.id,
+                    result.clone(),
+                    result_size(&result),
+                );
+                return Ok(result);
             }
+            // Another writer stored this id first: its result stays, these numbers go.
+            let _ = std::fs::remove_file(&values_path);
         }
-        let r = result;
-        self.results.lock().unwrap_or_else(|e| e.into_inner()).put(&r.id, r.clone(), result_size(&r));
-        Ok(r)
+        // Written once: the result stored under the id (the same request computed again) stays.
+        self.get(&result.id)?.ok_or_else(|| std::io::Error::other("the stored result went missing"))
     }
     fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>> {
         if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
             return Ok(Some(r));
         }
-        // After a restart: read the file back (its arrays carry their values).
         if !id.bytes().all(|b| b.is_ascii_hexdigit()) {
             return Ok(None);
         }
-        let body = match std::fs::read(self.dir.join(format!("{id}.json"))) {
-            Ok(b) => b,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        let not_found = |e: &std::io::Error| e.kind() == std::io::ErrorKind::NotFound;
+        let r = match std::fs::read(self.dir.join(format!("{id}.result.json"))) {
+            Ok(meta) => {
+                let meta: Value = serde_json::from_slice(&meta).map_err(std::io::Error::other)?;
+                let etag = meta["etag"].as_str().unwrap_or("").trim_matches('"').to_string();
+                let mut f = std::io::BufReader::with_capacity(
+                    1 << 20,
+                    std::fs::File::open(self.dir.join(format!("{id}.{etag}.f64")))?,
+                );
+                StoredResult::from_meta(id, &meta, |data| read_values(&mut f, data))?
+            }
+            Err(e) if not_found(&e) => match std::fs::read(self.dir.join(format!("{id}.json"))) {
+                Ok(body) => StoredResult::parse_legacy(id, &body)
+                    .ok_or_else(|| std::io::Error::other(format!("the stored result {id} does not parse")))?,
+                Err(e) if not_found(&e) => return Ok(None),
+                Err(e) => return Err(e),
+            },
             Err(e) => return Err(e),
         };
-        let r = Arc::new(
-            StoredResult::parse(id, body)
-                .ok_or_else(|| std::io::Error::other(format!("the stored result {id} does not parse")))?,
-        );
+        let r = Arc::new(r);
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
         Ok(Some(r))
     }
+}
+
+/// Writes a result's numbers to a file atomically, a megabyte at a time.
+fn write_values(path: &Path, r: &StoredResult) -> std::io::Result<()> {
+    static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = path.with_extension(format!("tmp.{}.{seq}", std::process::id()));
+    let written = (|| {
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+        for chunk in r.value_chunks(1 << 20) {
+            f.write_all(&chunk)?;
+        }
+        f.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
+/// Fills `data` with the next little-endian float64s of a reader.
+pub(crate) fn read_values(f: &mut impl std::io::Read, data: &mut [f64]) -> std::io::Result<()> {
+    let mut buf = vec![0u8; 1 << 20];
+    for part in data.chunks_mut(1 << 17) {
+        let bytes = &mut buf[..part.len() * 8];
+        f.read_exact(bytes)?;
+        for (v, b) in part.iter_mut().zip(bytes.chunks_exact(8)) {
+            *v = f64::from_le_bytes(b.try_into().unwrap_or([0; 8]));
+        }
+    }
+    Ok(())
 }
