@@ -8,13 +8,16 @@ cd "$(dirname "$0")/.."
 export KAC_DATA_DIR="${KAC_DATA_DIR:-$(cd .. && pwd)/shared/data}"
 
 # What the tests need from Debian: curl (the README walkthrough, the contract script), python3-venv
-# (schemathesis) and postgresql (the shared backend's tests start throwaway clusters of their own under target/,
+# (schemathesis), chromium and chromium-driver (the viewer's browser tests) and postgresql (the shared backend's tests start throwaway clusters of their own under target/,
 # with the server's initdb and pg_ctl; nothing is configured system-wide). Installed only where missing and
 # where we may.
 need=()
 command -v curl > /dev/null || need+=(curl)
 python3 -c 'import venv, ensurepip' 2> /dev/null || need+=(python3-venv)
 ls /usr/lib/postgresql/*/bin/initdb > /dev/null 2>&1 || need+=(postgresql)
+# The viewer's browser tests drive Debian's chromium (headless, software WebGL) through its chromedriver.
+command -v chromium > /dev/null || need+=(chromium)
+command -v chromedriver > /dev/null || need+=(chromium-driver)
 if [ ${#need[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ]; then apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${need[@]}"
   else echo "please install: ${need[*]}"; exit 1; fi
@@ -24,8 +27,8 @@ echo "== cargo test (workspace)"
 cargo test --workspace --locked
 # The tests on the shared meshes are #[ignore]d (a plain `cargo test` reports them as ignored); here they run
 # wherever the data is, and fail rather than skip if it cannot be read.
-# So are the PostgreSQL tests (store conformance, many replicas under faults), which need the server installed
-# above.
+# So are the PostgreSQL tests (store conformance, many replicas under faults) and the browser tests of the viewer
+# (which upload a shared mesh through the page), which need the packages installed above.
 if [ -f "$KAC_DATA_DIR/README.md" ]; then
   echo "== shared-data and PostgreSQL tests (data at $KAC_DATA_DIR)"
   cargo test --workspace --locked -- --ignored

@@ -171,3 +171,104 @@ async fn solver_settings_are_bounded_by_the_limits() {
     assert_eq!((status, p["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-option")), "{p}");
     assert!(p["detail"].as_str().unwrap().contains("limit of 20"), "{p}");
 }
+
+/// CORS: off by default (no header for any origin); with `--cors-origins`, a preflight from a listed origin is
+/// answered for every /v1 route before authentication, with the methods and headers a client sends and the
+/// response headers it may read; an origin not listed gets no `Access-Control-Allow-Origin`.
+#[tokio::test]
+async fn cors_allows_the_listed_origins_only() {
+    let preflight = |origin: &str, path: &str| {
+        Request::options(path)
+            .header("origin", origin)
+            .header("access-control-request-method", "POST")
+            .header("access-control-request-headers", "authorization, content-type")
+            .body(Body::empty())
+            .unwrap()
+    };
+    let allow = |r: &axum::response::Response, h: &str| {
+        r.headers().get(h).map(|v| v.to_str().unwrap().to_ascii_lowercase()).unwrap_or_default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let closed = app(dir.path());
+    let r = closed.clone().oneshot(preflight("https://front.example", "/v1/jobs")).await.unwrap();
+    assert_eq!(allow(&r, "access-control-allow-origin"), "", "no CORS by default");
+
+    let dir = tempfile::tempdir().unwrap();
+    let open = app_with(dir.path(), &["--cors-origins", "https://front.example", "--api-keys", "k1"]);
+    for path in
+        ["/v1/jobs", "/v1/shapes", "/v1/shapes/abc", "/v1/results/abc/arrays/x.npy", "/v1/analyze", "/v1/search"]
+    {
+        let r = open.clone().oneshot(preflight("https://front.example", path)).await.unwrap();
+        assert!(r.status().is_success(), "{path}: {}", r.status());
+        assert_eq!(allow(&r, "access-control-allow-origin"), "https://front.example", "{path}");
+        let methods = allow(&r, "access-control-allow-methods");
+        assert!(["get", "post", "delete"].iter().all(|m| methods.contains(m)), "{methods}");
+        let headers = allow(&r, "access-control-allow-headers");
+        for h in ["authorization", "content-type", "if-none-match", "last-event-id"] {
+            assert!(headers.contains(h), "{path}: {headers}");
+        }
+    }
+    // A real request from the listed origin: the answer names it and exposes ETag, Location and Retry-After.
+    let get = Request::get("/v1/shapes")
+        .header("origin", "https://front.example")
+        .header("authorization", "Bearer k1")
+        .body(Body::empty())
+        .unwrap();
+    let r = open.clone().oneshot(get).await.unwrap();
+    assert_eq!(r.status(), StatusCode::OK);
+    assert_eq!(allow(&r, "access-control-allow-origin"), "https://front.example");
+    let exposed = allow(&r, "access-control-expose-headers");
+    assert!(["etag", "location", "retry-after"].iter().all(|h| exposed.contains(h)), "{exposed}");
+    // Another origin: no permission for the browser to read anything.
+    let r = open.clone().oneshot(preflight("https://evil.example", "/v1/jobs")).await.unwrap();
+    assert_eq!(allow(&r, "access-control-allow-origin"), "");
+    let get = Request::get("/v1/shapes")
+        .header("origin", "https://evil.example")
+        .header("authorization", "Bearer k1")
+        .body(Body::empty())
+        .unwrap();
+    let r = open.clone().oneshot(get).await.unwrap();
+    assert_eq!(allow(&r, "access-control-allow-origin"), "");
+}
+
+/// The viewer is served from the binary at `/` with its modules, public (it asks for the key itself), and a
+/// shape's geometry is a binary its header describes.
+#[tokio::test]
+async fn the_viewer_and_a_shapes_geometry_are_served() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app_with(dir.path(), &["--api-keys", "k1"]);
+    for (path, ct) in
+        [("/", "text/html"), ("/viewer/app.js", "text/javascript"), ("/viewer/render.js", "text/javascript")]
+    {
+        let r = app.clone().oneshot(Request::get(path).body(Body::empty()).unwrap()).await.unwrap();
+        assert_eq!(r.status(), StatusCode::OK, "{path}");
+        assert!(r.headers()["content-type"].to_str().unwrap().starts_with(ct), "{path}");
+        let body = axum::body::to_bytes(r.into_body(), usize::MAX).await.unwrap();
+        assert!(!String::from_utf8_lossy(&body).contains("https://"), "{path} loads nothing from elsewhere");
+    }
+    let (status, _) = call(&app, Request::get("/viewer/nope.js").body(Body::empty()).unwrap()).await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    // A tet mesh is drawn by its boundary: the unit cube's six tetrahedra have 12 boundary triangles.
+    let cube = kac_core::geometry::generate::unit_cube_tets(1);
+    let mesh = serde_json::to_vec(&json!({ "vertices": cube.vertices, "tets": cube.tets })).unwrap();
+    let up =
+        Request::post("/v1/shapes?format=json").header("authorization", "Bearer k1").body(Body::from(mesh)).unwrap();
+    let (status, shape) = call(&app, up).await;
+    assert_eq!(status, StatusCode::CREATED, "{shape}");
+    let get = Request::get(format!("/v1/shapes/{}/geometry", shape["id"].as_str().unwrap()))
+        .header("authorization", "Bearer k1")
+        .body(Body::empty())
+        .unwrap();
+    let r = app.clone().oneshot(get).await.unwrap();
+    assert_eq!(r.status(), StatusCode::OK);
+    let bytes = axum::body::to_bytes(r.into_body(), usize::MAX).await.unwrap();
+    let hlen = u32::from_le_bytes(bytes[..4].try_into().unwrap()) as usize;
+    let head: Value = serde_json::from_slice(&bytes[4..4 + hlen]).unwrap();
+    assert_eq!(
+        (head["kind"].as_str(), head["vertices"].as_u64(), head["triangles"].as_u64()),
+        (Some("tet_mesh"), Some(8), Some(12))
+    );
+    let at = (4 + hlen).div_ceil(4) * 4;
+    let expected = at + 4 * (3 * 8 + 3 * 12 + head["input_rows"].as_u64().unwrap() as usize);
+    assert_eq!(bytes.len(), expected);
+}

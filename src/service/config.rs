@@ -85,6 +85,10 @@ pub struct Config {
     /// A file with one API key per line (added to --api-keys).
     #[arg(long, env = "KAC_API_KEYS_FILE")]
     pub api_keys_file: Option<PathBuf>,
+    /// Origins of web front ends allowed to call the API from a browser (comma-separated, e.g.
+    /// `https://app.example.org`, or `*` for any); none by default (same origin only).
+    #[arg(long, env = "KAC_CORS_ORIGINS", value_delimiter = ',')]
+    pub cors_origins: Vec<String>,
     /// Requests per minute each API key may make (0: unlimited); beyond it, 429 with Retry-After.
     #[arg(long, env = "KAC_RATE_LIMIT_PER_MINUTE", default_value_t = 0)]
     pub rate_limit_per_minute: u32,

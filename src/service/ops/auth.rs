@@ -93,11 +93,13 @@ impl Access {
     }
 }
 
-/// Paths anyone may read: health, metrics, the API description and the problem documentation.
+/// Paths anyone may read: health, metrics, the API description, the problem documentation and the viewer's
+/// files (the viewer asks for the key and sends it with its API calls).
 fn public(path: &str) -> bool {
-    matches!(path, "/livez" | "/readyz" | "/metrics" | "/openapi.json")
+    matches!(path, "/" | "/livez" | "/readyz" | "/metrics" | "/openapi.json")
         || path.starts_with("/docs")
         || path.starts_with("/problems/")
+        || path.starts_with("/viewer/")
 }
 
 pub async fn authorize(State(state): State<AppState>, req: Request, next: Next) -> Response {

@@ -7,12 +7,14 @@ mod health;
 mod results;
 mod retrieval;
 mod shapes;
+mod viewer;
 
 pub(crate) use analyses::*;
 pub(crate) use health::*;
 pub(crate) use results::*;
 pub(crate) use retrieval::*;
 pub(crate) use shapes::*;
+pub(crate) use viewer::*;
 
 use super::compare::CompareRequest;
 use super::error::{problem_response, ApiError, CODES};
@@ -39,11 +41,13 @@ use utoipa_swagger_ui::SwaggerUi;
 
 pub fn router(state: AppState) -> Router {
     let limit = state.config.max_body_bytes;
+    let state_cors = state.config.cors_origins.clone();
     let api = Router::new()
         .route("/livez", get(livez))
         .route("/readyz", get(readyz))
         .route("/v1/shapes", post(upload_shape).get(list_shapes))
         .route("/v1/shapes/{id}", get(get_shape).delete(delete_shape))
+        .route("/v1/shapes/{id}/geometry", get(get_geometry))
         .route("/v1/jobs", post(create_job).get(list_jobs))
         .route("/v1/jobs/{id}", get(get_job).delete(delete_job))
         .route("/v1/jobs/{id}/cancel", post(cancel_job))
@@ -57,6 +61,8 @@ pub fn router(state: AppState) -> Router {
         .route("/openapi.json", get(openapi_json))
         .merge(SwaggerUi::new("/docs").config(utoipa_swagger_ui::Config::from("/openapi.json")))
         .route("/metrics", get(metrics))
+        .route("/", get(viewer_index))
+        .route("/viewer/{file}", get(viewer_file))
         .fallback(not_found)
         .route_layer(axum::middleware::from_fn(strict_query))
         .route_layer(axum::middleware::from_fn(identity_encoding_only))
@@ -68,7 +74,41 @@ pub fn router(state: AppState) -> Router {
         )))
         .with_state(state);
     // Outside the method routers, where 405 responses already carry their Allow header.
-    Router::new().fallback_service(api).layer(axum::middleware::map_response(problem_405))
+    let app = Router::new().fallback_service(api).layer(axum::middleware::map_response(problem_405));
+    // Outermost: a preflight is answered before authentication (it carries no key) and routing.
+    match cors_layer(&state_cors) {
+        Some(cors) => app.layer(cors),
+        None => app,
+    }
+}
+
+/// CORS for web front ends on other origins (`--cors-origins`; none by default: same origin only). Preflights
+/// are answered for every route with the methods and headers a client of the API sends; `ETag`, `Location` and
+/// `Retry-After` are exposed. A request from an origin not in the list gets no `Access-Control-Allow-Origin`, so
+/// the browser keeps the answer from its page.
+fn cors_layer(origins: &[String]) -> Option<tower_http::cors::CorsLayer> {
+    use tower_http::cors::{AllowOrigin, CorsLayer};
+    if origins.is_empty() {
+        return None;
+    }
+    let allow = if origins.iter().any(|o| o == "*") {
+        AllowOrigin::any()
+    } else {
+        AllowOrigin::list(origins.iter().filter_map(|o| HeaderValue::from_str(o.trim_end_matches('/')).ok()))
+    };
+    Some(
+        CorsLayer::new()
+            .allow_origin(allow)
+            .allow_methods([axum::http::Method::GET, axum::http::Method::POST, axum::http::Method::DELETE])
+            .allow_headers([
+                header::AUTHORIZATION,
+                header::CONTENT_TYPE,
+                header::IF_NONE_MATCH,
+                axum::http::HeaderName::from_static("last-event-id"),
+            ])
+            .expose_headers([header::ETAG, header::LOCATION, header::RETRY_AFTER])
+            .max_age(std::time::Duration::from_secs(600)),
+    )
 }
 
 /// The document `kac openapi` prints (with the request schemas closed, see `openapi::document`), built once.

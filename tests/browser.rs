@@ -1,0 +1,201 @@
+//! The viewer in a real browser: Debian's chromium (headless, software WebGL) driven through chromedriver over
+//! WebDriver, against a real `kac serve` on loopback. A shared mesh is uploaded through the page's file input, a
+//! spectrum is run from the form, eigenfunctions are switched with the slider, a vertex is picked with a click and
+//! its geodesic distance shown; the screenshots must show the mesh and change with what is shown, the plots must be
+//! drawn, and the page must log no error and show no problem. Screenshots of each step go to `target/browser/`.
+
+use fantoccini::{Client, ClientBuilder, Locator};
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+struct Process(Child);
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+fn serve(dir: &std::path::Path) -> (Process, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_kac"))
+        .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
+        .arg(dir)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let v: Value = serde_json::from_str(&line).unwrap();
+    let base = format!("http://{}", v["listening"].as_str().unwrap());
+    (Process(child), base)
+}
+
+async fn browser() -> (Process, Client) {
+    let port = free_port();
+    let driver = Command::new("chromedriver")
+        .arg(format!("--port={port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("chromedriver (Debian's chromium-driver: scripts/test-all.sh installs it)");
+    let driver = Process(driver);
+    let caps = json!({
+        "goog:chromeOptions": {
+            "binary": "/usr/bin/chromium",
+            "args": ["--headless=new", "--no-sandbox", "--window-size=1400,900", "--use-angle=swiftshader",
+                     "--enable-unsafe-swiftshader", "--disable-dev-shm-usage"],
+        }
+    });
+    let connector = hyper_util::client::legacy::connect::HttpConnector::new();
+    let t = Instant::now();
+    loop {
+        let mut b = ClientBuilder::new(connector.clone());
+        b.capabilities(caps.as_object().unwrap().clone());
+        match b.connect(&format!("http://127.0.0.1:{port}")).await {
+            Ok(c) => return (driver, c),
+            Err(e) if t.elapsed() < Duration::from_secs(20) => {
+                let _ = e;
+                tokio::time::sleep(Duration::from_millis(200)).await;
+            }
+            Err(e) => panic!("cannot start a browser session: {e}"),
+        }
+    }
+}
+
+fn shots() -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/browser");
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The canvas as RGB pixels (its screenshot, saved as `NAME.png`).
+async fn canvas(c: &Client, name: &str) -> Vec<[u8; 3]> {
+    let png_bytes = c.find(Locator::Id("canvas")).await.unwrap().screenshot().await.unwrap();
+    std::fs::write(shots().join(format!("{name}.png")), &png_bytes).unwrap();
+    let decoder = png::Decoder::new(std::io::Cursor::new(png_bytes));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let channels = info.color_type.samples();
+    buf[..info.buffer_size()].chunks(channels).map(|p| [p[0], p[1], p[2]]).collect()
+}
+
+/// Pixels that are not the white background.
+fn drawn(pixels: &[[u8; 3]]) -> usize {
+    pixels.iter().filter(|p| p.iter().any(|&c| c < 240)).count()
+}
+
+/// Drawn pixels whose colour differs clearly between two screenshots.
+fn changed(a: &[[u8; 3]], b: &[[u8; 3]]) -> usize {
+    a.iter()
+        .zip(b)
+        .filter(|(x, y)| x.iter().zip(y.iter()).map(|(p, q)| p.abs_diff(*q) as u32).sum::<u32>() > 30)
+        .count()
+}
+
+async fn js(c: &Client, script: &str) -> Value {
+    c.execute(script, vec![]).await.unwrap()
+}
+
+/// Waits until `condition` (a JavaScript expression) is true; fails with the page's error box and the state.
+async fn until(c: &Client, condition: &str, what: &str) {
+    let t = Instant::now();
+    loop {
+        if js(c, &format!("return !!({condition});")).await == json!(true) {
+            return;
+        }
+        if t.elapsed() > Duration::from_secs(90) {
+            let err = js(
+                c,
+                "return document.getElementById('error').textContent + ' | ' + JSON.stringify(window.kac.errors)",
+            )
+            .await;
+            panic!("timed out waiting for {what}: {err}");
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+async fn no_errors(c: &Client, step: &str) {
+    let errors = js(c, "return window.kac.errors").await;
+    assert_eq!(errors, json!([]), "{step}: the page logged errors");
+    let shown =
+        js(c, "return document.getElementById('error').hidden ? '' : document.getElementById('error').textContent")
+            .await;
+    assert_eq!(shown, json!(""), "{step}: the page shows a problem");
+}
+
+#[tokio::test]
+#[ignore = "needs chromium, chromium-driver and the shared meshes (scripts/test-all.sh installs and runs it)"]
+async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() {
+    let data = std::env::var("KAC_DATA_DIR").unwrap_or_else(|_| "../shared/data".into());
+    let mesh = PathBuf::from(data).join("obj/fish_low_resolution.obj").canonicalize().expect("the shared fish mesh");
+    let dir = tempfile::tempdir().unwrap();
+    let (_server, base) = serve(dir.path());
+    let (_driver, c) = browser().await;
+    c.goto(&format!("{base}/")).await.unwrap();
+    until(&c, "window.kac && window.kac.ready", "the page to load").await;
+    no_errors(&c, "load").await;
+
+    // Upload through the page's file input; the shape is drawn.
+    c.find(Locator::Id("file")).await.unwrap().send_keys(mesh.to_str().unwrap()).await.unwrap();
+    until(&c, "window.kac.state.geometry && window.kac.viewer.frames > 0", "the uploaded shape").await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let shape = canvas(&c, "1-shape").await;
+    assert!(drawn(&shape) > shape.len() / 50, "the mesh is drawn: {} of {} pixels", drawn(&shape), shape.len());
+    let report = js(&c, "return document.getElementById('report').textContent").await;
+    assert!(report.as_str().unwrap().contains("vertices"), "the validation report is shown: {report}");
+
+    // A spectrum with its eigenvectors, from the form.
+    js(&c, "document.getElementById('analysis').value = 'spectrum'; document.getElementById('analysis').dispatchEvent(new Event('change')); return 0").await;
+    js(&c, "document.querySelector('[data-path=\"k\"]').value = '12'; return 0").await;
+    c.find(Locator::Id("run")).await.unwrap().click().await.unwrap();
+    until(&c, "window.kac.state.array === 'eigenvectors'", "the spectrum's eigenvectors").await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let first = canvas(&c, "2-eigenfunction-1").await;
+    assert!(drawn(&first) > first.len() / 50);
+    let label = js(&c, "return document.getElementById('column-value').textContent").await;
+    assert!(label.as_str().unwrap().contains('λ'), "λ is shown: {label}");
+    // Another eigenfunction: the colours change.
+    js(&c, "const s = document.getElementById('column'); s.value = '5'; s.dispatchEvent(new Event('input')); return 0")
+        .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let other = canvas(&c, "3-eigenfunction-5").await;
+    assert!(changed(&first, &other) > drawn(&first) / 10, "switching eigenfunctions recolours the shape");
+    // The spectrum against Weyl's law is plotted.
+    let plotted = js(&c, "const p = document.getElementById('plot'); const d = p.getContext('2d').getImageData(0, 0, p.width, p.height).data; let n = 0; for (let i = 3; i < d.length; i += 4) n += d[i] > 0; return n").await;
+    assert!(plotted.as_u64().unwrap() > 500, "the spectrum plot is drawn");
+    no_errors(&c, "spectrum").await;
+
+    // Pick the vertex under the middle of the canvas, then its geodesic distance.
+    c.find(Locator::Id("canvas")).await.unwrap().click().await.unwrap();
+    until(&c, "window.kac.state.vertex !== null", "a picked vertex").await;
+    let link = js(&c, "return location.hash").await;
+    assert!(link.as_str().unwrap().contains("vertex="), "the link names the vertex: {link}");
+    c.find(Locator::Id("geodesic")).await.unwrap().click().await.unwrap();
+    until(&c, "window.kac.state.array === 'distance'", "the geodesic distance").await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let distance = canvas(&c, "4-geodesic").await;
+    assert!(changed(&other, &distance) > drawn(&other) / 10, "the distance is shown");
+    no_errors(&c, "geodesic").await;
+
+    // The link reopens the view in a fresh page.
+    let url = js(&c, "return location.href").await;
+    c.goto("about:blank").await.unwrap();
+    c.goto(url.as_str().unwrap()).await.unwrap();
+    until(&c, "window.kac && window.kac.ready && window.kac.state.array === 'distance'", "the linked view").await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let again = canvas(&c, "5-link").await;
+    assert!(drawn(&again) > again.len() / 50);
+    no_errors(&c, "link").await;
+    c.close().await.unwrap();
+}

@@ -1,0 +1,502 @@
+// The kac viewer: a client of the public /v1 API only (the reference client for front ends). Upload or pick a
+// shape, run any analysis from a form built from the OpenAPI document, follow its progress by server-sent events,
+// and look at every per-vertex array of the result on the shape (arrays fetched as .npy). The view lives in the
+// URL's fragment (#shape=…&job=…&array=…&column=…&vertex=…), so every view can be linked to.
+import { Viewer } from './render.js';
+import { plotCurves, plotStaircase } from './plot.js';
+
+const $ = (id) => document.getElementById(id);
+const state = { shape: null, summary: null, geometry: null, job: null, result: null, arrays: {}, array: null, column: 0, vertex: null, jobSource: null };
+const viewer = new Viewer($('canvas'));
+// For tests and the curious: the viewer's state and renderer.
+window.kac = { state, viewer, errors: [] };
+window.addEventListener('error', (e) => window.kac.errors.push(String(e.message)));
+window.addEventListener('unhandledrejection', (e) => window.kac.errors.push(String(e.reason)));
+
+// ---- the API -------------------------------------------------------------------------------------------------
+
+$('key').value = localStorage.getItem('kac-key') || '';
+$('key').addEventListener('change', () => {
+  localStorage.setItem('kac-key', $('key').value.trim());
+  loadShapes();
+});
+
+function auth(h = {}) {
+  const k = localStorage.getItem('kac-key');
+  return k ? { ...h, Authorization: `Bearer ${k}` } : h;
+}
+
+class Problem extends Error {
+  constructor(p) {
+    super(`${p.title || 'Error'} (${p.code || p.status}): ${p.detail || ''}`);
+    this.problem = p;
+  }
+}
+
+async function api(method, path, body, contentType = 'application/json') {
+  const init = { method, headers: auth(body === undefined ? {} : { 'Content-Type': contentType }) };
+  if (body !== undefined) init.body = contentType === 'application/json' ? JSON.stringify(body) : body;
+  const r = await fetch(path, init);
+  const type = r.headers.get('content-type') || '';
+  if (!r.ok) {
+    const p = type.includes('json') ? await r.json() : { status: r.status, title: r.statusText, detail: await r.text() };
+    throw new Problem(p);
+  }
+  return type.includes('json') ? r.json() : r.arrayBuffer();
+}
+
+function showError(e) {
+  const box = $('error');
+  if (!e) {
+    box.hidden = true;
+    return;
+  }
+  box.hidden = false;
+  box.textContent = e.problem ? `${e.problem.title} — ${e.problem.code}\n${e.problem.detail}` : String(e.message || e);
+}
+
+async function guarded(f) {
+  try {
+    showError(null);
+    return await f();
+  } catch (e) {
+    showError(e);
+    return undefined;
+  }
+}
+
+// A .npy of float64 (C order, 1-D or 2-D): { rows, cols, data }.
+function parseNpy(buf) {
+  const bytes = new Uint8Array(buf);
+  const major = bytes[6];
+  const hlen = major === 1 ? bytes[8] | (bytes[9] << 8) : new DataView(buf).getUint32(8, true);
+  const start = major === 1 ? 10 : 12;
+  const header = new TextDecoder().decode(bytes.subarray(start, start + hlen));
+  const shape = header.match(/'shape':\s*\(([^)]*)\)/)[1].split(',').map((s) => s.trim()).filter(Boolean).map(Number);
+  return { rows: shape[0], cols: shape[1] || 1, data: new Float64Array(buf.slice(start + hlen)) };
+}
+
+// The geometry of a stored shape: positions, triangles (a tet mesh's boundary), segments, and the map from the
+// upload's vertex numbering (the rows of every array) to the geometry's vertices.
+function parseGeometry(buf) {
+  const dv = new DataView(buf);
+  const hlen = dv.getUint32(0, true);
+  const head = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, hlen)));
+  let at = 4 + hlen;
+  at += (4 - (at % 4)) % 4;
+  const take = (Type, n) => {
+    const a = new Type(buf, at, n);
+    at += n * 4;
+    return a;
+  };
+  return {
+    head,
+    positions: take(Float32Array, 3 * head.vertices),
+    triangles: take(Uint32Array, 3 * head.triangles),
+    segments: take(Uint32Array, 2 * head.segments),
+    inputToVertex: take(Uint32Array, head.input_rows),
+  };
+}
+
+// ---- the URL fragment ------------------------------------------------------------------------------------------
+
+function writeLink() {
+  const p = new URLSearchParams();
+  if (state.shape) p.set('shape', state.shape);
+  if (state.job) p.set('job', state.job);
+  if (state.array) p.set('array', state.array);
+  if (state.array) p.set('column', String(state.column));
+  if (state.vertex !== null) p.set('vertex', String(state.vertex));
+  const hash = `#${p}`;
+  if (location.hash !== hash) history.replaceState(null, '', hash);
+  $('link').href = location.href;
+}
+
+async function restore() {
+  const p = new URLSearchParams(location.hash.slice(1));
+  if (p.get('shape')) await selectShape(p.get('shape'));
+  if (p.get('vertex')) pickVertex(Number(p.get('vertex')), false);
+  if (p.get('job')) await openJob(p.get('job'), p.get('array'), Number(p.get('column') || 0));
+}
+
+// ---- shapes ----------------------------------------------------------------------------------------------------
+
+async function loadShapes() {
+  const list = await guarded(() => api('GET', '/v1/shapes?limit=1000'));
+  if (!list) return;
+  const sel = $('shapes');
+  sel.length = 1;
+  for (const s of list.items) {
+    const o = new Option(`${s.id.slice(0, 12)} — ${s.summary.kind} ${s.summary.vertices ?? ''} v`, s.id);
+    sel.add(o);
+  }
+  if (state.shape) sel.value = state.shape;
+}
+
+async function upload(file) {
+  await guarded(async () => {
+    const ext = (file.name.split('.').pop() || '').toLowerCase();
+    const formats = window.kac.formats || [];
+    const q = formats.includes(ext) ? `?format=${ext}` : '';
+    const s = await api('POST', `/v1/shapes${q}`, await file.arrayBuffer(), 'application/octet-stream');
+    await loadShapes();
+    await selectShape(s.id);
+  });
+}
+
+async function selectShape(id) {
+  await guarded(async () => {
+    const s = await api('GET', `/v1/shapes/${id}`);
+    state.shape = id;
+    state.summary = s.summary;
+    state.job = null;
+    state.result = null;
+    state.array = null;
+    state.vertex = null;
+    $('shapes').value = id;
+    const r = s.summary;
+    const facts = [
+      `${r.kind}, ${r.vertices ?? '?'} vertices`,
+      r.faces !== undefined ? `${r.faces} faces` : '',
+      r.components !== undefined ? `${r.components} component(s)` : '',
+      r.genus !== undefined && r.genus !== null ? `genus ${r.genus}` : '',
+      r.boundary_loops !== undefined ? `${r.boundary_loops} boundary loop(s)` : '',
+      r.area ? `area ${r.area.toPrecision(5)}` : '',
+      (r.report?.repairs || []).length ? `repairs: ${r.report.repairs.map((x) => `${x.code} ×${x.count}`).join(', ')}` : 'no repairs',
+    ].filter(Boolean);
+    $('report').innerHTML = facts.map((f) => `<div>${f}</div>`).join('');
+    const g = parseGeometry(await api('GET', `/v1/shapes/${id}/geometry`));
+    state.geometry = g;
+    viewer.setGeometry(g);
+    $('run').disabled = false;
+    $('controls').hidden = true;
+    $('colourbar').hidden = true;
+    $('picked-box').hidden = true;
+    window.kac.firstFrame = performance.now();
+    writeLink();
+  });
+}
+
+$('shapes').addEventListener('change', () => $('shapes').value && selectShape($('shapes').value));
+$('file').addEventListener('change', () => $('file').files[0] && upload($('file').files[0]));
+const drop = $('upload');
+drop.addEventListener('dragover', (e) => {
+  e.preventDefault();
+  drop.classList.add('over');
+});
+drop.addEventListener('dragleave', () => drop.classList.remove('over'));
+drop.addEventListener('drop', (e) => {
+  e.preventDefault();
+  drop.classList.remove('over');
+  if (e.dataTransfer.files[0]) upload(e.dataTransfer.files[0]);
+});
+
+// ---- analyses, from the OpenAPI document ------------------------------------------------------------------------
+
+let doc = null;
+const variants = {};
+
+// A property's schema with references followed and `oneOf: [X]` / `oneOf: [null, X]` (optional) unwrapped; the
+// outer default and description kept.
+function resolve(schema) {
+  if (!schema) return {};
+  if (schema.$ref) return { ...resolve(doc.components.schemas[schema.$ref.split('/').pop()]), ...without(schema, '$ref') };
+  const alts = (schema.oneOf || schema.allOf || []).filter((s) => s.type !== 'null');
+  if (alts.length === 1) return { ...resolve(alts[0]), ...without(schema, 'oneOf', 'allOf') };
+  return schema;
+}
+
+function without(o, ...keys) {
+  const c = { ...o };
+  for (const k of keys) delete c[k];
+  return c;
+}
+
+function typeOf(s) {
+  const t = Array.isArray(s.type) ? s.type.find((x) => x !== 'null') : s.type;
+  if (s.enum) return 'enum';
+  return t || (s.properties ? 'object' : 'string');
+}
+
+// One input per scalar property; objects one level deep as fieldsets; arrays as comma-separated numbers.
+function field(name, schema, path) {
+  const s = resolve(schema);
+  const t = typeOf(s);
+  const label = document.createElement('label');
+  label.title = s.description || '';
+  label.append(`${name} `);
+  let input;
+  if (t === 'boolean') {
+    input = document.createElement('input');
+    input.type = 'checkbox';
+    input.checked = s.default === true;
+  } else if (t === 'enum') {
+    input = document.createElement('select');
+    input.add(new Option(s.default !== undefined && s.default !== null ? `(default: ${s.default})` : '(default)', ''));
+    for (const v of s.enum.filter((v) => v !== null)) input.add(new Option(v, v));
+  } else {
+    input = document.createElement('input');
+    input.type = 'text';
+    input.placeholder = s.default !== undefined && s.default !== null ? String(s.default) : t === 'array' ? 'a, b, …' : 'default';
+  }
+  input.dataset.path = path;
+  input.dataset.kind = t;
+  input.dataset.initial = input.type === 'checkbox' ? String(input.checked) : '';
+  label.append(input);
+  return label;
+}
+
+function renderForm(name) {
+  const form = $('params');
+  form.innerHTML = '';
+  const v = variants[name];
+  for (const [prop, schema] of Object.entries(v.properties || {})) {
+    if (prop === 'analysis') continue;
+    const s = resolve(schema);
+    if (typeOf(s) === 'object' && s.properties) {
+      const fs = document.createElement('fieldset');
+      const lg = document.createElement('legend');
+      lg.textContent = prop;
+      fs.append(lg);
+      for (const [p, ps] of Object.entries(s.properties)) fs.append(field(p, ps, `${prop}.${p}`));
+      form.append(fs);
+    } else {
+      form.append(field(prop, schema, prop));
+    }
+  }
+  // Sensible first values for looking at something: eigenvectors of a spectrum.
+  const ev = form.querySelector('[data-path="eigenvectors"]');
+  if (ev) ev.checked = true;
+}
+
+// The request from the form: only what was set (the server fills in the rest and echoes it).
+function request() {
+  const req = { shape_id: state.shape, analysis: $('analysis').value };
+  for (const input of $('params').querySelectorAll('[data-path]')) {
+    const kind = input.dataset.kind;
+    let value;
+    if (kind === 'boolean') {
+      if (String(input.checked) === input.dataset.initial && input.dataset.path !== 'eigenvectors') continue;
+      value = input.checked;
+    } else if (input.value.trim() === '') continue;
+    else if (kind === 'integer') value = parseInt(input.value, 10);
+    else if (kind === 'number') value = parseFloat(input.value);
+    else if (kind === 'array') value = input.value.split(',').map((x) => x.trim()).filter(Boolean).map(Number);
+    else value = input.value;
+    const path = input.dataset.path.split('.');
+    let o = req;
+    for (const p of path.slice(0, -1)) o = o[p] = o[p] || {};
+    o[path[path.length - 1]] = value;
+  }
+  return req;
+}
+
+async function loadAnalyses() {
+  doc = await api('GET', '/openapi.json');
+  for (const v of resolve(doc.components.schemas.Analysis).oneOf) {
+    const name = v.properties.analysis.enum[0];
+    variants[name] = v;
+    $('analysis').add(new Option(name, name));
+  }
+  const fmt = resolve(doc.components.schemas.Format || {});
+  window.kac.formats = fmt.enum || [];
+  $('formats').textContent = (fmt.enum || []).join(', ');
+  $('analysis').addEventListener('change', () => renderForm($('analysis').value));
+  renderForm($('analysis').value);
+}
+
+// ---- jobs --------------------------------------------------------------------------------------------------------
+
+let events = null;
+
+async function submit(req) {
+  await guarded(async () => {
+    const job = await api('POST', '/v1/jobs', req);
+    await follow(job);
+  });
+}
+
+// Follows a job by its server-sent events until it ends; then opens its result.
+function follow(job) {
+  return new Promise((resolve) => {
+    state.job = job.id;
+    writeLink();
+    $('progress').hidden = false;
+    $('cancel').hidden = false;
+    if (events) events.close();
+    // EventSource cannot send an Authorization header: with a key, poll instead.
+    const done = async (v) => {
+      $('progress').hidden = true;
+      $('cancel').hidden = true;
+      $('phase').textContent = v.status;
+      if (v.status === 'succeeded') await openJob(v.id);
+      else if (v.error) showError(new Problem(v.error));
+      resolve();
+    };
+    const update = (v) => {
+      $('phase').textContent = `${v.status} · ${v.progress.phase}${v.progress.wanted ? ` ${v.progress.converged}/${v.progress.wanted}` : ''}`;
+      if (v.progress.wanted) {
+        $('progress').max = v.progress.wanted;
+        $('progress').value = v.progress.converged;
+      } else $('progress').removeAttribute('value');
+      if (['succeeded', 'failed', 'canceled'].includes(v.status)) {
+        if (events) events.close();
+        events = null;
+        done(v);
+        return true;
+      }
+      return false;
+    };
+    if (!localStorage.getItem('kac-key')) {
+      events = new EventSource(`/v1/jobs/${job.id}/events`);
+      events.addEventListener('job', (e) => update(JSON.parse(e.data)));
+      events.onerror = () => {};
+    } else {
+      const poll = async () => {
+        const v = await api('GET', `/v1/jobs/${job.id}`);
+        if (!update(v)) setTimeout(poll, 300);
+      };
+      poll();
+    }
+  });
+}
+
+$('run').addEventListener('click', () => submit(request()));
+$('cancel').addEventListener('click', () => state.job && guarded(() => api('POST', `/v1/jobs/${state.job}/cancel`)));
+
+async function openJob(id, array, column = 0) {
+  await guarded(async () => {
+    const job = await api('GET', `/v1/jobs/${id}`);
+    if (job.status !== 'succeeded') return follow(job);
+    if (job.shape_id && job.shape_id !== state.shape) await selectShape(job.shape_id);
+    state.job = id;
+    const r = await api('GET', `/v1/results/${id}?values=false`);
+    state.result = r;
+    state.arrays = {};
+    $('summary').textContent = JSON.stringify(r, (k, v) => (Array.isArray(v) && v.length > 40 ? `[${v.length} values]` : v), 1);
+    const names = Object.keys(r.arrays || {});
+    $('array').innerHTML = '';
+    for (const n of names) $('array').add(new Option(n, n));
+    $('controls').hidden = names.length === 0;
+    plots(r);
+    if (names.length) await showArray(array && names.includes(array) ? array : names[0], column);
+    writeLink();
+  });
+}
+
+// Fetches an array (.npy) once, and shows one column of it.
+async function showArray(name, column) {
+  if (!state.arrays[name]) state.arrays[name] = parseNpy(await api('GET', `/v1/results/${state.job}/arrays/${name}.npy`));
+  const a = state.arrays[name];
+  state.array = name;
+  state.column = Math.max(0, Math.min(column, a.cols - 1));
+  $('array').value = name;
+  const slider = $('column');
+  slider.max = String(a.cols - 1);
+  slider.value = String(state.column);
+  colour();
+}
+
+// Colours the shape by the current column: each vertex takes the value of an upload row that maps to it.
+function colour() {
+  const a = state.arrays[state.array], g = state.geometry;
+  if (!a || !g) return;
+  const n = g.positions.length / 3;
+  const values = new Float32Array(n).fill(NaN);
+  const map = g.inputToVertex;
+  for (let row = 0; row < a.rows && row < map.length; row++) {
+    const v = map[row];
+    if (v < n) values[v] = a.data[row * a.cols + state.column];
+  }
+  let lo = Infinity, hi = -Infinity;
+  for (const x of values) {
+    if (isFinite(x)) {
+      lo = Math.min(lo, x);
+      hi = Math.max(hi, x);
+    }
+  }
+  if (!isFinite(lo)) [lo, hi] = [0, 1];
+  viewer.isolines = $('isolines').checked || state.array === 'distance' ? 12 : 0;
+  viewer.setValues(values, lo, hi);
+  $('colourbar').hidden = false;
+  $('cb-lo').textContent = lo.toPrecision(4);
+  $('cb-hi').textContent = hi.toPrecision(4);
+  const meta = state.result.arrays[state.array] || {};
+  const col = meta.columns ? meta.columns[state.column] : null;
+  const what = { eigenvectors: 'λ', hks: 't', wks: 'e', si_hks: 'ω', heat_kernel: 't', heat: 't', gps: 'λ', embedding: 'λ' }[state.array];
+  $('column-label').textContent = what ? `${what} (column)` : 'column';
+  $('column-value').textContent = `${state.column}${col !== null && col !== undefined ? ` — ${what || 'value'} = ${Number(col).toPrecision(5)}` : ''}`;
+  if (state.vertex !== null) vertexPlot();
+  writeLink();
+}
+
+$('array').addEventListener('change', () => guarded(() => showArray($('array').value, 0)));
+$('column').addEventListener('input', () => {
+  state.column = Number($('column').value);
+  colour();
+});
+$('isolines').addEventListener('change', colour);
+
+// ---- picking -----------------------------------------------------------------------------------------------------
+
+// The upload's row of a geometry vertex (sources are given in the upload's numbering).
+function rowOf(v) {
+  const map = state.geometry.inputToVertex;
+  for (let row = 0; row < map.length; row++) if (map[row] === v) return row;
+  return v;
+}
+
+function pickVertex(v, link = true) {
+  state.vertex = v;
+  $('picked-box').hidden = false;
+  $('picked').textContent = `${rowOf(v)}`;
+  vertexPlot();
+  if (link) writeLink();
+}
+
+viewer.onpick = (v) => pickVertex(v);
+$('geodesic').addEventListener('click', () => submit({ shape_id: state.shape, analysis: 'geodesic', sources: [rowOf(state.vertex)] }));
+$('heat').addEventListener('click', () => submit({ shape_id: state.shape, analysis: 'heat', k: 100, sources: [rowOf(state.vertex)] }));
+
+// ---- plots ---------------------------------------------------------------------------------------------------------
+
+function plots(r) {
+  $('plot-title').textContent = '';
+  $('plot2-title').textContent = '';
+  for (const id of ['plot', 'plot2']) $(id).getContext('2d').clearRect(0, 0, $(id).width, $(id).height);
+  const values = r.eigenvalues || r.shape_dna?.eigenvalues;
+  if (Array.isArray(values) && values.length) {
+    // Weyl's law on a surface: N(λ) ≈ area·λ/(4π); on a solid N(λ) ≈ volume·λ^{3/2}/(6π²) (drawn by its slope at
+    // the top).
+    const area = state.summary?.area, volume = state.summary?.volume;
+    let slope = 0;
+    if (state.summary?.kind === 'tet_mesh' && volume) {
+      const top = values[values.length - 1];
+      slope = (volume * top ** 1.5) / (6 * Math.PI ** 2) / top;
+    } else if (area) slope = area / (4 * Math.PI);
+    $('plot-title').textContent = 'Spectrum against Weyl\u2019s law';
+    plotStaircase($('plot'), values, slope);
+  }
+}
+
+// The picked vertex's row of the current array against its columns (HKS against t on a log axis).
+function vertexPlot() {
+  const a = state.arrays[state.array];
+  const meta = state.result?.arrays?.[state.array];
+  if (!a || !meta || state.vertex === null) return;
+  const row = rowOf(state.vertex);
+  const ys = Array.from(a.data.subarray(row * a.cols, (row + 1) * a.cols));
+  const xs = meta.columns && meta.columns.length === a.cols ? meta.columns : ys.map((_, i) => i);
+  const logx = ['hks', 'heat_kernel', 'heat'].includes(state.array);
+  $('plot2-title').textContent = `${state.array} at vertex ${row}${logx ? ' against t' : ''}`;
+  plotCurves($('plot2'), [{ xs, ys, colour: '#1f4e79' }], { logx, xlabel: logx ? 't' : 'column' });
+}
+
+// ---- start -------------------------------------------------------------------------------------------------------
+
+(async () => {
+  await guarded(loadAnalyses);
+  await loadShapes();
+  await restore();
+  window.kac.ready = true;
+})();
