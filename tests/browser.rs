@@ -187,11 +187,26 @@ async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() 
     let distance = canvas(&c, "4-geodesic").await;
     assert!(changed(&other, &distance) > drawn(&other) / 10, "the distance is shown");
     no_errors(&c, "geodesic").await;
+    let url = js(&c, "return location.href").await;
+
+    // A second shape, then every stored shape compared: the distance matrix as a heat map, nearest neighbours.
+    let sphere = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(3));
+    let up = format!("fetch('/v1/shapes?format=off', {{ method: 'POST', body: {} }}); return 0", json!(sphere));
+    js(&c, &up).await;
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    c.find(Locator::Id("compare")).await.unwrap().click().await.unwrap();
+    until(&c, "document.getElementById('plot-title').textContent.startsWith('Shape-DNA distances')", "the comparison")
+        .await;
+    let matrix = js(&c, "const p = document.getElementById('plot'); const d = p.getContext('2d').getImageData(0, 0, p.width, p.height).data; let n = 0; for (let i = 3; i < d.length; i += 4) n += d[i] > 0; return n").await;
+    assert!(matrix.as_u64().unwrap() > 1000, "the distance matrix is drawn");
+    let near = js(&c, "return document.getElementById('summary').textContent").await;
+    assert_eq!(near.as_str().unwrap().lines().count(), 2, "each shape's nearest neighbour: {near}");
+    no_errors(&c, "compare").await;
+    let url = url.as_str().unwrap().to_string();
 
     // The link reopens the view in a fresh page.
-    let url = js(&c, "return location.href").await;
     c.goto("about:blank").await.unwrap();
-    c.goto(url.as_str().unwrap()).await.unwrap();
+    c.goto(&url).await.unwrap();
     until(&c, "window.kac && window.kac.ready && window.kac.state.array === 'distance'", "the linked view").await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     let again = canvas(&c, "5-link").await;

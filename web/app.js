@@ -3,7 +3,7 @@
 // and look at every per-vertex array of the result on the shape (arrays fetched as .npy). The view lives in the
 // URL's fragment (#shape=…&job=…&array=…&column=…&vertex=…), so every view can be linked to.
 import { Viewer } from './render.js';
-import { plotCurves, plotStaircase } from './plot.js';
+import { plotCurves, plotMatrix, plotStaircase } from './plot.js';
 
 const $ = (id) => document.getElementById(id);
 const state = { shape: null, summary: null, geometry: null, job: null, result: null, arrays: {}, array: null, column: 0, vertex: null, jobSource: null };
@@ -362,6 +362,13 @@ function follow(job) {
 }
 
 $('run').addEventListener('click', () => submit(request()));
+// Shape-DNA of every stored shape and the distances between them, as a job.
+$('compare').addEventListener('click', () =>
+  guarded(async () => {
+    const r = await api('POST', '/v1/compare?wait=0', { k: 50, normalization: 'area' });
+    await follow(r.status && r.links ? r : { id: r.result_id, status: 'succeeded' });
+  }),
+);
 $('cancel').addEventListener('click', () => state.job && guarded(() => api('POST', `/v1/jobs/${state.job}/cancel`)));
 
 async function openJob(id, array, column = 0) {
@@ -369,6 +376,11 @@ async function openJob(id, array, column = 0) {
     const job = await api('GET', `/v1/jobs/${id}`);
     if (job.status !== 'succeeded') return follow(job);
     if (job.shape_id && job.shape_id !== state.shape) await selectShape(job.shape_id);
+    state.analysis = job.analysis;
+    if (variants[job.analysis] && $('analysis').value !== job.analysis) {
+      $('analysis').value = job.analysis;
+      renderForm(job.analysis);
+    }
     state.job = id;
     const r = await api('GET', `/v1/results/${id}?values=false`);
     state.result = r;
@@ -448,6 +460,7 @@ function rowOf(v) {
 
 function pickVertex(v, link = true) {
   state.vertex = v;
+  viewer.setMarker(v);
   $('picked-box').hidden = false;
   $('picked').textContent = `${rowOf(v)}`;
   vertexPlot();
@@ -464,6 +477,15 @@ function plots(r) {
   $('plot-title').textContent = '';
   $('plot2-title').textContent = '';
   for (const id of ['plot', 'plot2']) $(id).getContext('2d').clearRect(0, 0, $(id).width, $(id).height);
+  if (Array.isArray(r.distances) && Array.isArray(r.shape_ids)) {
+    // A comparison: the shape-DNA distance matrix, and each shape's nearest neighbours below it.
+    $('plot-title').textContent = `Shape-DNA distances (${r.metric || 'euclidean'})`;
+    plotMatrix($('plot'), r.distances, r.shape_ids);
+    const near = (r.nearest || []).map((n) => `${String(n.shape_id).slice(0, 8)} → ${(n.nearest || []).map((x) => `${String(x.shape_id).slice(0, 8)} (${Number(x.distance).toPrecision(3)})`).join(', ')}`);
+    $('plot2-title').textContent = 'Nearest neighbours';
+    $('summary').textContent = near.join('\n');
+    return;
+  }
   const values = r.eigenvalues || r.shape_dna?.eigenvalues;
   if (Array.isArray(values) && values.length) {
     // Weyl's law on a surface: N(λ) ≈ area·λ/(4π); on a solid N(λ) ≈ volume·λ^{3/2}/(6π²) (drawn by its slope at

@@ -152,6 +152,8 @@ export class Viewer {
     this.cam.target = lo.map((l, c) => 0.5 * (l + hi[c]));
     this.cam.distance = 2.6 * this.radius;
     this.values = null;
+    this.marker = null;
+    this.firstColouredAt = 0;
     this.draw();
   }
 
@@ -203,7 +205,45 @@ export class Viewer {
     if (this.index) gl.drawElements(this.mode, this.count, gl.UNSIGNED_INT, 0);
     else gl.drawArrays(gl.POINTS, 0, this.count);
     gl.bindVertexArray(null);
+    this.drawMarker(view.m, proj);
     this.frames++;
+    if (this.values && !this.firstColouredAt) this.firstColouredAt = performance.now();
+  }
+
+  // The picked vertex as a red dot on top of the shape.
+  setMarker(v) {
+    this.marker = v;
+    this.draw();
+  }
+
+  drawMarker(view, proj) {
+    if (this.marker === null || this.marker === undefined || !this.geometry) return;
+    const gl = this.gl;
+    if (!this.markerProgram) {
+      this.markerProgram = this.compile(
+        `#version 300 es
+        in vec3 position; uniform mat4 view, proj; uniform float size;
+        void main() { gl_Position = proj * view * vec4(position, 1.0); gl_Position.z -= 0.002 * gl_Position.w; gl_PointSize = size; }`,
+        `#version 300 es
+        precision highp float; out vec4 colour;
+        void main() { if (length(gl_PointCoord - 0.5) > 0.5) discard; colour = vec4(0.85, 0.1, 0.1, 1.0); }`,
+      );
+      this.markerBuffer = gl.createBuffer();
+      this.markerVao = gl.createVertexArray();
+    }
+    const P = this.geometry.positions, i = this.marker;
+    gl.useProgram(this.markerProgram);
+    gl.bindVertexArray(this.markerVao);
+    gl.bindBuffer(gl.ARRAY_BUFFER, this.markerBuffer);
+    gl.bufferData(gl.ARRAY_BUFFER, new Float32Array([P[3 * i], P[3 * i + 1], P[3 * i + 2]]), gl.DYNAMIC_DRAW);
+    const loc = gl.getAttribLocation(this.markerProgram, 'position');
+    gl.enableVertexAttribArray(loc);
+    gl.vertexAttribPointer(loc, 3, gl.FLOAT, false, 0, 0);
+    gl.uniformMatrix4fv(gl.getUniformLocation(this.markerProgram, 'view'), false, view);
+    gl.uniformMatrix4fv(gl.getUniformLocation(this.markerProgram, 'proj'), false, proj);
+    gl.uniform1f(gl.getUniformLocation(this.markerProgram, 'size'), 9 * devicePixelRatio);
+    gl.drawArrays(gl.POINTS, 0, 1);
+    gl.bindVertexArray(null);
   }
 
   bindInput() {
