@@ -128,6 +128,13 @@ async fn until(c: &Client, condition: &str, what: &str) {
 async fn no_errors(c: &Client, step: &str) {
     let errors = js(c, "return window.kac.errors").await;
     assert_eq!(errors, json!([]), "{step}: the page logged errors");
+    // Every request the page made (modules, API calls, arrays) succeeded.
+    let failed = js(
+        c,
+        "return performance.getEntriesByType('resource').filter(e => e.responseStatus >= 400).map(e => e.name + ' ' + e.responseStatus)",
+    )
+    .await;
+    assert_eq!(failed, json!([]), "{step}: failed requests");
     let shown =
         js(c, "return document.getElementById('error').hidden ? '' : document.getElementById('error').textContent")
             .await;

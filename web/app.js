@@ -11,6 +11,11 @@ const viewer = new Viewer($('canvas'));
 // For tests and the curious: the viewer's state and renderer.
 window.kac = { state, viewer, errors: [] };
 window.addEventListener('error', (e) => window.kac.errors.push(String(e.message)));
+const consoleError = console.error.bind(console);
+console.error = (...args) => {
+  window.kac.errors.push(args.map(String).join(' '));
+  consoleError(...args);
+};
 window.addEventListener('unhandledrejection', (e) => window.kac.errors.push(String(e.reason)));
 
 // ---- the API -------------------------------------------------------------------------------------------------
@@ -133,12 +138,15 @@ async function loadShapes() {
   if (state.shape) sel.value = state.shape;
 }
 
+// Uploads as multipart with the file's name, so the server reads the format from the name as it would from any
+// client (every extension kac knows, e.g. .msh, .mesh, .pts), or from the content.
 async function upload(file) {
   await guarded(async () => {
-    const ext = (file.name.split('.').pop() || '').toLowerCase();
-    const formats = window.kac.formats || [];
-    const q = formats.includes(ext) ? `?format=${ext}` : '';
-    const s = await api('POST', `/v1/shapes${q}`, await file.arrayBuffer(), 'application/octet-stream');
+    const form = new FormData();
+    form.append('file', file, file.name);
+    const r = await fetch('/v1/shapes', { method: 'POST', headers: auth(), body: form });
+    const s = await r.json();
+    if (!r.ok) throw new Problem(s);
     await loadShapes();
     await selectShape(s.id);
   });
