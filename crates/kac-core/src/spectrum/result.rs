@@ -1,0 +1,146 @@
+//! What a solve returns: the eigenpairs with their residuals, the solver's statistics and timings, the
+//! completeness check's report, and why a solve failed.
+
+use super::*;
+
+/// Seconds spent in each phase.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Timings {
+    pub symbolic_s: f64,
+    pub numeric_s: f64,
+    pub iteration_s: f64,
+    /// Inside the iteration: block solves with the factor.
+    pub solve_s: f64,
+    /// Inside the iteration: the recurrence, full M-reorthogonalization and M-normalization of new blocks.
+    pub orthogonalize_s: f64,
+    /// Inside the iteration: the projected eigenproblems and convergence tests.
+    pub rayleigh_ritz_s: f64,
+    /// Inside the iteration: Ritz vectors at thick restarts and at the end.
+    pub restart_s: f64,
+    /// The completeness check (inertia) and any repair solves.
+    pub verify_s: f64,
+    pub total_s: f64,
+}
+
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Stats {
+    /// `dense`, `block-lanczos`, or `null-space` (every pair asked for is a known zero mode: nothing solved).
+    pub method: &'static str,
+    pub sigma: f64,
+    pub block: usize,
+    pub subspace: usize,
+    pub restarts: usize,
+    pub block_steps: usize,
+    /// Right-hand sides solved (columns).
+    pub solves: usize,
+    pub factor_nnz: usize,
+    /// `cholesky` (σ below the spectrum) or `ldlt` (σ inside it; see [`lanczos::weyl_shift`]).
+    pub factorization: &'static str,
+    /// With σ inside the spectrum: the number of eigenvalues below σ (Sylvester's inertia of the LDLᵀ factor), all
+    /// of which the solver returned.
+    pub below_sigma: Option<usize>,
+    pub symbolic_reused: bool,
+    /// Connected components of L's graph (where the operator's null space is known).
+    pub components: Option<usize>,
+    /// Known zero modes put in the result exactly (eigenvalue 0) and deflated from the iteration.
+    pub zero_modes: usize,
+    pub timings: Timings,
+    /// The completeness check; `None` when it was turned off.
+    pub completeness: Option<Completeness>,
+}
+
+/// Whether the returned eigenvalues are the k smallest, with nothing missed.
+///
+/// `inertia`: Sylvester's law of inertia counts the eigenvalues below a shift τ as the negative pivots of an LDLᵀ
+/// factorization of L − τM; τ sits in the first gap wider than 10⁻⁶ (relative) above λ_k among the converged
+/// pairs (the solver converges a few guard pairs beyond k for this), so the count must equal the pairs found below
+/// τ, which include all k returned. When the cluster at λ_k extends past the guard pairs, τ goes in the last gap
+/// below it instead: a pair missed inside that cluster would differ from a returned one by less than 10⁻⁶, and
+/// the returned pairs are then still a valid choice of the cluster's eigenvectors. When the count exceeds the pairs
+/// found, the found pairs are deflated and the missing ones solved for (`repairs` times). `dense`: every
+/// eigenvalue was computed. `null-space`: every returned pair is a known zero mode.
+#[derive(Debug, Clone, Serialize)]
+pub struct Completeness {
+    /// `inertia`, `dense` or `null-space`.
+    pub method: &'static str,
+    pub complete: bool,
+    /// τ of the (last) inertia count.
+    pub shift: Option<f64>,
+    /// Eigenvalues of the problem below `shift` (inertia).
+    pub below_shift: Option<usize>,
+    /// Eigenvalues the solver found below `shift`.
+    pub found_below_shift: Option<usize>,
+    /// Repair rounds that found missed pairs.
+    pub repairs: usize,
+    /// Pairs the repairs added.
+    pub repaired_pairs: usize,
+    pub seconds: f64,
+}
+
+impl Completeness {
+    pub(crate) fn by(method: &'static str) -> Self {
+        Completeness {
+            method,
+            complete: true,
+            shift: None,
+            below_shift: None,
+            found_below_shift: None,
+            repairs: 0,
+            repaired_pairs: 0,
+            seconds: 0.0,
+        }
+    }
+}
+
+/// Eigenpairs with their residuals.
+#[derive(Debug, Clone)]
+pub struct Spectrum {
+    pub values: Vec<f64>,
+    /// n × k, M-orthonormal columns.
+    pub vectors: Mat<f64>,
+    pub residuals: Vec<f64>,
+    pub stats: Stats,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize)]
+#[serde(tag = "error", rename_all = "snake_case")]
+pub enum EigenError {
+    #[error("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {max})")]
+    InvalidK { k: usize, n: usize, max: usize },
+    #[error("the shifted matrix L − σM could not be factored: {message}")]
+    Factorization { message: String },
+    #[error("stopped on request")]
+    Canceled,
+    #[error("did not converge: {converged} of {wanted} pairs after {steps} block steps")]
+    NoConvergence { converged: usize, wanted: usize, steps: usize },
+    #[error("invalid option {name}: {message}")]
+    InvalidOption { name: &'static str, message: String },
+    #[error(
+        "incomplete spectrum: {below} eigenvalues lie below {shift:e} (Sylvester's inertia), the solver found {found} \
+         after {repairs} repair rounds"
+    )]
+    Incomplete { shift: f64, below: usize, found: usize, repairs: usize },
+}
+
+impl EigenError {
+    pub fn code(&self) -> &'static str {
+        match self {
+            EigenError::InvalidK { .. } => "invalid-k",
+            EigenError::Factorization { .. } => "factorization-failed",
+            EigenError::Canceled => "canceled",
+            EigenError::NoConvergence { .. } => "no-convergence",
+            EigenError::InvalidOption { .. } => "invalid-option",
+            EigenError::Incomplete { .. } => "incomplete-spectrum",
+        }
+    }
+    /// Whether the request was at fault (it cannot succeed as given) rather than the computation.
+    pub fn caller_fault(&self) -> bool {
+        match self {
+            EigenError::InvalidK { .. } | EigenError::InvalidOption { .. } => true,
+            EigenError::Factorization { .. }
+            | EigenError::Canceled
+            | EigenError::NoConvergence { .. }
+            | EigenError::Incomplete { .. } => false,
+        }
+    }
+}
