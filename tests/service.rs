@@ -1095,3 +1095,21 @@ fn a_lost_upload_and_a_lost_fingerprint_are_recovered() {
     let r = reply(agent().post(&s.url("/v1/search")).send_json(json!({ "shape_id": id, "k": 6 })));
     assert_eq!((r.status, r.body["searched"].as_u64()), (200, Some(1)), "{}", r.body);
 }
+
+#[test]
+fn a_second_process_on_the_same_data_directory_is_refused() {
+    let (s, _) = Server::start_in(tempfile::tempdir().unwrap(), &[]);
+    let dir = s._dir.path().to_path_buf();
+    let out = Command::new(env!("CARGO_BIN_EXE_kac"))
+        .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "the second server started");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("in use by another kac process"));
+    // After the first is killed (its lock goes with it), the directory opens again.
+    let (dir, _) = s.stop(false);
+    let (again, hello) = Server::start_in(dir, &[]);
+    assert!(hello["listening"].is_string());
+    drop(again);
+}

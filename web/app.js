@@ -154,7 +154,7 @@ async function upload(file) {
 
 async function selectShape(id) {
   await guarded(async () => {
-    const s = await api('GET', `/v1/shapes/${id}`);
+    const s = await api('GET', `/v1/shapes/${encodeURIComponent(id)}`);
     state.shape = id;
     state.summary = s.summary;
     state.job = null;
@@ -172,8 +172,8 @@ async function selectShape(id) {
       r.area ? `area ${r.area.toPrecision(5)}` : '',
       (r.report?.repairs || []).length ? `repairs: ${r.report.repairs.map((x) => `${x.code} ×${x.count}`).join(', ')}` : 'no repairs',
     ].filter(Boolean);
-    $('report').innerHTML = facts.map((f) => `<div>${f}</div>`).join('');
-    const g = parseGeometry(await api('GET', `/v1/shapes/${id}/geometry`));
+    $('report').replaceChildren(...facts.map((f) => Object.assign(document.createElement('div'), { textContent: f })));
+    const g = parseGeometry(await api('GET', `/v1/shapes/${encodeURIComponent(id)}/geometry`));
     state.geometry = g;
     viewer.setGeometry(g);
     $('run').disabled = false;
@@ -316,6 +316,8 @@ async function loadAnalyses() {
 // ---- jobs --------------------------------------------------------------------------------------------------------
 
 let events = null;
+// Each follow has a number; an older one (a poll loop still running) stops when a newer starts.
+let following = 0;
 
 async function submit(req) {
   await guarded(async () => {
@@ -326,6 +328,7 @@ async function submit(req) {
 
 // Follows a job by its server-sent events until it ends; then opens its result.
 function follow(job) {
+  const mine = ++following;
   return new Promise((resolve) => {
     state.job = job.id;
     writeLink();
@@ -342,6 +345,10 @@ function follow(job) {
       resolve();
     };
     const update = (v) => {
+      if (mine !== following) {
+        resolve();
+        return true;
+      }
       $('phase').textContent = `${v.status} · ${v.progress.phase}${v.progress.wanted ? ` ${v.progress.converged}/${v.progress.wanted}` : ''}`;
       if (v.progress.wanted) {
         $('progress').max = v.progress.wanted;
@@ -356,13 +363,20 @@ function follow(job) {
       return false;
     };
     if (!localStorage.getItem('kac-key')) {
-      events = new EventSource(`/v1/jobs/${job.id}/events`);
+      events = new EventSource(`/v1/jobs/${encodeURIComponent(job.id)}/events`);
       events.addEventListener('job', (e) => update(JSON.parse(e.data)));
       events.onerror = () => {};
     } else {
       const poll = async () => {
-        const v = await api('GET', `/v1/jobs/${job.id}`);
-        if (!update(v)) setTimeout(poll, 300);
+        try {
+          const v = await api('GET', `/v1/jobs/${encodeURIComponent(job.id)}`);
+          if (!update(v)) setTimeout(poll, 300);
+        } catch (e) {
+          $('progress').hidden = true;
+          $('cancel').hidden = true;
+          showError(e);
+          resolve();
+        }
       };
       poll();
     }
@@ -377,11 +391,11 @@ $('compare').addEventListener('click', () =>
     await follow(r.status && r.links ? r : { id: r.result_id, status: 'succeeded' });
   }),
 );
-$('cancel').addEventListener('click', () => state.job && guarded(() => api('POST', `/v1/jobs/${state.job}/cancel`)));
+$('cancel').addEventListener('click', () => state.job && guarded(() => api('POST', `/v1/jobs/${encodeURIComponent(state.job)}/cancel`)));
 
 async function openJob(id, array, column = 0) {
   await guarded(async () => {
-    const job = await api('GET', `/v1/jobs/${id}`);
+    const job = await api('GET', `/v1/jobs/${encodeURIComponent(id)}`);
     if (job.status !== 'succeeded') return follow(job);
     if (job.shape_id && job.shape_id !== state.shape) await selectShape(job.shape_id);
     state.analysis = job.analysis;
@@ -390,7 +404,7 @@ async function openJob(id, array, column = 0) {
       renderForm(job.analysis);
     }
     state.job = id;
-    const r = await api('GET', `/v1/results/${id}?values=false`);
+    const r = await api('GET', `/v1/results/${encodeURIComponent(id)}?values=false`);
     state.result = r;
     state.arrays = {};
     $('summary').textContent = JSON.stringify(r, (k, v) => (Array.isArray(v) && v.length > 40 ? `[${v.length} values]` : v), 1);
@@ -406,7 +420,7 @@ async function openJob(id, array, column = 0) {
 
 // Fetches an array (.npy) once, and shows one column of it.
 async function showArray(name, column) {
-  if (!state.arrays[name]) state.arrays[name] = parseNpy(await api('GET', `/v1/results/${state.job}/arrays/${name}.npy`));
+  if (!state.arrays[name]) state.arrays[name] = parseNpy(await api('GET', `/v1/results/${encodeURIComponent(state.job)}/arrays/${encodeURIComponent(name)}.npy`));
   const a = state.arrays[name];
   state.array = name;
   state.column = Math.max(0, Math.min(column, a.cols - 1));

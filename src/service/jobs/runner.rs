@@ -105,20 +105,23 @@ pub fn supervise(state: AppState) {
 /// Writes the job's final view: here at once, in the queue while this claim holds it (retried while the store
 /// is away, for as long as the lease would last).
 fn finish(state: &AppState, job: &Job, status: Status, error: Option<Problem>, result: Option<String>) {
-    job.view.send_modify(|v| {
-        v.status = status;
-        v.finished_at = Some(now());
-        v.error = error;
-        v.result = result;
-        if status == Status::Succeeded {
-            v.progress.phase = "done".into();
-        }
-    });
-    let view = job.snapshot();
+    let mut view = job.snapshot();
+    view.status = status;
+    view.finished_at = Some(now());
+    view.error = error;
+    view.result = result;
+    if status == Status::Succeeded {
+        view.progress.phase = "done".into();
+    }
+    // Shown here only once the queue holds it: a claim that was lost writes nothing, and its watchers here must
+    // not see an outcome the job does not have.
     let deadline = std::time::Instant::now() + state.jobs.lease;
     loop {
         match state.jobs.queue.finish(&view.id, &job.owner, &view) {
-            Ok(true) => return,
+            Ok(true) => {
+                job.view.send_replace(view);
+                return;
+            }
             Ok(false) => {
                 tracing::warn!(job = %view.id, "the job's claim was lost before it finished: its outcome is not written");
                 return;

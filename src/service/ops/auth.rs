@@ -133,5 +133,12 @@ pub async fn authorize(State(state): State<AppState>, req: Request, next: Next) 
     if let Err(wait) = access.take(key) {
         return ApiError::RateLimited { retry_after_s: wait, per_minute: access.per_minute }.into_response();
     }
-    next.run(req).await
+    let mut r = next.run(req).await;
+    // An answer given for a key is the key holder's: shared caches must not keep it for others.
+    let public_cache =
+        r.headers().get(header::CACHE_CONTROL).and_then(|v| v.to_str().ok()).is_some_and(|v| v.contains("public"));
+    if public_cache {
+        r.headers_mut().insert(header::CACHE_CONTROL, HeaderValue::from_static("private, max-age=31536000, immutable"));
+    }
+    r
 }

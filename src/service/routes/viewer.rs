@@ -21,7 +21,9 @@ fn file(name: &str) -> Response {
             // The page and its scripts come from this server only.
             r.headers_mut().insert(
                 header::CONTENT_SECURITY_POLICY,
-                HeaderValue::from_static("default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'"),
+                HeaderValue::from_static(
+                    "default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; frame-ancestors 'none'",
+                ),
             );
             r.headers_mut().insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
             r
@@ -52,6 +54,15 @@ pub(crate) async fn viewer_file(Path(name): Path<String>) -> Response {
               (status = 422, description = "a graph without vertex positions", body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_geometry(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
     let shape = st.shapes.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "shape", id })?;
+    // Building the binary is work proportional to the shape (a tet mesh's boundary is found by sorting its
+    // faces): off the runtime's threads.
+    let out = tokio::task::spawn_blocking(move || geometry(&shape))
+        .await
+        .map_err(|e| ApiError::Internal { detail: e.to_string() })??;
+    Ok(out)
+}
+
+fn geometry(shape: &StoredShape) -> Result<Response, ApiError> {
     let v = &shape.validated;
     let (points, triangles, segments): (&[[f64; 3]], Vec<u32>, Vec<u32>) = match &v.shape {
         kac_core::Shape::TriangleMesh(m) => (&m.vertices, m.faces.iter().flatten().copied().collect(), vec![]),
@@ -102,15 +113,28 @@ fn id_tag(id: &str) -> String {
 /// The faces of a tet mesh that belong to one tetrahedron only (its boundary), outward for positively oriented
 /// tetrahedra.
 fn boundary_faces(tets: &[[u32; 4]]) -> Vec<u32> {
-    let mut count: std::collections::HashMap<[u32; 3], (u32, [u32; 3])> = std::collections::HashMap::new();
-    for t in tets {
-        for f in [[t[1], t[2], t[3]], [t[0], t[3], t[2]], [t[0], t[1], t[3]], [t[0], t[2], t[1]]] {
+    // Every face with its sorted corners as the key; a face met once is on the boundary.
+    let mut faces: Vec<([u32; 3], [u32; 3])> = tets
+        .iter()
+        .flat_map(|t| [[t[1], t[2], t[3]], [t[0], t[3], t[2]], [t[0], t[1], t[3]], [t[0], t[2], t[1]]])
+        .map(|f| {
             let mut key = f;
             key.sort_unstable();
-            count.entry(key).or_insert((0, f)).0 += 1;
+            (key, f)
+        })
+        .collect();
+    faces.sort_unstable_by_key(|f| f.0);
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < faces.len() {
+        let mut j = i + 1;
+        while j < faces.len() && faces[j].0 == faces[i].0 {
+            j += 1;
         }
+        if j - i == 1 {
+            out.extend_from_slice(&faces[i].1);
+        }
+        i = j;
     }
-    let mut faces: Vec<[u32; 3]> = count.into_values().filter(|(n, _)| *n == 1).map(|(_, f)| f).collect();
-    faces.sort_unstable();
-    faces.into_iter().flatten().collect()
+    out
 }

@@ -157,6 +157,15 @@ pub(crate) fn f64s_of(blob: &[u8]) -> Vec<f64> {
     blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect()
 }
 
+/// Runs a blocking piece of work (a large file, a large result's numbers): inside the service's multi-thread
+/// runtime through `block_in_place`, so its other tasks go on; elsewhere as it is.
+pub(crate) fn blocking<T>(f: impl FnOnce() -> T) -> T {
+    match tokio::runtime::Handle::try_current() {
+        Ok(h) if h.runtime_flavor() == tokio::runtime::RuntimeFlavor::MultiThread => tokio::task::block_in_place(f),
+        _ => f(),
+    }
+}
+
 /// Bytes a parsed shape holds, about: its upload counts twice (geometry plus topology and the report).
 pub(crate) fn shape_size(s: &StoredShape) -> usize {
     2 * s.bytes + 48 * s.validated.shape.vertex_count()

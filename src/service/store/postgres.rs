@@ -21,6 +21,10 @@ use tokio_postgres::NoTls;
 /// Bytes per blob row.
 const CHUNK: usize = 1 << 20;
 
+/// The longest one store call may take (a 500 MB result's write included); statements are bounded by the server
+/// too (`statement_timeout`), and idle connections probed (TCP keepalives).
+const CALL_TIMEOUT: Duration = Duration::from_secs(300);
+
 /// The schema, one migration per version, applied in order and recorded in `schema_migrations`.
 const MIGRATIONS: &[(i32, &str)] = &[
     (
@@ -56,6 +60,7 @@ const MIGRATIONS: &[(i32, &str)] = &[
 /// The advisory lock that serializes migrations (and queue admissions, as a transaction lock of its own key).
 const MIGRATION_LOCK: i64 = 0x6b61_6301;
 const ENQUEUE_LOCK: i64 = 0x6b61_6302;
+const LOG_LOCK: i64 = 0x6b61_6303;
 
 type PgResult<T> = std::result::Result<T, String>;
 
@@ -84,8 +89,13 @@ impl Drop for Postgres {
 impl Postgres {
     /// Connects (a pool of `pool_size`, and one connection that listens), and migrates the schema.
     pub fn open(url: &str, pool_size: usize, max_vertices: usize, cache_bytes: usize) -> std::io::Result<Self> {
-        let config: tokio_postgres::Config =
+        let mut config: tokio_postgres::Config =
             url.parse().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("{url}: {e}")))?;
+        config
+            .options("-c statement_timeout=300000")
+            .keepalives(true)
+            .keepalives_idle(Duration::from_secs(30))
+            .connect_timeout(Duration::from_secs(5));
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .thread_name("kac-postgres")
@@ -126,16 +136,24 @@ impl Postgres {
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
         let fut = f(self.pool.clone());
         self.rt.as_ref().expect("the runtime lives as long as the store").spawn(async move {
-            let _ = tx.send(fut.await);
+            // Bounded: a connection that stopped answering (a half-open socket) cannot hold a caller forever.
+            let answer = tokio::time::timeout(CALL_TIMEOUT, fut)
+                .await
+                .unwrap_or_else(|_| Err(format!("postgres: no answer in {} s", CALL_TIMEOUT.as_secs())));
+            let _ = tx.send(answer);
         });
-        let wait = || rx.recv();
-        let answer = match tokio::runtime::Handle::try_current() {
-            Ok(h) if h.runtime_flavor() == tokio::runtime::RuntimeFlavor::MultiThread => {
-                tokio::task::block_in_place(wait)
-            }
-            _ => wait(),
-        };
-        answer.map_err(|_| std::io::Error::other("postgres: the query's task ended"))?.map_err(std::io::Error::other)
+        blocking(|| rx.recv())
+            .map_err(|_| std::io::Error::other("postgres: the query's task ended"))?
+            .map_err(std::io::Error::other)
+    }
+
+    /// Whether a shape's record exists.
+    fn stored(&self, id: &str) -> std::io::Result<bool> {
+        let key = id.to_string();
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            Ok(c.query_opt("SELECT 1 FROM shapes WHERE id = $1", &[&key]).await.map_err(pg)?.is_some())
+        })
     }
 
     /// The pool's size, idle connections and callers waiting (for `/metrics`).
@@ -287,8 +305,14 @@ impl ShapeStore for Postgres {
         }
     }
     fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredShape>>> {
-        if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
-            return Ok(Some(s));
+        let cached = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id);
+        if let Some(s) = cached {
+            // Another replica may have removed it: the record is checked (one indexed query), the parse is not redone.
+            if self.stored(id)? {
+                return Ok(Some(s));
+            }
+            self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
+            return Ok(None);
         }
         let key = id.to_string();
         let stored = self.run(move |pool| async move {
@@ -303,10 +327,16 @@ impl ShapeStore for Postgres {
             Ok(Some((record_of(&row), get_blob(&c, "shape", &key).await?)))
         })?;
         let Some((record, bytes)) = stored else { return Ok(None) };
-        let s = Arc::new(
-            parse_shape(record, &bytes, self.max_vertices)
-                .ok_or_else(|| std::io::Error::other(format!("the stored shape {id} does not parse")))?,
-        );
+        let Some(s) = parse_shape(record, &bytes, self.max_vertices) else {
+            // Removed between the two reads, or not readable under this replica's limits: not a shape here.
+            tracing::warn!(shape = %id, "a stored shape could not be read back");
+            return Ok(None);
+        };
+        let s = Arc::new(s);
+        // Cached only if still stored: a removal that ran meanwhile must not be undone by the cache.
+        if !self.stored(id)? {
+            return Ok(None);
+        }
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(id, s.clone(), shape_size(&s));
         Ok(Some(s))
     }
@@ -329,6 +359,7 @@ impl ShapeStore for Postgres {
         let removed = self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
             let tx = c.transaction().await.map_err(pg)?;
+            tx.execute("SELECT pg_advisory_xact_lock($1)", &[&LOG_LOCK]).await.map_err(pg)?;
             let n = tx.execute("DELETE FROM shapes WHERE id = $1", &[&key]).await.map_err(pg)?;
             tx.execute("DELETE FROM blobs WHERE kind = 'shape' AND id = $1", &[&key]).await.map_err(pg)?;
             tx.execute("DELETE FROM fingerprints WHERE shape_id = $1", &[&key]).await.map_err(pg)?;
@@ -368,10 +399,21 @@ impl FingerprintStore for Postgres {
         self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
             let tx = c.transaction().await.map_err(pg)?;
+            // Log entries one transaction at a time, so their numbers are in commit order and a replica that has
+            // read up to one number has seen every entry below it.
+            tx.execute("SELECT pg_advisory_xact_lock($1)", &[&LOG_LOCK]).await.map_err(pg)?;
+            // The shape stays while its fingerprint is written (a removal waits for this transaction).
+            let stored = tx
+                .query_opt("SELECT 1 FROM shapes WHERE id = $1 FOR KEY SHARE", &[&shape_id])
+                .await
+                .map_err(pg)?
+                .is_some();
+            if !stored {
+                return Ok(false);
+            }
             let n = tx
                 .execute(
-                    "INSERT INTO fingerprints (family, shape_id, fingerprint)
-                     SELECT $1, $2, $3 WHERE EXISTS (SELECT 1 FROM shapes WHERE id = $2)
+                    "INSERT INTO fingerprints (family, shape_id, fingerprint) VALUES ($1, $2, $3)
                      ON CONFLICT (family, shape_id) DO UPDATE SET fingerprint = excluded.fingerprint",
                     &[&family, &shape_id, &blob],
                 )
@@ -424,35 +466,60 @@ impl FingerprintStore for Postgres {
 /// float64 in 1 MiB chunks, written in the row's transaction and read back chunk by chunk into the arrays.
 impl ResultStore for Postgres {
     fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>> {
-        let r = result.clone();
-        // Written once: a second write of the same id (the same request computed again after a lost claim) finds
-        // the row and writes nothing.
-        let written = self.run(move |pool| async move {
-            let mut c = pool.get().await.map_err(pg)?;
-            let tx = c.transaction().await.map_err(pg)?;
-            let meta = r.meta().to_string();
-            let chunks = (r.values() * 8).div_ceil(CHUNK) as i32;
-            let n = tx
-                .execute(
-                    "INSERT INTO results (id, meta, values_count, chunks, etag) VALUES ($1, $2, $3, $4, $5)
-                     ON CONFLICT (id) DO NOTHING",
-                    &[&r.id, &meta, &to_i64(r.values()), &chunks, &r.etag],
-                )
+        // The numbers are turned into chunks here, one at a time, and handed to the transaction on the store's
+        // runtime through a small channel: never all at once in memory, nor converted on the runtime's threads.
+        let (chunks_tx, mut chunks_rx) = tokio::sync::mpsc::channel::<Vec<u8>>(2);
+        let (done_tx, done_rx) = std::sync::mpsc::sync_channel::<PgResult<bool>>(1);
+        let (id, meta, count, etag) =
+            (result.id.clone(), result.meta().to_string(), result.values(), result.etag.clone());
+        let pool = self.pool.clone();
+        self.rt.as_ref().expect("the runtime lives as long as the store").spawn(async move {
+            let write = async {
+                let mut c = pool.get().await.map_err(pg)?;
+                let tx = c.transaction().await.map_err(pg)?;
+                let chunks = (count * 8).div_ceil(CHUNK) as i32;
+                // Written once: a second write of the same id (the same request computed again after a lost
+                // claim) finds the row and writes nothing.
+                let n = tx
+                    .execute(
+                        "INSERT INTO results (id, meta, values_count, chunks, etag) VALUES ($1, $2, $3, $4, $5)
+                         ON CONFLICT (id) DO NOTHING",
+                        &[&id, &meta, &to_i64(count), &chunks, &etag],
+                    )
+                    .await
+                    .map_err(pg)?;
+                if n == 0 {
+                    return Ok(false);
+                }
+                let st = tx
+                    .prepare_cached("INSERT INTO blobs (kind, id, seq, data) VALUES ('values', $1, $2, $3)")
+                    .await
+                    .map_err(pg)?;
+                let mut seq = 0i32;
+                while let Some(chunk) = chunks_rx.recv().await {
+                    tx.execute(&st, &[&id, &seq, &chunk]).await.map_err(pg)?;
+                    seq += 1;
+                }
+                tx.commit().await.map_err(pg)?;
+                Ok(true)
+            };
+            let answer = tokio::time::timeout(CALL_TIMEOUT, write)
                 .await
-                .map_err(pg)?;
-            if n == 0 {
-                return Ok(false);
+                .unwrap_or_else(|_| Err(format!("postgres: no answer in {} s", CALL_TIMEOUT.as_secs())));
+            let _ = done_tx.send(answer);
+        });
+        let written = blocking(|| {
+            for chunk in result.value_chunks(CHUNK) {
+                // A closed channel: the transaction ended (the id was stored already, or an error) — its answer says.
+                if chunks_tx.blocking_send(chunk).is_err() {
+                    break;
+                }
             }
-            let st = tx
-                .prepare_cached("INSERT INTO blobs (kind, id, seq, data) VALUES ('values', $1, $2, $3)")
-                .await
-                .map_err(pg)?;
-            for (seq, chunk) in r.value_chunks(CHUNK).enumerate() {
-                tx.execute(&st, &[&r.id, &(seq as i32), &chunk]).await.map_err(pg)?;
-            }
-            tx.commit().await.map_err(pg)?;
-            Ok(true)
-        })?;
+            drop(chunks_tx);
+            done_rx.recv()
+        })
+        .map_err(|_| std::io::Error::other("postgres: the write's task ended"))?
+        .map_err(std::io::Error::other)?;
         if written {
             self.results.lock().unwrap_or_else(|e| e.into_inner()).put(
                 &result.id,
@@ -478,7 +545,7 @@ impl ResultStore for Postgres {
         };
         let meta: Value = serde_json::from_str(&meta).map_err(std::io::Error::other)?;
         // The numbers arrive chunk by chunk and are copied into the arrays as they come: never the whole twice.
-        let (tx, rx) = std::sync::mpsc::sync_channel::<PgResult<Vec<u8>>>(4);
+        let (tx, rx) = tokio::sync::mpsc::channel::<PgResult<Vec<u8>>>(2);
         let key = id.to_string();
         let pool = self.pool.clone();
         self.rt.as_ref().expect("the runtime lives as long as the store").spawn(async move {
@@ -495,33 +562,29 @@ impl ResultStore for Postgres {
                 let mut rows = std::pin::pin!(rows);
                 while let Some(row) = rows.next().await {
                     let row = row.map_err(pg)?;
-                    if tx.send(Ok(row.get::<_, Vec<u8>>(0))).is_err() {
+                    if tx.send(Ok(row.get::<_, Vec<u8>>(0))).await.is_err() {
                         return Ok(());
                     }
                 }
                 Ok::<(), String>(())
             };
-            if let Err(e) = stream.await {
-                let _ = tx.send(Err(e));
+            if let Err(e) =
+                tokio::time::timeout(CALL_TIMEOUT, stream).await.unwrap_or_else(|_| Err("postgres: timed out".into()))
+            {
+                let _ = tx.send(Err(e)).await;
             }
         });
         let mut reader = ChunkReader { rx, chunk: vec![], at: 0 };
-        let read = |data: &mut [f64]| super::sqlite::read_values(&mut reader, data);
-        let r = match tokio::runtime::Handle::try_current() {
-            Ok(h) if h.runtime_flavor() == tokio::runtime::RuntimeFlavor::MultiThread => {
-                tokio::task::block_in_place(|| StoredResult::from_meta(id, &meta, read))
-            }
-            _ => StoredResult::from_meta(id, &meta, read),
-        }?;
+        let r = blocking(|| StoredResult::from_meta(id, &meta, |data| super::sqlite::read_values(&mut reader, data)))?;
         let r = Arc::new(r);
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
         Ok(Some(r))
     }
 }
 
-/// The bytes of blob chunks as they arrive, as a reader.
+/// The bytes of blob chunks as they arrive, as a reader (outside the store's runtime).
 struct ChunkReader {
-    rx: std::sync::mpsc::Receiver<PgResult<Vec<u8>>>,
+    rx: tokio::sync::mpsc::Receiver<PgResult<Vec<u8>>>,
     chunk: Vec<u8>,
     at: usize,
 }
@@ -529,10 +592,10 @@ struct ChunkReader {
 impl std::io::Read for ChunkReader {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         while self.at == self.chunk.len() {
-            match self.rx.recv() {
-                Ok(Ok(c)) => (self.chunk, self.at) = (c, 0),
-                Ok(Err(e)) => return Err(std::io::Error::other(e)),
-                Err(_) => return Ok(0),
+            match self.rx.blocking_recv() {
+                Some(Ok(c)) => (self.chunk, self.at) = (c, 0),
+                Some(Err(e)) => return Err(std::io::Error::other(e)),
+                None => return Ok(0),
             }
         }
         let n = buf.len().min(self.chunk.len() - self.at);
@@ -604,7 +667,7 @@ impl JobQueue for Postgres {
             view.started_at = Some(now());
             view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
             tx.execute(
-                "UPDATE jobs SET status = 'processing', owner = $2, cancel = false, view = $3, claims = claims + 1,
+                "UPDATE jobs SET status = 'processing', owner = $2, view = $3, claims = claims + 1,
                  lease_until = now() + make_interval(secs => $4) WHERE id = $1",
                 &[&id, &owner, &text_of(&view)?, &secs(lease)],
             )
@@ -705,7 +768,7 @@ impl JobQueue for Postgres {
             let tx = c.transaction().await.map_err(pg)?;
             let rows = tx
                 .query(
-                    "SELECT id, view FROM jobs WHERE status = 'processing' AND lease_until < now()
+                    "SELECT id, view, cancel FROM jobs WHERE status = 'processing' AND lease_until < now()
                      FOR UPDATE SKIP LOCKED",
                     &[],
                 )
@@ -715,12 +778,10 @@ impl JobQueue for Postgres {
             for row in rows {
                 let id: String = row.get(0);
                 let mut view = view_of(row.get(1))?;
-                view.status = Status::Enqueued;
-                view.started_at = None;
-                view.progress = JobProgress { phase: "requeued".into(), converged: 0, wanted: 0 };
+                let status = super::queue::release(&mut view, row.get(2));
                 tx.execute(
-                    "UPDATE jobs SET status = 'enqueued', owner = NULL, lease_until = NULL, view = $2 WHERE id = $1",
-                    &[&id, &text_of(&view)?],
+                    "UPDATE jobs SET status = $3, owner = NULL, lease_until = NULL, view = $2 WHERE id = $1",
+                    &[&id, &text_of(&view)?, &status.name()],
                 )
                 .await
                 .map_err(pg)?;

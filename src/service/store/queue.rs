@@ -65,3 +65,19 @@ pub trait JobQueue: Send + Sync {
     /// Ids of jobs as they change (on any replica).
     fn changes(&self) -> broadcast::Receiver<String>;
 }
+
+/// A processing job whose claim ended without a finish (its worker died, stalled or gave it up): back in the queue,
+/// or canceled when a cancel was asked for meanwhile (a cancel is never lost to a requeue). Its new status.
+pub(crate) fn release(view: &mut JobView, cancel_requested: bool) -> super::super::jobs::Status {
+    use super::super::jobs::{now, Status};
+    if cancel_requested {
+        view.status = Status::Canceled;
+        view.finished_at = Some(now());
+        view.error = Some(super::super::error::ApiError::Canceled.problem().1);
+    } else {
+        view.status = Status::Enqueued;
+        view.started_at = None;
+        view.progress = JobProgress { phase: "requeued".into(), converged: 0, wanted: 0 };
+    }
+    view.status
+}

@@ -22,6 +22,35 @@ pub struct Database {
     max_vertices: usize,
     /// Ids of jobs as they change.
     changes: tokio::sync::broadcast::Sender<String>,
+    /// Held (locked) while the store is open.
+    _lock: Arc<std::fs::File>,
+}
+
+/// Locks the data directory for this process: it belongs to one process (its recovery requeues every job another
+/// held), so a second `kac serve` on it is refused while the first runs (the lock goes with the process, kill -9
+/// included). Stores of one process share the lock (a test may open a directory twice).
+fn lock_dir(data_dir: &Path) -> std::io::Result<Arc<std::fs::File>> {
+    static HELD: Mutex<Vec<(PathBuf, std::sync::Weak<std::fs::File>)>> = Mutex::new(Vec::new());
+    let path = data_dir.canonicalize()?.join("kac.lock");
+    let mut held = HELD.lock().unwrap_or_else(|e| e.into_inner());
+    held.retain(|(_, f)| f.strong_count() > 0);
+    if let Some(f) = held.iter().find(|(p, _)| *p == path).and_then(|(_, f)| f.upgrade()) {
+        return Ok(f);
+    }
+    let file = std::fs::File::create(&path)?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::WouldBlock,
+                format!("{} is in use by another kac process", data_dir.display()),
+            ))
+        }
+        Err(std::fs::TryLockError::Error(e)) => return Err(e),
+    }
+    let file = Arc::new(file);
+    held.push((path, Arc::downgrade(&file)));
+    Ok(file)
 }
 
 /// The queue's columns on a jobs table of an older version (id and view only): added, and filled from the views.
@@ -56,6 +85,7 @@ impl Database {
     pub fn open(data_dir: &Path, max_vertices: usize, cache_bytes: usize) -> std::io::Result<Self> {
         let shape_dir = data_dir.join("shapes");
         std::fs::create_dir_all(&shape_dir)?;
+        let lock = lock_dir(data_dir)?;
         let conn = rusqlite::Connection::open(data_dir.join("kac.sqlite3")).map_err(db_err)?;
         conn.execute_batch(
             "PRAGMA journal_mode = WAL;
@@ -76,6 +106,7 @@ impl Database {
         .map_err(db_err)?;
         migrate_jobs(&conn)?;
         Ok(Database {
+            _lock: lock,
             changes: tokio::sync::broadcast::channel(1024).0,
             conn: Mutex::new(conn),
             shape_dir,
@@ -178,13 +209,18 @@ impl ShapeStore for Database {
     }
     fn remove(&self, id: &str) -> std::io::Result<bool> {
         let _id = self.id_lock(id);
-        let n = self.conn().execute("DELETE FROM shapes WHERE id = ?1", [id]).map_err(db_err)?;
-        self.conn().execute("DELETE FROM fingerprints WHERE shape_id = ?1", [id]).map_err(db_err)?;
-        if n > 0 {
-            self.conn()
-                .execute("INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES ('', ?1, NULL)", [id])
-                .map_err(db_err)?;
-        }
+        let n = {
+            let mut c = self.conn();
+            let tx = c.transaction().map_err(db_err)?;
+            let n = tx.execute("DELETE FROM shapes WHERE id = ?1", [id]).map_err(db_err)?;
+            tx.execute("DELETE FROM fingerprints WHERE shape_id = ?1", [id]).map_err(db_err)?;
+            if n > 0 {
+                tx.execute("INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES ('', ?1, NULL)", [id])
+                    .map_err(db_err)?;
+            }
+            tx.commit().map_err(db_err)?;
+            n
+        };
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
         let _ = std::fs::remove_file(self.shape_dir.join(id));
         Ok(n > 0)
@@ -285,10 +321,10 @@ impl JobQueue for Database {
             return Ok(Enqueued::Full);
         }
         let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
+        // A failed or canceled job enqueued again goes to the back of the queue (a new row, a new seq).
+        tx.execute("DELETE FROM jobs WHERE id = ?1", [&view.id]).map_err(db_err)?;
         tx.execute(
-            "INSERT INTO jobs (id, view, status, owner, lease_until, cancel) VALUES (?1, ?2, 'enqueued', NULL, 0, 0)
-             ON CONFLICT(id) DO UPDATE SET view = excluded.view, status = 'enqueued', owner = NULL, lease_until = 0,
-             cancel = 0",
+            "INSERT INTO jobs (id, view, status, owner, lease_until, cancel) VALUES (?1, ?2, 'enqueued', NULL, 0, 0)",
             rusqlite::params![view.id, text],
         )
         .map_err(db_err)?;
@@ -313,7 +349,7 @@ impl JobQueue for Database {
         view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
         let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
         tx.execute(
-            "UPDATE jobs SET status = 'processing', owner = ?2, lease_until = ?3, cancel = 0, view = ?4 WHERE id = ?1",
+            "UPDATE jobs SET status = 'processing', owner = ?2, lease_until = ?3, view = ?4 WHERE id = ?1",
             rusqlite::params![id, owner, now_ms() + lease.as_millis() as i64, text],
         )
         .map_err(db_err)?;
@@ -421,23 +457,21 @@ impl Database {
     fn requeue_where(&self, condition: &str, arg: i64) -> std::io::Result<Vec<String>> {
         let mut c = self.conn();
         let tx = c.transaction().map_err(db_err)?;
-        let rows: Vec<(String, String)> = {
+        let rows: Vec<(String, String, i64)> = {
             let mut st = tx
-                .prepare(&format!("SELECT id, view FROM jobs WHERE status = 'processing' AND {condition}"))
+                .prepare(&format!("SELECT id, view, cancel FROM jobs WHERE status = 'processing' AND {condition}"))
                 .map_err(db_err)?;
-            let rows = st.query_map([arg], |r| Ok((r.get(0)?, r.get(1)?))).map_err(db_err)?;
-            rows.flatten().collect()
+            let rows = st.query_map([arg], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?))).map_err(db_err)?;
+            rows.collect::<Result<_, _>>().map_err(db_err)?
         };
         let mut ids = vec![];
-        for (id, text) in rows {
+        for (id, text, cancel) in rows {
             let mut view = view_of(&text)?;
-            view.status = Status::Enqueued;
-            view.started_at = None;
-            view.progress = JobProgress { phase: "requeued".into(), converged: 0, wanted: 0 };
+            let status = super::queue::release(&mut view, cancel != 0);
             let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
             tx.execute(
-                "UPDATE jobs SET status = 'enqueued', owner = NULL, lease_until = 0, view = ?2 WHERE id = ?1",
-                rusqlite::params![id, text],
+                "UPDATE jobs SET status = ?3, owner = NULL, lease_until = 0, view = ?2 WHERE id = ?1",
+                rusqlite::params![id, text, status.name()],
             )
             .map_err(db_err)?;
             ids.push(id);
@@ -530,9 +564,16 @@ impl ResultStore for FileResults {
     fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>> {
         let meta_path = self.dir.join(format!("{}.result.json", result.id));
         if !meta_path.exists() && !self.dir.join(format!("{}.json", result.id)).exists() {
-            let values_path = self.dir.join(format!("{}.{}.f64", result.id, result.etag.trim_matches('"')));
-            write_values(&values_path, &result)?;
-            let meta = serde_json::to_vec(&result.meta()).map_err(std::io::Error::other)?;
+            // The numbers under a name of this writer's own (two writers of one id never share a file), which the
+            // meta names; the meta is created once, last.
+            static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+            let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let name = format!("{}.{}.{}.f64", result.id, std::process::id(), seq);
+            let values_path = self.dir.join(&name);
+            blocking(|| write_values(&values_path, &result))?;
+            let mut meta = result.meta();
+            meta["values_file"] = name.into();
+            let meta = serde_json::to_vec(&meta).map_err(std::io::Error::other)?;
             if write_once(&meta_path, &meta)? {
                 self.results.lock().unwrap_or_else(|e| e.into_inner()).put(
                     &result.id,
@@ -558,15 +599,15 @@ impl ResultStore for FileResults {
         let r = match std::fs::read(self.dir.join(format!("{id}.result.json"))) {
             Ok(meta) => {
                 let meta: Value = serde_json::from_slice(&meta).map_err(std::io::Error::other)?;
-                let etag = meta["etag"].as_str().unwrap_or("").trim_matches('"').to_string();
-                let mut f = std::io::BufReader::with_capacity(
-                    1 << 20,
-                    std::fs::File::open(self.dir.join(format!("{id}.{etag}.f64")))?,
-                );
-                StoredResult::from_meta(id, &meta, |data| read_values(&mut f, data))?
+                let name = meta["values_file"].as_str().unwrap_or("");
+                if name.contains('/') || !name.starts_with(id) {
+                    return Err(std::io::Error::other(format!("the stored result {id} names no numbers file")));
+                }
+                let mut f = std::io::BufReader::with_capacity(1 << 20, std::fs::File::open(self.dir.join(name))?);
+                blocking(|| StoredResult::from_meta(id, &meta, |data| read_values(&mut f, data)))?
             }
             Err(e) if not_found(&e) => match std::fs::read(self.dir.join(format!("{id}.json"))) {
-                Ok(body) => StoredResult::parse_legacy(id, &body)
+                Ok(body) => blocking(|| StoredResult::parse_legacy(id, &body))
                     .ok_or_else(|| std::io::Error::other(format!("the stored result {id} does not parse")))?,
                 Err(e) if not_found(&e) => return Ok(None),
                 Err(e) => return Err(e),
