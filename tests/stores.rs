@@ -182,12 +182,22 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert_eq!(q.heartbeat("j4", "r1:3", &p, lease).unwrap(), Lease::Lost);
     assert!(!q.finish("j4", "r1:3", &done).unwrap());
     assert_eq!(q.claim("r2:2", lease).unwrap().unwrap().id, "j4", "claimed again");
+    // A cancel asked for while a job runs is kept if its claim ends without a finish: released, it ends canceled.
+    assert!(matches!(q.enqueue(job("j5"), 9).unwrap(), Enqueued::New(_)));
+    let c5 = q.claim("r1:4", Duration::from_millis(200)).unwrap().unwrap();
+    assert_eq!(c5.id, "j5");
+    assert_eq!(reopen().queue.cancel("j5", &problem()).unwrap().unwrap().status, Status::Processing);
+    std::thread::sleep(Duration::from_millis(1200));
+    assert_eq!(q.requeue_expired().unwrap(), vec!["j5".to_string()]);
+    let v = reopen().queue.get("j5").unwrap().unwrap();
+    assert_eq!((v.status, v.error.map(|p| p.code)), (Status::Canceled, Some("canceled".to_string())));
+    assert!(q.claim("r1:5", lease).unwrap().is_none(), "a canceled job is not claimed again");
     // Counts and the list.
     let counts = q.counts().unwrap();
     let of = |s: &str| counts.iter().find(|(n, _)| n == s).map_or(0, |c| c.1);
-    assert_eq!((of("succeeded"), of("processing")), (1, 2));
+    assert_eq!((of("succeeded"), of("processing"), of("canceled")), (1, 2, 1));
     let ids: Vec<String> = q.list().unwrap().into_iter().map(|v| v.id).collect();
-    assert_eq!(ids.len(), 3);
+    assert_eq!(ids.len(), 4);
     // Every transition was announced.
     let mut seen = std::collections::HashSet::new();
     let t = std::time::Instant::now();
