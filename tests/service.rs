@@ -1113,3 +1113,30 @@ fn a_second_process_on_the_same_data_directory_is_refused() {
     assert!(hello["listening"].is_string());
     drop(again);
 }
+
+/// CORS over real HTTP: a preflight and a request from the listed origin are allowed, another origin's are not.
+#[test]
+fn cors_answers_real_origin_requests() {
+    let s = Server::start(&["--cors-origins", "https://front.example"]);
+    let preflight = |origin: &str| {
+        agent()
+            .request("OPTIONS", &s.url("/v1/jobs"))
+            .set("Origin", origin)
+            .set("Access-Control-Request-Method", "POST")
+            .set("Access-Control-Request-Headers", "content-type")
+            .call()
+            .unwrap()
+    };
+    let ok = preflight("https://front.example");
+    assert_eq!(ok.header("access-control-allow-origin"), Some("https://front.example"));
+    assert!(ok.header("access-control-allow-methods").unwrap_or("").contains("POST"));
+    assert_eq!(preflight("https://evil.example").header("access-control-allow-origin"), None);
+    let up = agent()
+        .post(&s.url("/v1/shapes?format=off"))
+        .set("Origin", "https://front.example")
+        .send_bytes(&icosphere_off(1))
+        .unwrap();
+    assert_eq!(up.status(), 201);
+    assert_eq!(up.header("access-control-allow-origin"), Some("https://front.example"));
+    assert!(up.header("access-control-expose-headers").unwrap_or("").to_lowercase().contains("location"));
+}
