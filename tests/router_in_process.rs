@@ -272,3 +272,35 @@ async fn the_viewer_and_a_shapes_geometry_are_served() {
     let expected = at + 4 * (3 * 8 + 3 * 12 + head["input_rows"].as_u64().unwrap() as usize);
     assert_eq!(bytes.len(), expected);
 }
+
+/// Curvature over HTTP: on a sphere of radius 2, the mean curvature is 1/2 with outward normals, and the heat
+/// kernel and the angle defect both hear K = 1/4.
+#[tokio::test]
+async fn curvature_analyses_hear_the_sphere() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let mut sphere = kac_core::geometry::generate::icosphere(3);
+    for p in &mut sphere.vertices {
+        *p = p.map(|x| 2.0 * x);
+    }
+    let off = kac_core::io::write::off(&sphere);
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(off.clone())).unwrap()
+    };
+    let (status, r) = call(&app, analyze(json!({ "analysis": "mean-curvature" }))).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    let h = &r["mean_curvature"];
+    assert!((h["min"].as_f64().unwrap() - 0.5).abs() < 0.02 && (h["max"].as_f64().unwrap() - 0.5).abs() < 0.02, "{h}");
+    assert_eq!(r["method"]["orientation"], "outward");
+    let normals = &r["arrays"]["normals"]["values"][0];
+    let p = sphere.vertices[0];
+    let dot: f64 = (0..3).map(|i| normals[i].as_f64().unwrap() * p[i] / 2.0).sum();
+    assert!(dot > 0.99, "the normal points out: {dot}");
+    let (status, r) = call(&app, analyze(json!({ "analysis": "heat-curvature", "k": 200 }))).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    let (heat, defect) =
+        (r["heat_curvature"]["mean"].as_f64().unwrap(), r["gaussian_curvature"]["mean"].as_f64().unwrap());
+    assert!((heat - 0.25).abs() < 0.03 && (defect - 0.25).abs() < 0.01, "heat {heat}, angle defect {defect}");
+    assert_eq!(r["arrays"]["heat_curvature"]["rows"], 642);
+}

@@ -7,6 +7,7 @@
 //! Vertex indices in requests and rows of per-vertex arrays follow the numbering of the uploaded file (welded
 //! input vertices share their value; vertices validation dropped get NaN).
 
+use kac_core::descriptors::curvature;
 use kac_core::descriptors::graph::{components, eigenmap, fiedler, spanning_trees};
 use kac_core::descriptors::heat::{diffuse_spectral, heat_kernel_row, heat_trace, heat_trace_tail_bound};
 use kac_core::descriptors::shape_dna::{self, Measures, ShapeDnaOptions};

@@ -18,6 +18,10 @@ pub const ARRAY_NAMES: &[&str] = &[
     "interpolated",
     "labels",
     "scores",
+    "mean_curvature",
+    "normals",
+    "gaussian_curvature",
+    "heat_curvature",
 ];
 
 /// A per-vertex array in the input numbering, row-major (rows × cols).

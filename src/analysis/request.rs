@@ -289,6 +289,22 @@ pub enum Analysis {
     },
     /// Spanning trees of the shape's edge graph (Kirchhoff).
     Trees {},
+    /// Mean curvature H and the outward unit normal per vertex from M⁻¹LX = 2Hn (cotan stiffness, mixed Voronoi
+    /// area; triangle meshes), with the angle-defect Gaussian curvature beside it; boundary vertices flagged.
+    MeanCurvature {},
+    /// Gaussian curvature heard from the heat kernel: K(x) from 4πt·k_t(x,x) = 1 + tK/3 + O(t²) fitted over a
+    /// window of small times, from the k smallest eigenpairs; the angle-defect K beside it on triangle meshes.
+    HeatCurvature {
+        #[serde(default = "k_curvature")]
+        k: usize,
+        /// The window's times (default: 8 log-spaced in [4 ln 10 / λ_k, 4× that]).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        times: Option<Vec<f64>>,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
     /// Laplacian eigenmap / GPS coordinates, with the Fiedler vector and bisection.
     Embed {
         #[serde(default = "dimensions_default")]
@@ -331,6 +347,9 @@ pub fn k_default() -> usize {
 pub(crate) fn k_signature() -> usize {
     100
 }
+pub fn k_curvature() -> usize {
+    300
+}
 pub(crate) fn steps_default() -> usize {
     1
 }
@@ -350,6 +369,8 @@ impl Analysis {
             Analysis::Heat { .. } => "heat",
             Analysis::Geodesic { .. } => "geodesic",
             Analysis::Trees { .. } => "trees",
+            Analysis::MeanCurvature { .. } => "mean-curvature",
+            Analysis::HeatCurvature { .. } => "heat-curvature",
             Analysis::Embed { .. } => "embed",
             Analysis::Smooth { .. } => "smooth",
             Analysis::Interpolate { .. } => "interpolate",
@@ -366,9 +387,11 @@ impl Analysis {
             | Analysis::Gps { solver, .. }
             | Analysis::ShapeDna { solver, .. }
             | Analysis::Heat { solver, .. }
+            | Analysis::HeatCurvature { solver, .. }
             | Analysis::Embed { solver, .. } => Some(solver),
             Analysis::Geodesic { .. }
             | Analysis::Trees { .. }
+            | Analysis::MeanCurvature { .. }
             | Analysis::Smooth { .. }
             | Analysis::Interpolate { .. } => None,
         }

@@ -300,6 +300,45 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             let t = spanning_trees(v.shape.vertex_count(), &edges, &weights)?;
             Output { fingerprints: vec![], summary: json!({ "trees": t }), arrays: vec![] }
         }
+        Analysis::MeanCurvature {} => {
+            let Shape::TriangleMesh(mesh) = &v.shape else {
+                return Err(AnalysisError::not_applicable("mean curvature is computed on triangle meshes"));
+            };
+            hooks.control.check()?;
+            let h = curvature::mean_curvature(mesh)?;
+            let k = curvature::angle_defect(mesh)?;
+            let column = |x: &[f64]| faer::Mat::from_fn(x.len(), 1, |i, _| x[i]);
+            let normals = faer::Mat::from_fn(h.normals.len(), 3, |i, j| h.normals[i][j]);
+            let summary = json!({
+                "mean_curvature": finite_stats(&h.h),
+                "gaussian_curvature": finite_stats(&k),
+                "method": h,
+                "convention": "M⁻¹LX = 2Hn with Δ = −∇·∇ and n outward: H = 1/r on a sphere of radius r",
+            });
+            let arrays = vec![
+                validated_to_input(v, column(&h.h).as_ref(), "mean_curvature"),
+                validated_to_input(v, normals.as_ref(), "normals"),
+                validated_to_input(v, column(&k).as_ref(), "gaussian_curvature"),
+            ];
+            Output { fingerprints: vec![], summary, arrays }
+        }
+        Analysis::HeatCurvature { k, times, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
+            hooks.control.phase("descriptor", 0, 0)?;
+            let pair = &e.operator.pair;
+            // The measure (area) per unknown: Σ of all of M's entries over n.
+            let resolved = 20.0 * pair.mass.iter().sum::<f64>() / pair.n().max(1) as f64;
+            let hc = curvature::heat_curvature(&basis_of(&e, *k), times.as_deref(), resolved)?;
+            let column = |x: &[f64]| faer::Mat::from_fn(x.len(), 1, |i, _| x[i]);
+            let mut arrays = vec![to_input_rows(v, &e.operator, column(&hc.k).as_ref(), "heat_curvature")];
+            let mut summary = json!({ "k": k, "heat_curvature": finite_stats(&hc.k), "fit": hc });
+            if let Shape::TriangleMesh(mesh) = &v.shape {
+                let ad = curvature::angle_defect(mesh)?;
+                summary["gaussian_curvature"] = finite_stats(&ad);
+                arrays.push(validated_to_input(v, column(&ad).as_ref(), "gaussian_curvature"));
+            }
+            Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays }
+        }
         Analysis::Embed { dimensions, scaling, operator, solver } => {
             let op = build_operator(v, operator)?;
             let zeros = expected_zero_modes(&op);
@@ -401,6 +440,18 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
         o.insert("eigenpairs_reused".into(), reused.get().into());
     }
     Ok(Output { fingerprints: out.fingerprints, summary, arrays: out.arrays })
+}
+
+/// Minimum, maximum, mean and count of the finite values (NaN marks vertices without one).
+pub(crate) fn finite_stats(x: &[f64]) -> Value {
+    let f: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    let n = f.len();
+    json!({
+        "min": f.iter().copied().fold(f64::INFINITY, f64::min),
+        "max": f.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        "mean": if n > 0 { f.iter().sum::<f64>() / n as f64 } else { f64::NAN },
+        "vertices": n,
+    })
 }
 
 /// The output of a per-vertex signature: its summary with the operator's, and its values as one array.

@@ -31,7 +31,7 @@ fn io_fail(path: &Path, e: impl std::fmt::Display) -> Failure {
     Failure { code: 1, message: format!("cannot write {}: {e}", path.display()) }
 }
 
-fn emit(mut out: Output, args: &OutArgs) -> Result<(), Failure> {
+pub(super) fn emit(mut out: Output, args: &OutArgs) -> Result<(), Failure> {
     let mut files = vec![];
     let mut inline = serde_json::Map::new();
     for (i, a) in out.arrays.iter().enumerate() {
@@ -62,7 +62,7 @@ fn emit(mut out: Output, args: &OutArgs) -> Result<(), Failure> {
     print_json(&out.summary)
 }
 
-fn run(v: &Validated, a: &Analysis, o: &OutArgs) -> Result<Output, Failure> {
+pub(super) fn run(v: &Validated, a: &Analysis, o: &OutArgs) -> Result<Output, Failure> {
     if o.threads > 0 {
         let _ = rayon::ThreadPoolBuilder::new().num_threads(o.threads).build_global();
     }

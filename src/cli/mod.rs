@@ -7,6 +7,7 @@ use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
 use std::path::PathBuf;
 
 mod analyses;
+mod curvature;
 mod generate;
 mod inspect;
 mod operator;
@@ -41,6 +42,10 @@ enum Command {
     Geodesic(analyses::GeodesicCmd),
     /// Number of spanning trees of the shape's edge graph (Kirchhoff's theorem).
     Trees(analyses::TreesCmd),
+    /// Mean curvature and outward normals from M⁻¹LX = 2Hn, with the angle-defect Gaussian curvature.
+    MeanCurvature(curvature::MeanCurvatureCmd),
+    /// Gaussian curvature from the heat kernel's diagonal at small times, beside the angle defect.
+    HeatCurvature(curvature::HeatCurvatureCmd),
     /// Laplacian eigenmap or GPS embedding, with the Fiedler vector and bisection.
     Embed(analyses::EmbedCmd),
     /// Smooth vertex coordinates or a function: (M + αL) u = M ū.
@@ -136,6 +141,8 @@ pub fn run() -> i32 {
         Command::Heat(a) => analyses::heat(a),
         Command::Geodesic(a) => analyses::geodesic(a),
         Command::Trees(a) => analyses::trees(a),
+        Command::MeanCurvature(a) => curvature::mean_curvature(a),
+        Command::HeatCurvature(a) => curvature::heat_curvature(a),
         Command::Embed(a) => analyses::embed(a),
         Command::Smooth(a) => analyses::smooth(a),
         Command::Interpolate(a) => analyses::interpolate(a),

@@ -15,12 +15,15 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         | Analysis::SiHks { k, .. }
         | Analysis::Wks { k, .. }
         | Analysis::Gps { k, .. }
-        | Analysis::Heat { k, .. } => Some(("k", *k)),
+        | Analysis::Heat { k, .. }
+        | Analysis::HeatCurvature { k, .. } => Some(("k", *k)),
         Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
         Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
-        Analysis::Geodesic { .. } | Analysis::Trees { .. } | Analysis::Smooth { .. } | Analysis::Interpolate { .. } => {
-            None
-        }
+        Analysis::Geodesic { .. }
+        | Analysis::Trees { .. }
+        | Analysis::MeanCurvature { .. }
+        | Analysis::Smooth { .. }
+        | Analysis::Interpolate { .. } => None,
     };
     let Some((what, k)) = asked else { return Ok(()) };
     if k == 0 {
@@ -70,6 +73,8 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
             (vec![("sources", sources.len()), ("options.varadhan_steps", options.varadhan_steps)], 2)
         }
         Analysis::Trees {} => (vec![], 1),
+        Analysis::MeanCurvature {} => (vec![], 3),
+        Analysis::HeatCurvature { k, times, .. } => (vec![("times", len(times).unwrap_or(8))], *k),
         Analysis::Embed { dimensions, .. } => (vec![], dimensions.saturating_add(1)),
         Analysis::Smooth { .. } => (vec![], 3),
         Analysis::Interpolate { values, labels, .. } => {

@@ -11,6 +11,7 @@
 //! - Per-vertex results are n × T matrices (vertices of the operator, rows; samples, columns).
 //! - Every parameter a descriptor used, chosen or defaulted, is returned beside the values.
 
+pub mod curvature;
 pub mod graph;
 pub mod heat;
 pub mod shape_dna;
