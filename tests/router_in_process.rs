@@ -304,3 +304,54 @@ async fn curvature_analyses_hear_the_sphere() {
     assert!((heat - 0.25).abs() < 0.03 && (defect - 0.25).abs() < 0.01, "heat {heat}, angle defect {defect}");
     assert_eq!(r["arrays"]["heat_curvature"]["rows"], 642);
 }
+
+/// Waves and Schrödinger over HTTP, against the closed form for an eigenfunction φ with eigenvalue λ:
+/// u(t) = cos(√λ t) φ; ψ(t) = e^{−iλt} φ with its M-norm conserved; a bump at a source vertex keeps its norm too.
+#[tokio::test]
+async fn wave_and_schrodinger_evolve_an_eigenfunction_as_the_closed_form() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(3));
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(off.clone())).unwrap()
+    };
+    let (status, s) = call(&app, analyze(json!({ "analysis": "spectrum", "k": 6, "eigenvectors": true }))).await;
+    assert_eq!(status, StatusCode::OK, "{s}");
+    let lambda = s["eigenvalues"][1].as_f64().unwrap();
+    let phi: Vec<f64> =
+        s["arrays"]["eigenvectors"]["values"].as_array().unwrap().iter().map(|r| r[1].as_f64().unwrap()).collect();
+    let t = 0.4;
+    let column = |r: &Value, name: &str, j: usize| -> Vec<f64> {
+        r["arrays"][name]["values"].as_array().unwrap().iter().map(|row| row[j].as_f64().unwrap()).collect()
+    };
+    let close = |got: &[f64], want: &dyn Fn(usize) -> f64, what: &str| {
+        let err = got.iter().enumerate().map(|(i, g)| (g - want(i)).abs()).fold(0.0, f64::max);
+        assert!(err < 1e-8, "{what}: {err}");
+    };
+    let (status, w) =
+        call(&app, analyze(json!({ "analysis": "wave", "k": 6, "times": [0.0, t], "initial": phi }))).await;
+    assert_eq!(status, StatusCode::OK, "{w}");
+    close(&column(&w, "wave", 1), &|i| (lambda.sqrt() * t).cos() * phi[i], "wave");
+    let (status, q) =
+        call(&app, analyze(json!({ "analysis": "schrodinger", "k": 6, "times": [0.0, t, 2.0 * t], "initial": phi })))
+            .await;
+    assert_eq!(status, StatusCode::OK, "{q}");
+    close(&column(&q, "schrodinger_re", 1), &|i| (lambda * t).cos() * phi[i], "Re ψ");
+    close(&column(&q, "schrodinger_im", 1), &|i| -(lambda * t).sin() * phi[i], "Im ψ");
+    for n in q["m_norm"].as_array().unwrap() {
+        assert!((n.as_f64().unwrap() - 1.0).abs() < 1e-9, "{}", q["m_norm"]);
+    }
+    // A bump: its norm is kept at every time (up to what the basis cannot hold, reported).
+    let (status, b) = call(
+        &app,
+        analyze(json!({ "analysis": "schrodinger", "k": 100, "times": [0.0, 0.1, 1.0], "source": 3, "width": 0.3 })),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{b}");
+    let norms: Vec<f64> = b["m_norm"].as_array().unwrap().iter().map(|n| n.as_f64().unwrap()).collect();
+    assert!(norms.iter().all(|n| (n - norms[0]).abs() < 1e-9 * norms[0]), "{norms:?}");
+    assert_eq!(b["initial"]["source"], 3);
+    let (status, p) = call(&app, analyze(json!({ "analysis": "wave", "times": [0.1] }))).await;
+    assert_eq!((status, p["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-parameter")), "{p}");
+}

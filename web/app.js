@@ -301,7 +301,10 @@ function request() {
 
 async function loadAnalyses() {
   doc = await api('GET', '/openapi.json');
-  for (const v of resolve(doc.components.schemas.Analysis).oneOf) {
+  for (const variant of resolve(doc.components.schemas.Analysis).oneOf) {
+    // A variant with flattened parts (allOf) has its properties spread over them.
+    const v = { properties: {} };
+    for (const part of variant.allOf || [variant]) Object.assign(v.properties, resolve(part).properties || {});
     const name = v.properties.analysis.enum[0];
     variants[name] = v;
     $('analysis').add(new Option(name, name));

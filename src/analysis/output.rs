@@ -22,6 +22,9 @@ pub const ARRAY_NAMES: &[&str] = &[
     "normals",
     "gaussian_curvature",
     "heat_curvature",
+    "wave",
+    "schrodinger_re",
+    "schrodinger_im",
 ];
 
 /// A per-vertex array in the input numbering, row-major (rows × cols).

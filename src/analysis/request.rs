@@ -162,6 +162,21 @@ impl SolverSpec {
     }
 }
 
+/// Initial data of an evolution: a function per vertex (the upload's numbering), or a Gaussian bump
+/// exp(−d²/(2w²)) of width w around a source vertex (d the straight-line distance to its position).
+#[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct InitialData {
+    /// u₀ (or Re ψ₀) per vertex, in the upload's numbering.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub initial: Option<Vec<f64>>,
+    /// Or a bump at this vertex (upload numbering).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<u32>,
+    /// The bump's width w (default: 5 % of the bounding box's diagonal).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub width: Option<f64>,
+}
+
 /// Which eigensolver runs.
 #[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
@@ -305,6 +320,39 @@ pub enum Analysis {
         #[serde(default)]
         solver: SolverSpec,
     },
+    /// The wave equation ∂²u/∂t² = −Δu by modal superposition over the k smallest eigenpairs, from an initial
+    /// displacement (`initial`, per vertex in the upload's numbering, or a Gaussian bump of `width` at `source`)
+    /// and an optional initial velocity.
+    Wave {
+        #[serde(default = "k_signature")]
+        k: usize,
+        times: Vec<f64>,
+        #[serde(flatten)]
+        start: InitialData,
+        /// ∂u/∂t at t = 0, per vertex (upload numbering; default zero).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        velocity: Option<Vec<f64>>,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    /// The Schrödinger equation ∂ψ/∂t = −iΔψ, unitary in the eigenbasis: ψ(t) = Σ e^{−iλt}⟨ψ₀, φ⟩_M φ over the k
+    /// smallest eigenpairs; real and imaginary parts as arrays, the M-norm at every time reported (conserved).
+    Schrodinger {
+        #[serde(default = "k_signature")]
+        k: usize,
+        times: Vec<f64>,
+        #[serde(flatten)]
+        start: InitialData,
+        /// The imaginary part of ψ₀, per vertex (upload numbering; default zero).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        initial_imag: Option<Vec<f64>>,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
     /// Laplacian eigenmap / GPS coordinates, with the Fiedler vector and bisection.
     Embed {
         #[serde(default = "dimensions_default")]
@@ -371,6 +419,8 @@ impl Analysis {
             Analysis::Trees { .. } => "trees",
             Analysis::MeanCurvature { .. } => "mean-curvature",
             Analysis::HeatCurvature { .. } => "heat-curvature",
+            Analysis::Wave { .. } => "wave",
+            Analysis::Schrodinger { .. } => "schrodinger",
             Analysis::Embed { .. } => "embed",
             Analysis::Smooth { .. } => "smooth",
             Analysis::Interpolate { .. } => "interpolate",
@@ -388,6 +438,8 @@ impl Analysis {
             | Analysis::ShapeDna { solver, .. }
             | Analysis::Heat { solver, .. }
             | Analysis::HeatCurvature { solver, .. }
+            | Analysis::Wave { solver, .. }
+            | Analysis::Schrodinger { solver, .. }
             | Analysis::Embed { solver, .. } => Some(solver),
             Analysis::Geodesic { .. }
             | Analysis::Trees { .. }

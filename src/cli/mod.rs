@@ -8,6 +8,7 @@ use std::path::PathBuf;
 
 mod analyses;
 mod curvature;
+mod evolution;
 mod generate;
 mod inspect;
 mod operator;
@@ -46,6 +47,10 @@ enum Command {
     MeanCurvature(curvature::MeanCurvatureCmd),
     /// Gaussian curvature from the heat kernel's diagonal at small times, beside the angle defect.
     HeatCurvature(curvature::HeatCurvatureCmd),
+    /// The wave equation ∂²u/∂t² = −Δu by modal superposition, from a displacement and a velocity.
+    Wave(evolution::WaveCmd),
+    /// The Schrödinger equation ∂ψ/∂t = −iΔψ, unitary in the eigenbasis (real and imaginary parts, M-norm).
+    Schrodinger(evolution::SchrodingerCmd),
     /// Laplacian eigenmap or GPS embedding, with the Fiedler vector and bisection.
     Embed(analyses::EmbedCmd),
     /// Smooth vertex coordinates or a function: (M + αL) u = M ū.
@@ -143,6 +148,8 @@ pub fn run() -> i32 {
         Command::Trees(a) => analyses::trees(a),
         Command::MeanCurvature(a) => curvature::mean_curvature(a),
         Command::HeatCurvature(a) => curvature::heat_curvature(a),
+        Command::Wave(a) => evolution::wave(a),
+        Command::Schrodinger(a) => evolution::schrodinger(a),
         Command::Embed(a) => analyses::embed(a),
         Command::Smooth(a) => analyses::smooth(a),
         Command::Interpolate(a) => analyses::interpolate(a),

@@ -16,7 +16,9 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         | Analysis::Wks { k, .. }
         | Analysis::Gps { k, .. }
         | Analysis::Heat { k, .. }
-        | Analysis::HeatCurvature { k, .. } => Some(("k", *k)),
+        | Analysis::HeatCurvature { k, .. }
+        | Analysis::Wave { k, .. }
+        | Analysis::Schrodinger { k, .. } => Some(("k", *k)),
         Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
         Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
         Analysis::Geodesic { .. }
@@ -74,6 +76,9 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
         }
         Analysis::Trees {} => (vec![], 1),
         Analysis::MeanCurvature {} => (vec![], 3),
+        Analysis::Wave { k, times, .. } => (vec![("times", times.len())], times.len().max(*k)),
+        // Real and imaginary parts: twice the times.
+        Analysis::Schrodinger { k, times, .. } => (vec![("times", times.len())], times.len().saturating_mul(2).max(*k)),
         Analysis::HeatCurvature { k, times, .. } => (vec![("times", len(times).unwrap_or(8))], *k),
         Analysis::Embed { dimensions, .. } => (vec![], dimensions.saturating_add(1)),
         Analysis::Smooth { .. } => (vec![], 3),

@@ -67,12 +67,16 @@ fn resolve<'a>(doc: &'a Value, schema: &'a Value) -> &'a Value {
 }
 
 /// The one-value `enum` of a tag property of an object schema: `Some((property, value))`.
+/// A branch made of flattened parts (`allOf`) has its tag in one of them.
 fn tag_of<'a>(doc: &'a Value, branch: &'a Value) -> Option<(&'a str, &'a str)> {
     let b = resolve(doc, branch);
-    b.get("properties")?.as_object()?.iter().find_map(|(name, p)| {
-        let e = resolve(doc, p).get("enum")?.as_array()?;
-        (e.len() == 1).then(|| e[0].as_str().map(|v| (name.as_str(), v))).flatten()
-    })
+    let own = b.get("properties").and_then(Value::as_object).and_then(|props| {
+        props.iter().find_map(|(name, p)| {
+            let e = resolve(doc, p).get("enum")?.as_array()?;
+            (e.len() == 1).then(|| e[0].as_str().map(|v| (name.as_str(), v))).flatten()
+        })
+    });
+    own.or_else(|| b.get("allOf")?.as_array()?.iter().find_map(|m| tag_of(doc, m)))
 }
 
 /// The object schemas that together describe `value` at this place (several for `allOf`), or `None` when the place
@@ -309,6 +313,15 @@ mod tests {
         assert!(check_query("/v1/analyze", "POST", "wait=1&format=off").is_ok());
         let e = check_query("/v1/analyze", "POST", "wiat=1").unwrap_err();
         assert_eq!((e.pointer.as_str(), e.suggestion.as_deref()), ("?wiat", Some("wait")));
+    }
+
+    #[test]
+    fn flattened_parts_of_a_tagged_branch_are_checked() {
+        let ok = json!({ "shape_id": "x", "analysis": "wave", "times": [0.1], "source": 3, "width": 0.2 });
+        assert!(check_body(&ok, "JobRequest").is_ok());
+        let bad = json!({ "shape_id": "x", "analysis": "wave", "times": [0.1], "sourse": 3 });
+        let e = check_body(&bad, "JobRequest").unwrap_err();
+        assert_eq!(e.suggestion.as_deref(), Some("source"));
     }
 
     #[test]
