@@ -355,3 +355,51 @@ async fn wave_and_schrodinger_evolve_an_eigenfunction_as_the_closed_form() {
     let (status, p) = call(&app, analyze(json!({ "analysis": "wave", "times": [0.1] }))).await;
     assert_eq!((status, p["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-parameter")), "{p}");
 }
+
+/// The PDE tools as analyses, on the unit sphere where z is an eigenfunction (Δz = 2z): Poisson's f = z/2 (and
+/// the incompatible mean of g + 1 removed and reported), diffusion with diffusivity α as e^{−2αt} z (spectral and
+/// backward Euler), and the Dirichlet energy ½∫|∇z|² = 4π/3 with Rayleigh quotient 2.
+#[tokio::test]
+async fn pde_tools_as_analyses_agree_with_the_sphere() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let sphere = kac_core::geometry::generate::icosphere(4);
+    let off = kac_core::io::write::off(&sphere);
+    let z: Vec<f64> = sphere.vertices.iter().map(|p| p[2]).collect();
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(off.clone())).unwrap()
+    };
+    let column = |r: &Value, name: &str, j: usize| -> Vec<f64> {
+        r["arrays"][name]["values"].as_array().unwrap().iter().map(|row| row[j].as_f64().unwrap()).collect()
+    };
+    let worst = |got: &[f64], want: &dyn Fn(usize) -> f64| {
+        got.iter().enumerate().map(|(i, g)| (g - want(i)).abs()).fold(0.0, f64::max)
+    };
+    let g1: Vec<f64> = z.iter().map(|x| x + 1.0).collect();
+    let (status, p) = call(&app, analyze(json!({ "analysis": "poisson", "g": g1 }))).await;
+    assert_eq!(status, StatusCode::OK, "{p}");
+    assert!((p["poisson"]["removed_mean"][0].as_f64().unwrap() - 1.0).abs() < 1e-3, "{}", p["poisson"]);
+    let e = worst(&column(&p, "solution", 0), &|i| z[i] / 2.0);
+    assert!(e < 0.01, "Poisson: {e}");
+    let fixed = json!([[0, z[0] / 2.0], [7, z[7] / 2.0]]);
+    let (status, d) = call(&app, analyze(json!({ "analysis": "poisson", "g": z, "dirichlet_values": fixed }))).await;
+    assert_eq!(status, StatusCode::OK, "{d}");
+    let f = column(&d, "solution", 0);
+    assert!((f[0] - z[0] / 2.0).abs() < 1e-12 && worst(&f, &|i| z[i] / 2.0) < 0.01);
+    for (method, tol) in [("spectral", 0.01), ("implicit", 0.03)] {
+        let req = json!({ "analysis": "diffuse", "times": [0.1], "initial": z, "diffusivity": 2.0, "method": method, "steps": 50 });
+        let (status, h) = call(&app, analyze(req)).await;
+        assert_eq!(status, StatusCode::OK, "{h}");
+        let e = worst(&column(&h, "diffused", 0), &|i| (-0.4f64).exp() * z[i]);
+        assert!(e < tol, "{method}: {e}");
+    }
+    let (status, w) = call(&app, analyze(json!({ "analysis": "dirichlet-energy", "function": z }))).await;
+    assert_eq!(status, StatusCode::OK, "{w}");
+    let energy = &w["dirichlet_energy"][0];
+    let (en, rq) = (energy["energy"].as_f64().unwrap(), energy["rayleigh_quotient"].as_f64().unwrap());
+    let exact = 4.0 * std::f64::consts::PI / 3.0;
+    assert!((en - exact).abs() < 0.01 * exact && (rq - 2.0).abs() < 0.01, "{energy}");
+    let (status, c) = call(&app, analyze(json!({ "analysis": "dirichlet-energy" }))).await;
+    assert_eq!((status, c["dirichlet_energy"].as_array().map(Vec::len)), (StatusCode::OK, Some(3)), "{c}");
+}

@@ -28,6 +28,7 @@ mod output;
 mod request;
 mod rows;
 mod run;
+mod tools;
 
 pub use eigen::*;
 pub use error::*;

@@ -25,6 +25,8 @@ pub const ARRAY_NAMES: &[&str] = &[
     "wave",
     "schrodinger_re",
     "schrodinger_im",
+    "solution",
+    "diffused",
 ];
 
 /// A per-vertex array in the input numbering, row-major (rows × cols).

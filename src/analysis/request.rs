@@ -353,6 +353,47 @@ pub enum Analysis {
         #[serde(default)]
         solver: SolverSpec,
     },
+    /// Poisson's equation Δf = g (L f = M g): Neumann (the mean of g that makes it incompatible is removed per
+    /// component and reported; f has mean zero) or with Dirichlet values on given vertices.
+    Poisson {
+        /// g per vertex (upload numbering).
+        g: Vec<f64>,
+        /// f fixed at these vertices (upload numbering): `[[vertex, value], …]`; none: Neumann.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        dirichlet_values: Option<Vec<(u32, f64)>>,
+        #[serde(default)]
+        operator: OperatorSpec,
+    },
+    /// Heat diffusion ∂u/∂t = −αΔu of a given function (or a bump at a source vertex): spectral over the k
+    /// smallest eigenpairs with the truncation bound, or backward Euler.
+    Diffuse {
+        times: Vec<f64>,
+        #[serde(flatten)]
+        start: InitialData,
+        /// The diffusivity α (default 1): u(t) is the unit-diffusivity solution at αt.
+        #[serde(default = "one")]
+        diffusivity: f64,
+        #[serde(default)]
+        method: HeatMethod,
+        #[serde(default = "k_signature")]
+        k: usize,
+        /// Backward-Euler steps per time (`implicit`).
+        #[serde(default = "steps_default")]
+        steps: usize,
+        #[serde(default)]
+        operator: OperatorSpec,
+        #[serde(default)]
+        solver: SolverSpec,
+    },
+    /// The Dirichlet energy ½ uᵀLu of a function (default: of each coordinate), with uᵀMu and the Rayleigh
+    /// quotient uᵀLu / uᵀMu.
+    DirichletEnergy {
+        /// u per vertex (upload numbering); absent: the vertex coordinates, one energy each.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        function: Option<Vec<f64>>,
+        #[serde(default)]
+        operator: OperatorSpec,
+    },
     /// Laplacian eigenmap / GPS coordinates, with the Fiedler vector and bisection.
     Embed {
         #[serde(default = "dimensions_default")]
@@ -395,6 +436,9 @@ pub fn k_default() -> usize {
 pub(crate) fn k_signature() -> usize {
     100
 }
+pub(crate) fn one() -> f64 {
+    1.0
+}
 pub fn k_curvature() -> usize {
     300
 }
@@ -421,6 +465,9 @@ impl Analysis {
             Analysis::HeatCurvature { .. } => "heat-curvature",
             Analysis::Wave { .. } => "wave",
             Analysis::Schrodinger { .. } => "schrodinger",
+            Analysis::Poisson { .. } => "poisson",
+            Analysis::Diffuse { .. } => "diffuse",
+            Analysis::DirichletEnergy { .. } => "dirichlet-energy",
             Analysis::Embed { .. } => "embed",
             Analysis::Smooth { .. } => "smooth",
             Analysis::Interpolate { .. } => "interpolate",
@@ -440,10 +487,13 @@ impl Analysis {
             | Analysis::HeatCurvature { solver, .. }
             | Analysis::Wave { solver, .. }
             | Analysis::Schrodinger { solver, .. }
+            | Analysis::Diffuse { solver, .. }
             | Analysis::Embed { solver, .. } => Some(solver),
             Analysis::Geodesic { .. }
             | Analysis::Trees { .. }
             | Analysis::MeanCurvature { .. }
+            | Analysis::Poisson { .. }
+            | Analysis::DirichletEnergy { .. }
             | Analysis::Smooth { .. }
             | Analysis::Interpolate { .. } => None,
         }

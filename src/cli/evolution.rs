@@ -27,7 +27,7 @@ pub struct Start {
     pub width: Option<f64>,
 }
 
-fn npy_column(path: &std::path::Path) -> Result<Vec<f64>, Failure> {
+pub(super) fn npy_column(path: &std::path::Path) -> Result<Vec<f64>, Failure> {
     let bytes = std::fs::read(path).map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
     let (rows, cols, data) = kac_core::io::npy::decode_f64(&bytes)
         .map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
@@ -35,7 +35,7 @@ fn npy_column(path: &std::path::Path) -> Result<Vec<f64>, Failure> {
 }
 
 impl Start {
-    fn data(&self) -> Result<InitialData, Failure> {
+    pub(super) fn data(&self) -> Result<InitialData, Failure> {
         Ok(InitialData {
             initial: self.initial.as_deref().map(npy_column).transpose()?,
             source: self.source,

@@ -12,6 +12,7 @@ mod evolution;
 mod generate;
 mod inspect;
 mod operator;
+mod pde;
 mod spectrum;
 
 #[derive(Parser)]
@@ -51,6 +52,12 @@ enum Command {
     Wave(evolution::WaveCmd),
     /// The Schrödinger equation ∂ψ/∂t = −iΔψ, unitary in the eigenbasis (real and imaginary parts, M-norm).
     Schrodinger(evolution::SchrodingerCmd),
+    /// Poisson's equation Δf = g (Neumann with the incompatible mean removed, or Dirichlet values).
+    Poisson(pde::PoissonCmd),
+    /// Heat diffusion ∂u/∂t = −αΔu of a function (spectral or backward Euler).
+    Diffuse(pde::DiffuseCmd),
+    /// The Dirichlet energy ½ uᵀLu of a function (or of each coordinate).
+    DirichletEnergy(pde::DirichletEnergyCmd),
     /// Laplacian eigenmap or GPS embedding, with the Fiedler vector and bisection.
     Embed(analyses::EmbedCmd),
     /// Smooth vertex coordinates or a function: (M + αL) u = M ū.
@@ -150,6 +157,9 @@ pub fn run() -> i32 {
         Command::HeatCurvature(a) => curvature::heat_curvature(a),
         Command::Wave(a) => evolution::wave(a),
         Command::Schrodinger(a) => evolution::schrodinger(a),
+        Command::Poisson(a) => pde::poisson(a),
+        Command::Diffuse(a) => pde::diffuse(a),
+        Command::DirichletEnergy(a) => pde::dirichlet_energy(a),
         Command::Embed(a) => analyses::embed(a),
         Command::Smooth(a) => analyses::smooth(a),
         Command::Interpolate(a) => analyses::interpolate(a),

@@ -19,11 +19,14 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         | Analysis::HeatCurvature { k, .. }
         | Analysis::Wave { k, .. }
         | Analysis::Schrodinger { k, .. } => Some(("k", *k)),
+        Analysis::Diffuse { k, method, .. } => (*method == crate::analysis::HeatMethod::Spectral).then_some(("k", *k)),
         Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
         Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
         Analysis::Geodesic { .. }
         | Analysis::Trees { .. }
         | Analysis::MeanCurvature { .. }
+        | Analysis::Poisson { .. }
+        | Analysis::DirichletEnergy { .. }
         | Analysis::Smooth { .. }
         | Analysis::Interpolate { .. } => None,
     };
@@ -76,6 +79,14 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
         }
         Analysis::Trees {} => (vec![], 1),
         Analysis::MeanCurvature {} => (vec![], 3),
+        Analysis::Poisson { g, dirichlet_values, .. } => {
+            (vec![("g", g.len()), ("dirichlet_values", dirichlet_values.as_ref().map_or(0, Vec::len))], 1)
+        }
+        Analysis::Diffuse { k, times, steps, method, .. } => {
+            let k = if *method == crate::analysis::HeatMethod::Spectral { *k } else { 0 };
+            (vec![("times", times.len()), ("steps", *steps)], times.len().max(k))
+        }
+        Analysis::DirichletEnergy { function, .. } => (vec![("function", function.as_ref().map_or(0, Vec::len))], 3),
         Analysis::Wave { k, times, .. } => (vec![("times", times.len())], times.len().max(*k)),
         // Real and imaginary parts: twice the times.
         Analysis::Schrodinger { k, times, .. } => (vec![("times", times.len())], times.len().saturating_mul(2).max(*k)),

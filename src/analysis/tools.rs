@@ -1,0 +1,232 @@
+//! The analyses that are the chapter's tools beyond descriptors: curvature (from the Laplacian and from the heat
+//! kernel), evolutions (waves, Schrödinger), Poisson, diffusion of a function and the Dirichlet energy; and the
+//! helpers that turn their inputs (per-vertex functions, initial data) into vectors over an operator's unknowns.
+
+use super::*;
+
+/// Runs one of the tools (the runner passes only these).
+pub(crate) fn run(
+    v: &Validated,
+    analysis: &Analysis,
+    hooks: Hooks<'_>,
+    reused: &std::cell::Cell<bool>,
+) -> Result<Output, AnalysisError> {
+    Ok(match analysis {
+        Analysis::MeanCurvature {} => {
+            let Shape::TriangleMesh(mesh) = &v.shape else {
+                return Err(AnalysisError::not_applicable("mean curvature is computed on triangle meshes"));
+            };
+            hooks.control.check()?;
+            let h = curvature::mean_curvature(mesh)?;
+            let k = curvature::angle_defect(mesh)?;
+            let column = |x: &[f64]| faer::Mat::from_fn(x.len(), 1, |i, _| x[i]);
+            let normals = faer::Mat::from_fn(h.normals.len(), 3, |i, j| h.normals[i][j]);
+            let summary = json!({
+                "mean_curvature": finite_stats(&h.h),
+                "gaussian_curvature": finite_stats(&k),
+                "method": h,
+                "convention": "M⁻¹LX = 2Hn with Δ = −∇·∇ and n outward: H = 1/r on a sphere of radius r",
+            });
+            let arrays = vec![
+                validated_to_input(v, column(&h.h).as_ref(), "mean_curvature"),
+                validated_to_input(v, normals.as_ref(), "normals"),
+                validated_to_input(v, column(&k).as_ref(), "gaussian_curvature"),
+            ];
+            Output { fingerprints: vec![], summary, arrays }
+        }
+        Analysis::HeatCurvature { k, times, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
+            hooks.control.phase("descriptor", 0, 0)?;
+            let pair = &e.operator.pair;
+            // The measure (area) per unknown: Σ of all of M's entries over n.
+            let resolved = 20.0 * pair.mass.iter().sum::<f64>() / pair.n().max(1) as f64;
+            let hc = curvature::heat_curvature(&basis_of(&e, *k), times.as_deref(), resolved)?;
+            let column = |x: &[f64]| faer::Mat::from_fn(x.len(), 1, |i, _| x[i]);
+            let mut arrays = vec![to_input_rows(v, &e.operator, column(&hc.k).as_ref(), "heat_curvature")];
+            let mut summary = json!({ "k": k, "heat_curvature": finite_stats(&hc.k), "fit": hc });
+            if let Shape::TriangleMesh(mesh) = &v.shape {
+                let ad = curvature::angle_defect(mesh)?;
+                summary["gaussian_curvature"] = finite_stats(&ad);
+                arrays.push(validated_to_input(v, column(&ad).as_ref(), "gaussian_curvature"));
+            }
+            Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays }
+        }
+        Analysis::Wave { k, times, start, velocity, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
+            hooks.control.phase("descriptor", 0, 0)?;
+            let (u0, how) = initial_function(v, &e.operator, start)?;
+            let v0 = velocity.as_ref().map(|f| input_function(v, &e.operator, f, "velocity")).transpose()?;
+            let (u, dropped) = pde::wave(&basis_of(&e, *k), &e.operator.pair, &u0, v0.as_deref(), times)?;
+            let mut a = to_input_rows(v, &e.operator, u.as_ref(), "wave");
+            a.columns = Some(times.clone());
+            let summary = json!({ "k": k, "times": times, "initial": how, "dropped_m_norm": dropped, "velocity": velocity.is_some() });
+            Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays: vec![a] }
+        }
+        Analysis::Schrodinger { k, times, start, initial_imag, operator, solver } => {
+            let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
+            hooks.control.phase("descriptor", 0, 0)?;
+            let (re0, how) = initial_function(v, &e.operator, start)?;
+            let im0 = initial_imag.as_ref().map(|f| input_function(v, &e.operator, f, "initial_imag")).transpose()?;
+            let pde::Evolution { re, im, norms, dropped } =
+                pde::schrodinger(&basis_of(&e, *k), &e.operator.pair, &re0, im0.as_deref(), times)?;
+            let mut a = to_input_rows(v, &e.operator, re.as_ref(), "schrodinger_re");
+            let mut b = to_input_rows(v, &e.operator, im.as_ref(), "schrodinger_im");
+            a.columns = Some(times.clone());
+            b.columns = Some(times.clone());
+            let summary = json!({
+                "k": k, "times": times, "initial": how, "m_norm": norms, "dropped_m_norm": dropped,
+                "equation": "∂ψ/∂t = −iΔψ, ψ(t) = Σ e^{−iλt}⟨ψ₀, φ⟩_M φ",
+            });
+            Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays: vec![a, b] }
+        }
+        Analysis::Poisson { g, dirichlet_values, operator } => {
+            let op = build_operator(v, operator)?;
+            hooks.control.check()?;
+            let g_op = input_function(v, &op, g, "g")?;
+            let fixed = match dirichlet_values {
+                Some(list) => {
+                    let ids: Vec<u32> = list.iter().map(|p| p.0).collect();
+                    let rows = to_operator_rows(&op, &map_vertices(v, &ids, "dirichlet_values")?)?;
+                    Some(rows.into_iter().zip(list.iter().map(|p| p.1)).collect::<Vec<_>>())
+                }
+                None => None,
+            };
+            let f = pde::poisson(&op.pair, &g_op, fixed.as_deref())?;
+            let column = faer::Mat::from_fn(f.values.len(), 1, |i, _| f.values[i]);
+            let summary = json!({ "poisson": f, "equation": "Δf = g, L f = M g (Δ = −∇·∇)" });
+            let arrays = vec![to_input_rows(v, &op, column.as_ref(), "solution")];
+            Output { fingerprints: vec![], summary: merge(summary, operator_json(&op)), arrays }
+        }
+        Analysis::Diffuse { times, start, diffusivity, method, k, steps, operator, solver } => {
+            if !(*diffusivity > 0.0 && diffusivity.is_finite()) {
+                return Err(AnalysisError::invalid_parameter(format!(
+                    "diffusivity = {diffusivity}: give a positive number"
+                )));
+            }
+            // ∂u/∂t = −αΔu: the unit-diffusivity solution at αt.
+            let scaled: Vec<f64> = times.iter().map(|t| diffusivity * t).collect();
+            let (mut a, op_json, detail) = match method {
+                HeatMethod::Spectral => {
+                    let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
+                    hooks.control.phase("descriptor", 0, 0)?;
+                    let (u0, how) = initial_function(v, &e.operator, start)?;
+                    let d = diffuse_spectral(&basis_of(&e, *k), &e.operator.pair, &u0, &scaled)?;
+                    let a = to_input_rows(v, &e.operator, d.values.as_ref(), "diffused");
+                    (a, operator_json(&e.operator), json!({ "initial": how, "spectral": d }))
+                }
+                HeatMethod::Implicit => {
+                    let op = build_operator(v, operator)?;
+                    let (u0, how) = initial_function(v, &op, start)?;
+                    let u = pde::heat_implicit(&op.pair, &u0, &scaled, *steps)?;
+                    let a = to_input_rows(v, &op, u.as_ref(), "diffused");
+                    (a, operator_json(&op), json!({ "initial": how, "steps": steps }))
+                }
+            };
+            a.columns = Some(times.clone());
+            let summary = merge(json!({ "times": times, "diffusivity": diffusivity, "method": method }), detail);
+            Output { fingerprints: vec![], summary: merge(summary, op_json), arrays: vec![a] }
+        }
+        Analysis::DirichletEnergy { function, operator } => {
+            let op = build_operator(v, operator)?;
+            let columns: Vec<(String, Vec<f64>)> = match function {
+                Some(f) => vec![("function".into(), input_function(v, &op, f, "function")?)],
+                None => {
+                    let pos = v.shape.positions().ok_or_else(|| {
+                        AnalysisError::not_applicable("the shape has no coordinates; give a function")
+                    })?;
+                    let rows: Vec<usize> = match &op.interior {
+                        None => (0..pos.len()).collect(),
+                        Some(keep) => keep.iter().map(|&i| i as usize).collect(),
+                    };
+                    ["x", "y", "z"]
+                        .iter()
+                        .enumerate()
+                        .map(|(c, n)| (n.to_string(), rows.iter().map(|&i| pos[i][c]).collect()))
+                        .collect()
+                }
+            };
+            let n = op.pair.n();
+            let mut lu = vec![0.0; n];
+            let mut mu = vec![0.0; n];
+            let energies: Vec<Value> = columns
+                .iter()
+                .map(|(name, u)| {
+                    operators::sparse::matvec(&op.pair.pattern, &op.pair.stiffness, u, &mut lu);
+                    operators::sparse::matvec(&op.pair.pattern, &op.pair.mass, u, &mut mu);
+                    let (ulu, umu) = (dot(u, &lu), dot(u, &mu));
+                    json!({ "of": name, "energy": 0.5 * ulu, "u_m_u": umu, "rayleigh_quotient": ulu / umu })
+                })
+                .collect();
+            let summary = json!({ "dirichlet_energy": energies, "definition": "E(u) = ½ uᵀLu = ½ ∫ |∇u|²" });
+            Output { fingerprints: vec![], summary: merge(summary, operator_json(&op)), arrays: vec![] }
+        }
+        other => unreachable!("the runner passes only the tools here, not {}", other.name()),
+    })
+}
+
+/// A per-vertex function in the upload's numbering as a vector over the operator's unknowns.
+pub(crate) fn input_function(v: &Validated, op: &Operator, f: &[f64], what: &str) -> Result<Vec<f64>, AnalysisError> {
+    if let Some(i) = f.iter().position(|x| !x.is_finite()) {
+        return Err(AnalysisError::invalid_parameter(format!("{what}: value {i} is not a finite number")));
+    }
+    let mapped = from_input_rows(v, f, what)?;
+    Ok(match &op.interior {
+        None => mapped,
+        Some(keep) => keep.iter().map(|&i| mapped[i as usize]).collect(),
+    })
+}
+
+/// The initial data of an evolution over the operator's unknowns, and how it was given.
+pub(crate) fn initial_function(
+    v: &Validated,
+    op: &Operator,
+    start: &InitialData,
+) -> Result<(Vec<f64>, Value), AnalysisError> {
+    match (&start.initial, start.source) {
+        (Some(f), None) => Ok((input_function(v, op, f, "initial")?, json!({ "given": "per vertex" }))),
+        (None, Some(s)) => {
+            let pos = v
+                .shape
+                .positions()
+                .ok_or_else(|| AnalysisError::not_applicable("the shape has no coordinates; give `initial`"))?;
+            let at = map_vertices(v, &[s], "source")?[0];
+            let (lo, hi) = pos.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), p| {
+                (std::array::from_fn(|c| lo[c].min(p[c])), std::array::from_fn(|c| hi[c].max(p[c])))
+            });
+            let diagonal = (0..3).map(|c| (hi[c] - lo[c]).powi(2)).sum::<f64>().sqrt();
+            let w = start.width.unwrap_or(0.05 * diagonal);
+            if !(w > 0.0 && w.is_finite()) {
+                return Err(AnalysisError::invalid_parameter(format!("width = {w}: give a positive number")));
+            }
+            let c = pos[at];
+            let bump: Vec<f64> = pos
+                .iter()
+                .map(|p| (-(0..3).map(|k| (p[k] - c[k]).powi(2)).sum::<f64>() / (2.0 * w * w)).exp())
+                .collect();
+            let values = match &op.interior {
+                None => bump,
+                Some(keep) => keep.iter().map(|&i| bump[i as usize]).collect(),
+            };
+            Ok((values, json!({ "source": s, "width": w })))
+        }
+        _ => Err(AnalysisError::invalid_parameter(
+            "give either `initial` (per vertex) or `source` (with an optional `width`)",
+        )),
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Minimum, maximum, mean and count of the finite values (NaN marks vertices without one).
+pub(crate) fn finite_stats(x: &[f64]) -> Value {
+    let f: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    let n = f.len();
+    json!({
+        "min": f.iter().copied().fold(f64::INFINITY, f64::min),
+        "max": f.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        "mean": if n > 0 { f.iter().sum::<f64>() / n as f64 } else { f64::NAN },
+        "vertices": n,
+    })
+}
