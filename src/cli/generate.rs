@@ -9,7 +9,8 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct GenerateCmd {
-    /// icosphere, square, disk, torus, cube-tets, segment, path, cycle, complete, petersen
+    /// icosphere, square, disk, torus, gww1, gww2 (the Gordon–Webb–Wolpert isospectral drums), cube-tets, segment,
+    /// path, cycle, complete, petersen
     pub name: String,
     /// Subdivision level (icosphere).
     #[arg(long, default_value_t = 4)]
@@ -28,6 +29,8 @@ pub fn run(a: GenerateCmd) -> Result<(), Failure> {
         "square" => Shape::TriangleMesh(generate::unit_square(a.n)),
         "disk" => Shape::TriangleMesh(generate::unit_disk(a.n)),
         "torus" => Shape::TriangleMesh(generate::torus(2.0, 0.5, 2 * a.n, a.n)),
+        "gww1" => Shape::TriangleMesh(generate::gww_drum(1, a.n)),
+        "gww2" => Shape::TriangleMesh(generate::gww_drum(2, a.n)),
         "cube-tets" => Shape::TetMesh(generate::unit_cube_tets(a.n)),
         "segment" => Shape::Polyline(generate::segment(a.n, 1.0)),
         "path" => Shape::Graph(generate::path_graph(a.n)),

@@ -471,3 +471,29 @@ fn inertia_check_confirms_clusters_and_catches_a_missing_eigenvalue() {
     // confirms the count, or the repairs ran out of Krylov room and the dense path computed everything.
     assert!(c.complete && (c.below_shift >= Some(30) || c.method == "dense"), "{c:?}");
 }
+
+/// Kac's question answered "no" by kac: the Gordon–Webb–Wolpert drums are not congruent (different shape ids),
+/// yet their Dirichlet spectra agree (on these conforming meshes to rounding: transplantation holds for the
+/// discrete problem too), and the first eigenvalue approaches Driscoll's 2.53794399980 for the drums at twice
+/// this size (Driscoll 1997, SIAM Review 39: λ scales as 1/size², so ours is 4×) under refinement.
+#[test]
+fn isospectral_drums_sound_the_same() {
+    let spectrum = |which: usize, n: usize| {
+        let off = kac_core::io::write::off(&generate::gww_drum(which, n));
+        let v = kac_core::load_bytes(off.as_bytes(), kac_core::Format::Off, &Default::default(), &Default::default())
+            .unwrap();
+        let o = operators::build(&v.shape, &opts(Mass::Consistent, Boundary::Dirichlet)).unwrap();
+        let s =
+            kac_core::spectrum::eigs(&o.pair, &EigenOptions { k: 10, ..Default::default() }, None, Control::default())
+                .unwrap();
+        (v.id.hex(), s.values)
+    };
+    let (id1, l1) = spectrum(1, 12);
+    let (id2, l2) = spectrum(2, 12);
+    assert_ne!(id1, id2, "two different drums");
+    assert_close(&l1, &l2, 1e-9, "the two drums' spectra");
+    let driscoll = 4.0 * 2.53794399980;
+    let errors: Vec<f64> = [6, 12, 24].iter().map(|&n| (spectrum(1, n).1[0] - driscoll) / driscoll).collect();
+    assert!(errors.iter().all(|e| *e > 0.0), "P1 eigenvalues lie above: {errors:?}");
+    assert!(errors[1] < errors[0] && errors[2] < errors[1] && errors[2] < 0.005, "{errors:?}");
+}

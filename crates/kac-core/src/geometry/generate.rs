@@ -107,6 +107,76 @@ pub fn unit_square(n: usize) -> TriangleMesh {
     grid(n, n, 1.0, 1.0)
 }
 
+/// The boundary of the Gordon–Webb–Wolpert isospectral drums (Gordon, Webb & Wolpert 1992) in the coordinates
+/// of Moler's "Can one hear the shape of a drum?" (2012): eight-sided polygons of area 7/2, each a union of seven
+/// half unit squares, non-congruent and with the same Dirichlet spectrum.
+pub const GWW_DRUMS: [[[f64; 2]; 8]; 2] = [
+    [[0.0, 0.0], [0.0, 1.0], [2.0, 3.0], [2.0, 2.0], [3.0, 2.0], [2.0, 1.0], [1.0, 1.0], [1.0, 0.0]],
+    [[1.0, 0.0], [0.0, 1.0], [0.0, 2.0], [2.0, 2.0], [2.0, 3.0], [3.0, 2.0], [2.0, 1.0], [1.0, 1.0]],
+];
+
+/// Gordon–Webb–Wolpert drum `which` (1 or 2), meshed conformingly: every unit square of [0, 3]² is cut by its two
+/// diagonals into four triangles, those inside the drum (the drum's edges run along grid lines and diagonals, so
+/// each such triangle is wholly inside or outside) are each split uniformly into n² triangles, and shared
+/// vertices are merged. Mesh size 1/(2n) along the axes.
+pub fn gww_drum(which: usize, n: usize) -> TriangleMesh {
+    let poly = GWW_DRUMS[(which.clamp(1, 2)) - 1];
+    let n = n.max(1);
+    let inside = |x: f64, y: f64| {
+        // Even–odd rule.
+        let mut c = false;
+        for k in 0..8 {
+            let (a, b) = (poly[k], poly[(k + 1) % 8]);
+            if (a[1] > y) != (b[1] > y) && x < a[0] + (y - a[1]) * (b[0] - a[0]) / (b[1] - a[1]) {
+                c = !c;
+            }
+        }
+        c
+    };
+    let scale = (2 * n) as f64;
+    let mut index: std::collections::HashMap<(i64, i64), u32> = std::collections::HashMap::new();
+    let mut vertices: Vec<Point> = vec![];
+    let mut faces = vec![];
+    let mut vertex = |p: [f64; 2], vertices: &mut Vec<Point>| -> u32 {
+        let key = ((p[0] * scale).round() as i64, (p[1] * scale).round() as i64);
+        *index.entry(key).or_insert_with(|| {
+            vertices.push([key.0 as f64 / scale, key.1 as f64 / scale, 0.0]);
+            (vertices.len() - 1) as u32
+        })
+    };
+    for i in 0..3 {
+        for j in 0..3 {
+            let (x, y) = (i as f64, j as f64);
+            let c = [x + 0.5, y + 0.5];
+            let corners = [[x, y], [x + 1.0, y], [x + 1.0, y + 1.0], [x, y + 1.0]];
+            for k in 0..4 {
+                let (a, b) = (corners[k], corners[(k + 1) % 4]);
+                let centroid = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0];
+                if !inside(centroid[0], centroid[1]) {
+                    continue;
+                }
+                // Uniform subdivision of the triangle (a, b, c): points a + (u/n)(b − a) + (v/n)(c − a).
+                let at = |u: usize, v: usize| {
+                    let (s, t) = (u as f64 / n as f64, v as f64 / n as f64);
+                    [a[0] + s * (b[0] - a[0]) + t * (c[0] - a[0]), a[1] + s * (b[1] - a[1]) + t * (c[1] - a[1])]
+                };
+                for u in 0..n {
+                    for v in 0..n - u {
+                        let (p0, p1, p2) = (at(u, v), at(u + 1, v), at(u, v + 1));
+                        let f = [vertex(p0, &mut vertices), vertex(p1, &mut vertices), vertex(p2, &mut vertices)];
+                        faces.push(f);
+                        if u + v + 1 < n {
+                            let p3 = at(u + 1, v + 1);
+                            faces.push([f[1], vertex(p3, &mut vertices), f[2]]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    TriangleMesh { vertices, faces }
+}
+
 /// The unit disk: `rings` concentric rings, ring k with 6k vertices, boundary vertices exactly on the circle.
 pub fn unit_disk(rings: usize) -> TriangleMesh {
     let mut vertices: Vec<Point> = vec![[0.0, 0.0, 0.0]];
