@@ -10,7 +10,7 @@ use std::path::PathBuf;
 #[derive(Args)]
 pub struct GenerateCmd {
     /// icosphere, square, disk, torus, gww1, gww2 (the Gordon–Webb–Wolpert isospectral drums), cube-tets, segment,
-    /// path, cycle, complete, petersen
+    /// path, cycle, complete, petersen, cospectral1, cospectral2 (non-isomorphic graphs with one Laplacian spectrum)
     pub name: String,
     /// Subdivision level (icosphere).
     #[arg(long, default_value_t = 4)]
@@ -37,6 +37,8 @@ pub fn run(a: GenerateCmd) -> Result<(), Failure> {
         "cycle" => Shape::Graph(generate::cycle_graph(a.n)),
         "complete" => Shape::Graph(generate::complete_graph(a.n)),
         "petersen" => Shape::Graph(generate::petersen_graph()),
+        "cospectral1" => Shape::Graph(generate::cospectral_graph(1)),
+        "cospectral2" => Shape::Graph(generate::cospectral_graph(2)),
         other => return Err(Failure { code: 2, message: format!("unknown shape '{other}'") }),
     };
     // The format follows the extension (.off, .obj, .ply, .json); OFF for meshes and kac JSON otherwise by default.

@@ -281,6 +281,19 @@ pub fn path_graph(n: usize) -> Graph {
     Graph { vertex_count: n, positions: None, weights: vec![1.0; edges.len()], edges }
 }
 
+/// A pair of connected graphs on 6 vertices and 7 edges with the same combinatorial Laplacian spectrum that are
+/// not isomorphic (their degree sequences differ: 4,2,2,2,2,2 and 3,3,3,2,2,1): the discrete "can you hear the
+/// shape" counterexample. Found by an exhaustive search of the connected graphs on 6 vertices, comparing exact
+/// characteristic polynomials of their Laplacians; `which` is 1 or 2.
+pub fn cospectral_graph(which: usize) -> Graph {
+    let edges: Vec<[u32; 2]> = if which == 2 {
+        vec![[0, 2], [0, 4], [0, 5], [1, 2], [1, 4], [1, 5], [2, 3]]
+    } else {
+        vec![[0, 2], [0, 3], [0, 4], [0, 5], [1, 4], [1, 5], [2, 3]]
+    };
+    Graph { vertex_count: 6, positions: None, weights: vec![1.0; edges.len()], edges }
+}
+
 /// The cycle graph C_n.
 pub fn cycle_graph(n: usize) -> Graph {
     let edges: Vec<[u32; 2]> = (0..n as u32).map(|i| [i.min((i + 1) % n as u32), i.max((i + 1) % n as u32)]).collect();
