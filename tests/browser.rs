@@ -195,6 +195,22 @@ async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() 
     assert!(changed(&other, &distance) > drawn(&other) / 10, "the distance is shown");
     no_errors(&c, "geodesic").await;
     let url = js(&c, "return location.href").await;
+    // A wave from the picked vertex, played with the slider: the shape's colours move with time.
+    c.find(Locator::Id("wave")).await.unwrap().click().await.unwrap();
+    until(&c, "window.kac.state.array === 'wave'", "the wave").await;
+    js(&c, "const s = document.getElementById('column'); s.value = '2'; s.dispatchEvent(new Event('input')); return 0")
+        .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let early = canvas(&c, "5-wave-early").await;
+    js(
+        &c,
+        "const s = document.getElementById('column'); s.value = '12'; s.dispatchEvent(new Event('input')); return 0",
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let later = canvas(&c, "6-wave-later").await;
+    assert!(changed(&early, &later) > drawn(&early) / 10, "the wave moves");
+    no_errors(&c, "wave").await;
 
     // A second shape, then every stored shape compared: the distance matrix as a heat map, nearest neighbours.
     let sphere = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(3));
@@ -216,7 +232,7 @@ async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() 
     c.goto(&url).await.unwrap();
     until(&c, "window.kac && window.kac.ready && window.kac.state.array === 'distance'", "the linked view").await;
     tokio::time::sleep(Duration::from_millis(300)).await;
-    let again = canvas(&c, "5-link").await;
+    let again = canvas(&c, "7-link").await;
     assert!(drawn(&again) > again.len() / 50);
     no_errors(&c, "link").await;
     c.close().await.unwrap();

@@ -460,7 +460,10 @@ function colour() {
   $('cb-hi').textContent = hi.toPrecision(4);
   const meta = state.result.arrays[state.array] || {};
   const col = meta.columns ? meta.columns[state.column] : null;
-  const what = { eigenvectors: 'λ', hks: 't', wks: 'e', si_hks: 'ω', heat_kernel: 't', heat: 't', gps: 'λ', embedding: 'λ' }[state.array];
+  const what = {
+    eigenvectors: 'λ', hks: 't', wks: 'e', si_hks: 'ω', heat_kernel: 't', heat: 't', gps: 'λ', embedding: 'λ',
+    wave: 't', schrodinger_re: 't', schrodinger_im: 't', diffused: 't',
+  }[state.array];
   $('column-label').textContent = what ? `${what} (column)` : 'column';
   $('column-value').textContent = `${state.column}${col !== null && col !== undefined ? ` — ${what || 'value'} = ${Number(col).toPrecision(5)}` : ''}`;
   if (state.vertex !== null) vertexPlot();
@@ -495,6 +498,18 @@ function pickVertex(v, link = true) {
 viewer.onpick = (v) => pickVertex(v);
 $('geodesic').addEventListener('click', () => submit({ shape_id: state.shape, analysis: 'geodesic', sources: [rowOf(state.vertex)] }));
 $('heat').addEventListener('click', () => submit({ shape_id: state.shape, analysis: 'heat', k: 100, sources: [rowOf(state.vertex)] }));
+// Evolutions from a bump at the picked vertex, over times scaled to the shape (its area: a wave crosses a
+// unit-area surface in about one time unit); the slider then plays them.
+const evolutionTimes = () => {
+  const scale = Math.sqrt(state.summary?.area || 1);
+  return Array.from({ length: 24 }, (_, i) => (i * scale) / 12);
+};
+$('wave').addEventListener('click', () =>
+  submit({ shape_id: state.shape, analysis: 'wave', k: 200, times: evolutionTimes(), source: rowOf(state.vertex) }),
+);
+$('schrodinger').addEventListener('click', () =>
+  submit({ shape_id: state.shape, analysis: 'schrodinger', k: 200, times: evolutionTimes().map((t) => t / 10), source: rowOf(state.vertex) }),
+);
 
 // ---- plots ---------------------------------------------------------------------------------------------------------
 
