@@ -403,3 +403,24 @@ async fn pde_tools_as_analyses_agree_with_the_sphere() {
     let (status, c) = call(&app, analyze(json!({ "analysis": "dirichlet-energy" }))).await;
     assert_eq!((status, c["dirichlet_energy"].as_array().map(Vec::len)), (StatusCode::OK, Some(3)), "{c}");
 }
+
+/// On a shape with a boundary the heat-kernel curvature says so: boundary vertices get no value (null), and a
+/// note names the boundary's bias near it.
+#[tokio::test]
+async fn heat_curvature_flags_the_boundary() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::unit_disk(12));
+    let uri = format!(
+        "/v1/analyze?format=off&wait=60&analysis={}",
+        urlencode(&json!({ "analysis": "heat-curvature", "k": 100 }).to_string())
+    );
+    let (status, r) = call(&app, Request::post(uri).body(Body::from(off)).unwrap()).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    let boundary = r["boundary_vertices"].as_u64().unwrap();
+    assert_eq!(boundary, 72, "the disk's outer ring");
+    assert!(r["boundary_note"].is_string());
+    let nulls =
+        r["arrays"]["heat_curvature"]["values"].as_array().unwrap().iter().filter(|row| row[0].is_null()).count();
+    assert_eq!(nulls as u64, boundary);
+}

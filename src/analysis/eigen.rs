@@ -113,16 +113,11 @@ pub fn eigenpairs(
         reused.set(true);
         return Ok(e);
     }
-    hooks.control.check()?;
-    let t0 = std::time::Instant::now();
-    let operator = build_operator(v, spec)?;
-    let assembly_s = t0.elapsed().as_secs_f64();
-    hooks.control.check()?;
+    let (operator, assembly_s) = assemble(v, spec, solver, hooks)?;
     let n = operator.pair.n();
-    if k == 0 || k > n {
+    if k > n {
         return Err(AnalysisError::invalid_k(format!("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {n})")));
     }
-    hooks.limits.check_dense(solver, n)?;
     let spectrum = spectrum::eigs(&operator.pair, &solver.eigen_options(k, hooks.threads), None, hooks.control)?;
     if let Some(f) = hooks.on_solve {
         f(&spectrum.stats);
@@ -134,6 +129,22 @@ pub fn eigenpairs(
     Ok(e)
 }
 
+/// The operator a solve needs, with its assembly time, between stop checks and within the dense limit.
+fn assemble(
+    v: &Validated,
+    spec: &OperatorSpec,
+    solver: &SolverSpec,
+    hooks: Hooks<'_>,
+) -> Result<(Operator, f64), AnalysisError> {
+    hooks.control.check()?;
+    let t0 = std::time::Instant::now();
+    let operator = build_operator(v, spec)?;
+    let assembly_s = t0.elapsed().as_secs_f64();
+    hooks.control.check()?;
+    hooks.limits.check_dense(solver, operator.pair.n())?;
+    Ok((operator, assembly_s))
+}
+
 /// Every eigenpair with λ in [a, b] (not cached: the cache holds the smallest pairs), at most
 /// `hooks.limits.max_pairs` of them and no more eigenvectors than `hooks.limits.max_values` values.
 pub fn band_pairs(
@@ -143,13 +154,8 @@ pub fn band_pairs(
     band: [f64; 2],
     hooks: Hooks<'_>,
 ) -> Result<Eigen, AnalysisError> {
-    hooks.control.check()?;
-    let t0 = std::time::Instant::now();
-    let operator = build_operator(v, spec)?;
-    let assembly_s = t0.elapsed().as_secs_f64();
-    hooks.control.check()?;
+    let (operator, assembly_s) = assemble(v, spec, solver, hooks)?;
     let n = operator.pair.n();
-    hooks.limits.check_dense(solver, n)?;
     let max_pairs = hooks.limits.max_pairs.min(hooks.limits.max_values / n.max(1)).max(1);
     let opts = solver.eigen_options(0, hooks.threads);
     let spectrum = spectrum::eigs_band(&operator.pair, band[0], band[1], max_pairs, &opts, hooks.control)?;

@@ -40,10 +40,30 @@ pub(crate) fn run(
             let pair = &e.operator.pair;
             // The measure (area) per unknown: Σ of all of M's entries over n.
             let resolved = 20.0 * pair.mass.iter().sum::<f64>() / pair.n().max(1) as f64;
-            let hc = curvature::heat_curvature(&basis_of(&e, *k), times.as_deref(), resolved)?;
+            let mut hc = curvature::heat_curvature(&basis_of(&e, *k), times.as_deref(), resolved)?;
+            // The expansion holds away from a boundary (there it has a boundary term): boundary vertices get no
+            // value, and the output says that vertices within about √t of the boundary are affected too.
+            let boundary = operators::boundary::boundary_vertices(&v.shape);
+            let rows: Vec<usize> = match &e.operator.interior {
+                None => (0..boundary.len()).collect(),
+                Some(keep) => keep.iter().map(|&i| i as usize).collect(),
+            };
+            let mut on_boundary = 0;
+            for (row, &vertex) in rows.iter().enumerate() {
+                if boundary.get(vertex).copied().unwrap_or(false) {
+                    hc.k[row] = f64::NAN;
+                    on_boundary += 1;
+                }
+            }
             let column = |x: &[f64]| faer::Mat::from_fn(x.len(), 1, |i, _| x[i]);
             let mut arrays = vec![to_input_rows(v, &e.operator, column(&hc.k).as_ref(), "heat_curvature")];
-            let mut summary = json!({ "k": k, "heat_curvature": finite_stats(&hc.k), "fit": hc });
+            let mut summary =
+                json!({ "k": k, "heat_curvature": finite_stats(&hc.k), "fit": hc, "boundary_vertices": on_boundary });
+            if on_boundary > 0 || e.operator.interior.is_some() {
+                summary["boundary_note"] = json!(
+                    "the shape has a boundary: boundary vertices get no value, and within about √t of it the heat kernel's boundary term biases the estimate"
+                );
+            }
             if let Shape::TriangleMesh(mesh) = &v.shape {
                 let ad = curvature::angle_defect(mesh)?;
                 summary["gaussian_curvature"] = finite_stats(&ad);
@@ -112,7 +132,8 @@ pub(crate) fn run(
                     let (u0, how) = initial_function(v, &e.operator, start)?;
                     let d = diffuse_spectral(&basis_of(&e, *k), &e.operator.pair, &u0, &scaled)?;
                     let a = to_input_rows(v, &e.operator, d.values.as_ref(), "diffused");
-                    (a, operator_json(&e.operator), json!({ "initial": how, "spectral": d }))
+                    // `spectral.times` are the scaled times αt the unit-diffusivity solution was taken at.
+                    (a, operator_json(&e.operator), json!({ "initial": how, "spectral": d, "scaled_times": scaled }))
                 }
                 HeatMethod::Implicit => {
                     let op = build_operator(v, operator)?;
