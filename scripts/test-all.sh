@@ -41,5 +41,8 @@ fi
 echo "== release build (the command docker/Dockerfile runs)"
 cargo build --release --locked --bin kac
 
+echo "== peers: SciPy reads the operator matrices the server serves, and ARPACK agrees with its spectra"
+bash scripts/peers.sh target/release/kac
+
 echo "== contract: schemathesis against openapi/openapi.json on the real server"
 bash scripts/contract.sh target/release/kac

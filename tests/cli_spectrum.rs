@@ -87,6 +87,14 @@ fn operator_report_and_matrix_market() {
     assert_eq!(body[0], "49 49 49");
     let total: f64 = body[1..].iter().map(|l| l.split_whitespace().nth(2).unwrap().parse::<f64>().unwrap()).sum();
     assert!((total - 1.0).abs() < 1e-12);
+    // SciPy's .npz beside each (read back in the router tests; by SciPy itself in scripts/peers.sh) and the
+    // vertex of each unknown.
+    assert!(std::fs::read(out_dir.join("L.npz")).unwrap().starts_with(b"PK\x03\x04"));
+    assert_eq!(v["files"]["M_npz"], out_dir.join("M.npz").display().to_string());
+    assert!(out_dir.join("unknown_vertices.npy").exists());
+    let out = kac().args(["operator", "--boundary", "dirichlet", "--out-dir"]).arg(&out_dir).arg(&sq).output().unwrap();
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(d["interior_vertices"].as_array().map(Vec::len), Some(25), "{d}");
     // A bad operator name or an operator that does not fit the shape: exit 2, one line.
     let out = kac().args(["operator", "--operator", "tet"]).arg(&sq).output().unwrap();
     assert_eq!(out.status.code(), Some(2));

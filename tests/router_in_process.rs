@@ -424,3 +424,139 @@ async fn heat_curvature_flags_the_boundary() {
         r["arrays"]["heat_curvature"]["values"].as_array().unwrap().iter().filter(|row| row[0].is_null()).count();
     assert_eq!(nulls as u64, boundary);
 }
+
+async fn raw(app: &axum::Router, uri: &str) -> (StatusCode, Vec<u8>, String) {
+    let resp = app.clone().oneshot(Request::get(uri).body(Body::empty()).unwrap()).await.unwrap();
+    let status = resp.status();
+    let ct = resp.headers().get("content-type").map(|v| v.to_str().unwrap().to_string()).unwrap_or_default();
+    (status, axum::body::to_bytes(resp.into_body(), usize::MAX).await.unwrap().to_vec(), ct)
+}
+
+/// Operators out: the `operator` analysis of a grid on the unit square returns L and M whose Matrix Market and
+/// .npz files hold the triplets it returns (a lumped M sums to the area; L's rows sum to zero under Neumann
+/// conditions), the unknowns' vertices are the interior ones under Dirichlet conditions, and the property report
+/// comes on request. (SciPy reads the same files in scripts/peers.py.)
+#[tokio::test]
+async fn the_operator_analysis_serves_its_matrices() {
+    use std::io::Read;
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::unit_square(8));
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(off.clone())).unwrap()
+    };
+    let req = json!({ "analysis": "operator", "report": true, "operator": { "mass": "lumped" } });
+    let (status, r) = call(&app, analyze(req)).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    assert_eq!((r["unknowns"].as_u64(), r["vertices"].as_u64()), (Some(81), Some(81)), "{r}");
+    assert_eq!(r["properties"]["linear_precision"]["holds"], true);
+    let id = r["result_id"].as_str().unwrap();
+    let links = &r["arrays"]["stiffness"];
+    assert!(links["ply"].is_null() && links["npz"].is_string() && links["mtx"].is_string(), "{links}");
+    let triplets = |name: &str| -> Vec<[f64; 3]> {
+        r["arrays"][name]["values"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| [t[0].as_f64().unwrap(), t[1].as_f64().unwrap(), t[2].as_f64().unwrap()])
+            .collect()
+    };
+    let (l, m) = (triplets("stiffness"), triplets("mass"));
+    assert_eq!(m.len(), 81, "a lumped mass is diagonal");
+    assert!((m.iter().map(|t| t[2]).sum::<f64>() - 1.0).abs() < 1e-12);
+    let mut row_sums = [0.0f64; 81];
+    for &[i, j, v] in &l {
+        assert!(i <= j);
+        row_sums[i as usize] += v;
+        if i != j {
+            row_sums[j as usize] += v;
+        }
+    }
+    assert!(row_sums.iter().all(|s| s.abs() < 1e-12), "constants in the kernel");
+    // Matrix Market: the lower triangle, 1-based, the same values.
+    let (status, mtx, ct) = raw(&app, &format!("/v1/results/{id}/arrays/stiffness.mtx")).await;
+    assert_eq!((status, ct.starts_with("text/plain")), (StatusCode::OK, true));
+    let text = String::from_utf8(mtx).unwrap();
+    let body: Vec<&str> = text.lines().filter(|x| !x.starts_with('%')).collect();
+    assert_eq!(body[0], format!("81 81 {}", l.len()));
+    for (line, t) in body[1..].iter().zip(&l) {
+        let f: Vec<f64> = line.split(' ').map(|x| x.parse().unwrap()).collect();
+        assert_eq!([f[1] - 1.0, f[0] - 1.0, f[2]], *t);
+    }
+    // .npz: CSR of the whole matrix.
+    let (status, npz, ct) = raw(&app, &format!("/v1/results/{id}/arrays/stiffness.npz")).await;
+    assert_eq!((status, ct.as_str()), (StatusCode::OK, "application/zip"));
+    let mut z = zip::ZipArchive::new(std::io::Cursor::new(npz)).unwrap();
+    let mut member = |name: &str| {
+        let mut b = vec![];
+        z.by_name(name).unwrap().read_to_end(&mut b).unwrap();
+        let h = u16::from_le_bytes([b[8], b[9]]) as usize;
+        b[10 + h..].chunks(8).map(|c| <[u8; 8]>::try_from(c).unwrap()).collect::<Vec<_>>()
+    };
+    let indptr: Vec<i64> = member("indptr.npy").into_iter().map(i64::from_le_bytes).collect();
+    let off_diagonal = l.iter().filter(|t| t[0] != t[1]).count();
+    assert_eq!((indptr.len(), indptr[81] as usize), (82, l.len() + off_diagonal));
+    // Not per-vertex: no coloured PLY; a per-vertex format name that does not exist is not found.
+    assert_eq!(raw(&app, &format!("/v1/results/{id}/arrays/stiffness.ply")).await.0, StatusCode::NOT_FOUND);
+    assert_eq!(raw(&app, &format!("/v1/results/{id}/arrays/unknown_vertices.npz")).await.0, StatusCode::NOT_FOUND);
+    // Dirichlet: 49 interior unknowns, each mapped to an interior vertex of the grid.
+    let (status, d) =
+        call(&app, analyze(json!({ "analysis": "operator", "operator": { "boundary": "dirichlet" } }))).await;
+    assert_eq!(status, StatusCode::OK, "{d}");
+    let map: Vec<usize> = d["arrays"]["unknown_vertices"]["values"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x[0].as_f64().unwrap() as usize)
+        .collect();
+    let square = kac_core::geometry::generate::unit_square(8);
+    assert_eq!(map.len(), 49);
+    assert!(map.iter().all(|&i| {
+        let p = square.vertices[i];
+        p[0] > 0.0 && p[0] < 1.0 && p[1] > 0.0 && p[1] < 1.0
+    }));
+}
+
+/// N(λ) beside Weyl's law: on the unit square with Dirichlet conditions the count at each computed eigenvalue
+/// is its index (what the closed form π²(a² + b²) counts up to the discretization error), and the two-term law
+/// with the boundary's length 4 is nearer to it than the leading term alone; a band counts the pairs below it.
+#[tokio::test]
+async fn the_counting_function_follows_weyls_law() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::unit_square(24));
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(off.clone())).unwrap()
+    };
+    let req = json!({ "analysis": "spectrum", "k": 40, "counting": true, "operator": { "boundary": "dirichlet" } });
+    let (status, r) = call(&app, analyze(req)).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    let c = &r["counting"];
+    assert!((c["boundary_measure"].as_f64().unwrap() - 4.0).abs() < 1e-12, "{c}");
+    assert!(c["terms"].as_str().unwrap().contains("Dirichlet"));
+    let pi2 = std::f64::consts::PI.powi(2);
+    let mut exact: Vec<f64> = (1..20).flat_map(|a| (1..20).map(move |b| pi2 * (a * a + b * b) as f64)).collect();
+    exact.sort_by(f64::total_cmp);
+    let (lambda, count, weyl) =
+        (c["lambda"].as_array().unwrap(), c["count"].as_array().unwrap(), c["weyl"].as_array().unwrap());
+    let (mut two, mut lead) = (0.0, 0.0);
+    for i in 0..40 {
+        let l = lambda[i].as_f64().unwrap();
+        let n = count[i].as_u64().unwrap() as usize;
+        // The count is the index of the last equal eigenvalue (a double eigenvalue counts twice at both).
+        assert!(n > i && (n == 40 || lambda[n].as_f64().unwrap() > l), "{i}: {n}");
+        // P1 eigenvalues lie above the exact ones: the exact count at λ_h is at least the discrete one.
+        assert!(exact.iter().filter(|&&e| e <= l * (1.0 + 1e-9)).count() >= n);
+        two += (weyl[i].as_f64().unwrap() - n as f64).abs();
+        lead += (l / (4.0 * std::f64::consts::PI) - n as f64).abs();
+    }
+    assert!(two < 0.5 * lead, "two-term {two} vs leading {lead}");
+    let req = json!({ "analysis": "spectrum", "band": [50.0, 100.0], "counting": true, "operator": { "boundary": "dirichlet" } });
+    let (status, b) = call(&app, analyze(req)).await;
+    assert_eq!(status, StatusCode::OK, "{b}");
+    // The band's first pair is counted after every eigenvalue below 50 (2π², 5π² twice, 8π²… as discretized).
+    let below = lambda.iter().filter(|x| x.as_f64().unwrap() < 50.0).count();
+    assert_eq!(b["counting"]["count"][0].as_u64().unwrap() as usize, below + 1, "{}", b["counting"]);
+}

@@ -411,7 +411,8 @@ async function openJob(id, array, column = 0) {
     state.result = r;
     state.arrays = {};
     $('summary').textContent = JSON.stringify(r, (k, v) => (Array.isArray(v) && v.length > 40 ? `[${v.length} values]` : v), 1);
-    const names = Object.keys(r.arrays || {});
+    // Per-vertex arrays only (they have a coloured PLY); an operator's matrices are links in the summary.
+    const names = Object.keys(r.arrays || {}).filter((n) => r.arrays[n].ply);
     $('array').innerHTML = '';
     for (const n of names) $('array').add(new Option(n, n));
     $('controls').hidden = names.length === 0;

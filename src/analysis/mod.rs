@@ -24,6 +24,7 @@ use std::sync::Arc;
 
 mod eigen;
 mod error;
+mod operator;
 mod output;
 mod request;
 mod rows;
@@ -32,6 +33,7 @@ mod tools;
 
 pub use eigen::*;
 pub use error::*;
+pub use operator::{is_per_vertex, unknown_vertices, MATRIX_ARRAYS};
 pub use output::*;
 pub use request::*;
 pub use rows::*;

@@ -223,10 +223,27 @@ pub enum Analysis {
         /// Return the eigenvectors as a per-vertex array.
         #[serde(default)]
         eigenvectors: bool,
+        /// Add the counting function N(λ) at each returned eigenvalue beside Weyl's law for the shape's measure
+        /// (two terms where the boundary's measure is known).
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        counting: bool,
         #[serde(default)]
         operator: OperatorSpec,
         #[serde(default)]
         solver: SolverSpec,
+    },
+    /// The operator itself: L and M as downloadable matrices (Matrix Market, SciPy .npz; kept as upper-triangle
+    /// triplets), the map from its unknowns to the upload's vertices, and on request the "no free lunch" property
+    /// report.
+    Operator {
+        /// Add the property report (symmetry, locality, linear precision, maximum principle, PSD, null space).
+        #[serde(default)]
+        report: bool,
+        /// Return L and M (`stiffness`, `mass`) and the unknowns' vertices (default true).
+        #[serde(default = "yes", skip_serializing_if = "is_true")]
+        matrices: bool,
+        #[serde(default)]
+        operator: OperatorSpec,
     },
     /// Heat kernel signature (the scale-invariant form is its own analysis, `si-hks`).
     Hks {
@@ -436,6 +453,9 @@ pub fn k_default() -> usize {
 pub(crate) fn k_signature() -> usize {
     100
 }
+pub(crate) fn yes() -> bool {
+    true
+}
 pub(crate) fn one() -> f64 {
     1.0
 }
@@ -453,6 +473,7 @@ impl Analysis {
     pub fn name(&self) -> &'static str {
         match self {
             Analysis::Spectrum { .. } => "spectrum",
+            Analysis::Operator { .. } => "operator",
             Analysis::Hks { .. } => "hks",
             Analysis::SiHks { .. } => "si-hks",
             Analysis::Wks { .. } => "wks",
@@ -489,7 +510,8 @@ impl Analysis {
             | Analysis::Schrodinger { solver, .. }
             | Analysis::Diffuse { solver, .. }
             | Analysis::Embed { solver, .. } => Some(solver),
-            Analysis::Geodesic { .. }
+            Analysis::Operator { .. }
+            | Analysis::Geodesic { .. }
             | Analysis::Trees { .. }
             | Analysis::MeanCurvature { .. }
             | Analysis::Poisson { .. }

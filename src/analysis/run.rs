@@ -151,16 +151,25 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
     // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
     let reused = std::cell::Cell::new(false);
     let out = match analysis {
-        Analysis::Spectrum { k, band, eigenvectors, operator, solver } => match band {
-            Some(band) => {
-                let e = band_pairs(v, operator, solver, *band, hooks)?;
-                spectrum_output(v, &e, e.spectrum.values.len(), Some(*band), *eigenvectors, solver, hooks.threads)
+        Analysis::Spectrum { k, band, eigenvectors, counting, operator, solver } => {
+            let (e, k) = match band {
+                Some(band) => {
+                    let e = Arc::new(band_pairs(v, operator, solver, *band, hooks)?);
+                    let k = e.spectrum.values.len();
+                    (e, k)
+                }
+                None => (eigenpairs(v, operator, solver, *k, hooks, &reused)?, *k),
+            };
+            let mut out = spectrum_output(v, &e, k, *band, *eigenvectors, solver, hooks.threads);
+            if *counting {
+                let values = &e.spectrum.values[..k.min(e.spectrum.values.len())];
+                out.summary["counting"] = operator::counting_json(v, &e, values, operator);
             }
-            None => {
-                let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
-                spectrum_output(v, &e, *k, None, *eigenvectors, solver, hooks.threads)
-            }
-        },
+            out
+        }
+        Analysis::Operator { report, matrices, operator } => {
+            operator::operator_output(v, operator, *report, *matrices, hooks)?
+        }
         Analysis::Hks { k, options, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
             hooks.control.phase("descriptor", 0, 0)?;

@@ -1,4 +1,4 @@
-//! `kac spectrum FILE -k K [operator flags] [solver flags] [--band A,B] [--eigenvectors OUT.npy] [--threads N]`:
+//! `kac spectrum FILE -k K [operator flags] [solver flags] [--band A,B] [--counting] [--eigenvectors OUT.npy] [--threads N]`:
 //! the k smallest eigenpairs of L φ = λ M φ as JSON. The flags make the service's `spectrum` request, run by the
 //! same analysis code, so the JSON is the service's (plus the read time, the total with it, and the file the
 //! eigenvectors went to).
@@ -33,6 +33,9 @@ pub struct SpectrumCmd {
     /// Band mode: every eigenpair with λ in [A, B] (then -k is ignored), e.g. `--band 0,100`.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub band: Option<Vec<f64>>,
+    /// Add the counting function N(λ) at each eigenvalue beside Weyl's law (`counting`).
+    #[arg(long)]
+    pub counting: bool,
     /// Check by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the found ones was missed, and
     /// solve again for any that were: the default (the result's `solver.completeness`); the flag is kept for
     /// scripts written when it was not.
@@ -55,6 +58,7 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
         k: a.k,
         band,
         eigenvectors: a.eigenvectors.is_some(),
+        counting: a.counting,
         operator: a.op.clone(),
         solver: SolverSpec { method: a.method.unwrap_or(a.solver.method), ..a.solver.clone() },
     };

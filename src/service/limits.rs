@@ -22,7 +22,8 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         Analysis::Diffuse { k, method, .. } => (*method == crate::analysis::HeatMethod::Spectral).then_some(("k", *k)),
         Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
         Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
-        Analysis::Geodesic { .. }
+        Analysis::Operator { .. }
+        | Analysis::Geodesic { .. }
         | Analysis::Trees { .. }
         | Analysis::MeanCurvature { .. }
         | Analysis::Poisson { .. }
@@ -53,6 +54,8 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
     let (counts, columns): (Vec<(&str, usize)>, usize) = match a {
         // The k eigenvectors are held (and cached) whether or not they are returned.
         Analysis::Spectrum { k, .. } => (vec![], *k),
+        // The matrices' non-zeros are counted against --max-output-values once assembled (by the runner).
+        Analysis::Operator { .. } => (vec![], 1),
         Analysis::Hks { k, options, .. } => {
             let t = len(&options.times).unwrap_or(options.count);
             (vec![("options.count", options.count), ("options.times", t)], t.max(*k))

@@ -263,14 +263,16 @@ pub fn result_of(out: analysis::Output, id: &str) -> StoredResult {
     let mut summary = out.summary;
     let mut arrays = serde_json::Map::new();
     for a in &out.arrays {
-        arrays.insert(
-            a.name.into(),
-            serde_json::json!({
-                "rows": a.rows, "cols": a.cols, "columns": a.columns,
-                "npy": format!("/v1/results/{id}/arrays/{}.npy", a.name),
-                "ply": format!("/v1/results/{id}/arrays/{}.ply", a.name),
-            }),
-        );
+        let link = |ext: &str| format!("/v1/results/{id}/arrays/{}.{ext}", a.name);
+        let mut meta = serde_json::json!({ "rows": a.rows, "cols": a.cols, "columns": a.columns, "npy": link("npy") });
+        if analysis::MATRIX_ARRAYS.contains(&a.name) {
+            // A matrix: its triplets as .npy, the matrix itself as Matrix Market and SciPy .npz.
+            meta["mtx"] = link("mtx").into();
+            meta["npz"] = link("npz").into();
+        } else if analysis::is_per_vertex(a.name) {
+            meta["ply"] = link("ply").into();
+        }
+        arrays.insert(a.name.into(), meta);
     }
     if let Some(o) = summary.as_object_mut() {
         o.insert("result_id".into(), id.into());

@@ -64,10 +64,13 @@ pub struct ArrayQuery {
     pub column: Option<usize>,
 }
 
-/// A per-vertex array of a result: `NAME.npy` (float64, rows in the upload's vertex numbering), `NAME.json`, or
-/// `NAME.ply` (the shape with one column as vertex colours, for viewing).
+/// An array of a result: `NAME.npy` (float64, rows in the upload's vertex numbering), `NAME.json`, or
+/// `NAME.ply` (the shape with one column as vertex colours, for viewing). The `operator` analysis' matrices
+/// (`stiffness`, `mass`: upper-triangle triplets as .npy/.json) are also served whole as `NAME.mtx` (Matrix
+/// Market, symmetric) and `NAME.npz` (`scipy.sparse.load_npz`, CSR), with rows and columns the operator's
+/// unknowns (`unknown_vertices` maps them to vertices).
 #[utoipa::path(get, path = "/v1/results/{id}/arrays/{file}", tag = "results",
-    params(("id" = String, Path), ("file" = String, Path, description = "NAME.npy, NAME.json or NAME.ply"), ArrayQuery),
+    params(("id" = String, Path), ("file" = String, Path, description = "NAME.npy, NAME.json, NAME.ply; for matrices NAME.mtx or NAME.npz"), ArrayQuery),
     responses((status = 200, description = "the array"), (status = 304, description = "not modified"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_array(
@@ -92,7 +95,24 @@ pub(crate) async fn get_array(
     let (body, ct): (axum::body::Body, &'static str) = match ext {
         "npy" => (stream(Box::new(r.clone().array_npy_chunks(i))), "application/octet-stream"),
         "json" => (stream(Box::new(r.clone().array_json_chunks(i))), "application/json"),
-        "ply" => {
+        "mtx" | "npz" if analysis::MATRIX_ARRAYS.contains(&a.name) => {
+            let n = r.summary["unknowns"].as_u64().unwrap_or(0) as usize;
+            let comment = format!("kac: {} of result {}", a.name, r.id);
+            let data = a.data.clone();
+            let mtx = ext == "mtx";
+            let bytes = tokio::task::spawn_blocking(move || {
+                if mtx {
+                    kac_core::io::matrix::matrix_market(n, &data, &comment)
+                } else {
+                    kac_core::io::matrix::npz_csr(n, &data)
+                }
+            })
+            .await
+            .map_err(|e| ApiError::Internal { detail: e.to_string() })?
+            .map_err(|detail| ApiError::Internal { detail })?;
+            (axum::body::Body::from(bytes), if mtx { "text/plain; charset=utf-8" } else { "application/zip" })
+        }
+        "ply" if analysis::is_per_vertex(a.name) => {
             if col >= a.cols {
                 return Err(ApiError::invalid_request(format!("column {col} does not exist ({} columns)", a.cols)));
             }

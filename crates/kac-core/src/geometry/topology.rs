@@ -286,6 +286,38 @@ pub fn boundary_vertices(mesh: &TriangleMesh) -> Vec<bool> {
     b
 }
 
+/// The (d−1)-dimensional measure of a shape's boundary, as Weyl's second term needs it: the length of a
+/// surface's boundary edges, the area of a solid's boundary faces, the number of a curve's end points (0-d);
+/// `None` for point clouds and graphs, which have no boundary to measure.
+pub fn boundary_measure(shape: &super::Shape) -> Option<f64> {
+    use super::Shape;
+    match shape {
+        Shape::TriangleMesh(m) => {
+            let topo = EdgeTopology::new(&m.faces);
+            Some(
+                topo.edges
+                    .iter()
+                    .enumerate()
+                    .filter(|&(e, _)| topo.valence(e) == 1)
+                    .map(|(_, &[a, b])| vec3::norm(vec3::sub(m.vertices[a as usize], m.vertices[b as usize])))
+                    .sum(),
+            )
+        }
+        Shape::TetMesh(m) => {
+            Some(tet_boundary(&m.tets).0.iter().map(|f| 0.5 * vec3::norm(tri_area2(&m.vertices, f))).sum())
+        }
+        Shape::Polyline(p) => {
+            let mut degree = vec![0usize; p.vertices.len()];
+            for s in &p.segments {
+                degree[s[0] as usize] += 1;
+                degree[s[1] as usize] += 1;
+            }
+            Some(degree.iter().filter(|&&d| d == 1).count() as f64)
+        }
+        Shape::PointCloud(_) | Shape::Graph(_) => None,
+    }
+}
+
 /// Outward boundary triangles of a tet mesh with positively oriented tets, and the count of faces shared by
 /// more than two tets.
 pub fn tet_boundary(tets: &[[u32; 4]]) -> (Vec<[u32; 3]>, usize) {

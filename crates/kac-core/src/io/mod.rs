@@ -6,6 +6,7 @@
 mod gltf;
 mod gmsh;
 mod json;
+pub mod matrix;
 mod medit;
 pub mod mtx;
 pub mod npy;

@@ -1,26 +1,8 @@
-//! Matrix Market: operators are written as symmetric coordinate files (one triangle, explicit zeros left out,
-//! through sprs, which keeps the entries with row ≤ column of the full matrix given to it); a symmetric or general Matrix Market matrix is read as the weighted adjacency of a graph
-//! (off-diagonal entries are edges, the diagonal is ignored).
+//! Matrix Market in: a symmetric or general coordinate matrix is read as the weighted adjacency of a graph
+//! (off-diagonal entries are edges, the diagonal is ignored). Operators are written by [`super::matrix`].
 
 use crate::error::{Element, Location, Result, ShapeError};
 use crate::geometry::RawShape;
-use crate::operators::sparse::Pattern;
-use std::path::Path;
-
-/// Writes the symmetric matrix with `values` on `p` to `path`.
-pub fn write_symmetric(path: &Path, p: &Pattern, values: &[f64]) -> std::io::Result<()> {
-    let mut tri = sprs::TriMat::new((p.n, p.n));
-    for j in 0..p.n {
-        for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
-            let i = p.row_idx[pos];
-            if values[pos] != 0.0 {
-                tri.add_triplet(i, j, values[pos]);
-            }
-        }
-    }
-    let m: sprs::CsMat<f64> = tri.to_csc();
-    sprs::io::write_matrix_market_sym(path, &m, sprs::io::SymmetryMode::Symmetric)
-}
 
 /// Reads a Matrix Market `coordinate` matrix (real, integer or pattern; general or symmetric) as a graph.
 /// Parsed here rather than by sprs: its reader panics on indices outside the declared size, and an upload

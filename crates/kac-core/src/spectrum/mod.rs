@@ -322,11 +322,12 @@ pub fn eigs_band(
         if top > b || k >= limit {
             let keep: Vec<usize> = (0..s.values.len()).filter(|&j| s.values[j] >= a && s.values[j] <= b).collect();
             let vectors = Mat::from_fn(n, keep.len(), |i, j| s.vectors[(i, keep[j])]);
+            let below = s.values.iter().filter(|&&v| v < a).count();
             return Ok(Spectrum {
                 values: keep.iter().map(|&j| s.values[j]).collect(),
                 residuals: keep.iter().map(|&j| s.residuals[j]).collect(),
                 vectors,
-                stats: s.stats,
+                stats: Stats { below_band: Some(below), ..s.stats },
             });
         }
         if k >= max_pairs {

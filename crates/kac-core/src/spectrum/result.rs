@@ -44,6 +44,10 @@ pub struct Stats {
     pub components: Option<usize>,
     /// Known zero modes put in the result exactly (eigenvalue 0) and deflated from the iteration.
     pub zero_modes: usize,
+    /// A band [a, b] ([`super::eigs_band`]): the eigenvalues below a, solved for and left out (so the first pair
+    /// returned is the (below_band + 1)-th eigenvalue).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub below_band: Option<usize>,
     pub timings: Timings,
     /// The completeness check; `None` when it was turned off.
     pub completeness: Option<Completeness>,

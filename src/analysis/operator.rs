@@ -1,0 +1,126 @@
+//! Operators out: the `operator` analysis (L and M as upper-triangle triplets the service serves as Matrix Market
+//! and SciPy `.npz`, the vertex of each unknown, the property report), and the counting function N(λ) beside
+//! Weyl's law that `spectrum` adds on request.
+
+use super::*;
+use kac_core::operators::properties;
+use kac_core::spectrum::weyl_law::weyl_count;
+
+/// Names of the arrays that are not per-vertex: the matrices (rows: non-zeros of the upper triangle; columns:
+/// row, column, value) and the vertex of each unknown (rows: unknowns). They have no coloured PLY.
+pub const MATRIX_ARRAYS: &[&str] = &["stiffness", "mass"];
+pub const UNKNOWN_ARRAYS: &[&str] = &["unknown_vertices"];
+
+/// Whether an array has one row per vertex of the upload (and so can colour the shape).
+pub fn is_per_vertex(name: &str) -> bool {
+    !MATRIX_ARRAYS.contains(&name) && !UNKNOWN_ARRAYS.contains(&name)
+}
+
+/// For each unknown of the operator, its vertex in the upload's numbering (the first input vertex welded into
+/// it): the interior map under Dirichlet conditions, and the inverse of validation's renumbering.
+pub fn unknown_vertices(v: &Validated, op: &Operator) -> Vec<u32> {
+    let mut first = vec![u32::MAX; v.shape.vertex_count()];
+    for (input, &w) in v.vertex_map.iter().enumerate() {
+        if w != u32::MAX && first[w as usize] == u32::MAX {
+            first[w as usize] = input as u32;
+        }
+    }
+    match &op.interior {
+        Some(keep) => keep.iter().map(|&w| first[w as usize]).collect(),
+        None => first,
+    }
+}
+
+pub(crate) fn operator_output(
+    v: &Validated,
+    spec: &OperatorSpec,
+    report: bool,
+    matrices: bool,
+    hooks: Hooks<'_>,
+) -> Result<Output, AnalysisError> {
+    let t = std::time::Instant::now();
+    let op = build_operator(v, spec)?;
+    let assembly_s = t.elapsed().as_secs_f64();
+    let mut summary = merge(
+        json!({
+            "kind": v.shape.kind(),
+            "vertices": op.full_size,
+            "unknowns": op.pair.n(),
+            "nonzeros": op.pair.nnz(),
+            "mass_is_diagonal": op.pair.mass_is_diagonal,
+            "sign": "L is positive semidefinite (stiffness); the eigenproblem is L φ = λ M φ",
+            "timings": { "assembly_s": assembly_s },
+        }),
+        operator_json(&op),
+    );
+    if report {
+        hooks.control.check()?;
+        summary["properties"] = serde_json::to_value(properties::report(&v.shape, &op))
+            .map_err(|e| AnalysisError::invalid_parameter(e.to_string()))?;
+    }
+    let mut arrays = vec![];
+    if matrices {
+        let triplets = |values: &[f64]| kac_core::io::matrix::upper_triplets(&op.pair.pattern, values);
+        let (l, m) = (triplets(&op.pair.stiffness), triplets(&op.pair.mass));
+        let values = l.len().saturating_add(m.len());
+        if values > hooks.limits.max_values {
+            return Err(AnalysisError::TooLarge(format!(
+                "L and M have {} and {} non-zeros in their upper triangles ({values} values as triplets), above \
+                 the limit of {} (--max-output-values)",
+                l.len() / 3,
+                m.len() / 3,
+                hooks.limits.max_values
+            )));
+        }
+        let map: Vec<f64> = unknown_vertices(v, &op).iter().map(|&i| i as f64).collect();
+        summary["matrices"] = json!({
+            "numbering": "rows and columns are the operator's unknowns, 0-based; unknown_vertices gives each \
+                          unknown's vertex in the upload's numbering (the interior map under Dirichlet conditions)",
+            "stiffness": { "name": "L", "nonzeros_upper": l.len() / 3 },
+            "mass": { "name": "M", "nonzeros_upper": m.len() / 3 },
+            "triplets": "row, column, value of the upper triangle (row ≤ column), explicit zeros left out",
+        });
+        for (name, data) in [("stiffness", l), ("mass", m)] {
+            arrays.push(VertexArray { name, rows: data.len() / 3, cols: 3, data, columns: None });
+        }
+        arrays.push(VertexArray { name: "unknown_vertices", rows: map.len(), cols: 1, data: map, columns: None });
+    }
+    Ok(Output { fingerprints: vec![], summary, arrays })
+}
+
+/// N(λ) at each returned eigenvalue (the number of eigenvalues at or below it, counting those a band left out)
+/// beside Weyl's law for the shape's measure, with the boundary's second term where the shape has a boundary of
+/// known measure and its condition is the shape's own (Neumann or Dirichlet on the whole boundary).
+pub(crate) fn counting_json(v: &Validated, e: &Eigen, values: &[f64], spec: &OperatorSpec) -> Value {
+    let offset = e.spectrum.stats.below_band.unwrap_or(0);
+    let count: Vec<usize> =
+        (0..values.len()).map(|i| offset + values.iter().rposition(|&x| x <= values[i]).unwrap_or(i) + 1).collect();
+    let m = measures(v, Some(&e.operator));
+    let dimension = (!matches!(v.shape, Shape::Graph(_))).then_some(m.dimension);
+    let measure = dimension.and(m.measure());
+    let dirichlet = e.operator.interior.is_some();
+    let boundary = match (spec.dirichlet_vertices.is_some(), kac_core::geometry::topology::boundary_measure(&v.shape)) {
+        (false, Some(b)) if b > 0.0 => Some(b),
+        _ => None,
+    };
+    let weyl: Option<Vec<f64>> = match (dimension, measure) {
+        (Some(d), Some(mu)) => {
+            Some(values.iter().map(|&l| weyl_count(d, mu, l, boundary.map(|b| (b, dirichlet)))).collect())
+        }
+        _ => None,
+    };
+    json!({
+        "lambda": values,
+        "count": count,
+        "weyl": weyl,
+        "dimension": dimension,
+        "measure": measure,
+        "boundary_measure": boundary,
+        "terms": match (&weyl, boundary) {
+            (None, _) => "none: a graph has no Weyl law",
+            (Some(_), Some(_)) if dirichlet => "two: ω_d|Ω|λ^{d/2}/(2π)^d − ω_{d−1}|∂Ω|λ^{(d−1)/2}/(4(2π)^{d−1}) (Dirichlet)",
+            (Some(_), Some(_)) => "two: ω_d|Ω|λ^{d/2}/(2π)^d + ω_{d−1}|∂Ω|λ^{(d−1)/2}/(4(2π)^{d−1}) (Neumann)",
+            (Some(_), None) => "one: ω_d|Ω|λ^{d/2}/(2π)^d",
+        },
+    })
+}
