@@ -560,3 +560,57 @@ async fn the_counting_function_follows_weyls_law() {
     let below = lambda.iter().filter(|x| x.as_f64().unwrap() < 50.0).count();
     assert_eq!(b["counting"]["count"][0].as_u64().unwrap() as usize, below + 1, "{}", b["counting"]);
 }
+
+/// Point clouds in Rⁿ over HTTP: a CSV with four columns (a random sample of the flat torus in R⁴) and the same
+/// points as an .npy are one shape; its spectrum, with the intrinsic dimension estimated, is the flat torus'
+/// (λ₂..₅ = 1); the chapter's normalization, the radius and a given dimension are taken and echoed; the robust
+/// operator, which needs R³, is refused.
+#[tokio::test]
+async fn point_clouds_in_rn_are_heard_over_http() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let coords = kac_core::geometry::generate::random_flat_torus_r4(3000, 21);
+    let csv: String = "u1,u2,v1,v2\n".to_string()
+        + &coords.chunks(4).map(|c| format!("{:?},{:?},{:?},{:?}\n", c[0], c[1], c[2], c[3])).collect::<String>();
+    let npy = kac_core::io::npy::encode_f64(3000, 4, &coords);
+    let upload = |body: Vec<u8>, format: &str| {
+        Request::post(format!("/v1/shapes?format={format}")).body(Body::from(body)).unwrap()
+    };
+    let (status, a) = call(&app, upload(csv.clone().into_bytes(), "csv")).await;
+    assert_eq!(status, StatusCode::CREATED, "{a}");
+    let (status, b) = call(&app, upload(npy, "npy")).await;
+    assert!(status.is_success(), "{b}");
+    assert_eq!(a["id"], b["id"], "the same points, as text or as numbers");
+    assert_eq!(a["summary"]["report"]["facts"]["ambient_dimension"], 4, "{a}");
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=csv&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(csv.clone())).unwrap()
+    };
+    let (status, s) = call(&app, analyze(json!({ "analysis": "spectrum", "k": 5 }))).await;
+    assert_eq!(status, StatusCode::OK, "{s}");
+    assert_eq!(
+        (s["operator"].as_str(), s["parameters"]["intrinsic_dimension"].as_u64()),
+        (Some("point-cloud"), Some(2))
+    );
+    for l in &s["eigenvalues"].as_array().unwrap()[1..5] {
+        assert!((l.as_f64().unwrap() - 1.0).abs() < 0.06, "{}", s["eigenvalues"]);
+    }
+    let op = json!({ "normalization": "chapter", "intrinsic_dimension": 2, "radius": 0.5, "time": 0.02 });
+    let (status, c) = call(&app, analyze(json!({ "analysis": "spectrum", "k": 5, "operator": op }))).await;
+    assert_eq!(status, StatusCode::OK, "{c}");
+    let p = &c["parameters"];
+    assert_eq!(
+        (p["normalization"].as_str(), p["radius"].as_f64(), p["intrinsic_dimension_given"].as_bool()),
+        (Some("chapter"), Some(0.5), Some(true))
+    );
+    let (status, r) =
+        call(&app, analyze(json!({ "analysis": "spectrum", "operator": { "operator": "robust" } }))).await;
+    assert_eq!(
+        (status, r["code"].as_str()),
+        (StatusCode::UNPROCESSABLE_ENTITY, Some("operator-not-applicable")),
+        "{r}"
+    );
+    let (status, r) =
+        call(&app, analyze(json!({ "analysis": "spectrum", "operator": { "intrinsic_dimension": 7 } }))).await;
+    assert_eq!((status, r["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-parameter")), "{r}");
+}

@@ -80,7 +80,14 @@ pub fn build_operator(v: &Validated, spec: &OperatorSpec) -> Result<Operator, An
         operator: spec.operator,
         mass: spec.mass,
         boundary,
-        cloud: CloudParams { k: spec.neighbours, neighbourhood: spec.neighbourhood, t: spec.time, radius: None },
+        cloud: CloudParams {
+            k: spec.neighbours,
+            neighbourhood: spec.neighbourhood,
+            t: spec.time,
+            radius: spec.radius,
+            dimension: spec.intrinsic_dimension,
+            normalization: spec.normalization,
+        },
         ..Default::default()
     };
     Ok(operators::build(&v.shape, &o)?)

@@ -96,7 +96,7 @@ pub(crate) fn counting_json(v: &Validated, e: &Eigen, values: &[f64], spec: &Ope
     let count: Vec<usize> =
         (0..values.len()).map(|i| offset + values.iter().rposition(|&x| x <= values[i]).unwrap_or(i) + 1).collect();
     let m = measures(v, Some(&e.operator));
-    let dimension = (!matches!(v.shape, Shape::Graph(_))).then_some(m.dimension);
+    let dimension = (!matches!(v.shape, Shape::Graph(_)) && m.dimension > 0).then_some(m.dimension);
     let measure = dimension.and(m.measure());
     let dirichlet = e.operator.interior.is_some();
     let boundary = match (spec.dirichlet_vertices.is_some(), kac_core::geometry::topology::boundary_measure(&v.shape)) {

@@ -2,6 +2,7 @@
 //! service (the operator and solver specs, each analysis with its parameters and defaults).
 
 use super::*;
+use kac_core::operators::manifold::CloudNormalization;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
 pub const ALGORITHM_VERSION: u32 = 3;
@@ -36,6 +37,32 @@ pub struct OperatorSpec {
     /// Point clouds: sum the heat kernel over `radius` (ε-ball, default) or `knn` (k nearest) neighbourhoods.
     #[arg(long, default_value = "radius", value_parser = parse_neighbourhood)]
     pub neighbourhood: Neighbourhood,
+    /// Point clouds: the kernel's radius ε (default 3√t; 6√t with the chapter's normalization).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[arg(long)]
+    pub radius: Option<f64>,
+    /// Point clouds: the intrinsic dimension m of the sampled manifold (default 2 for points in R³; estimated
+    /// from the neighbourhoods (Levina–Bickel) for points in Rⁿ, n ≥ 4).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[arg(long)]
+    pub intrinsic_dimension: Option<usize>,
+    /// Point clouds: `symmetric` (local volumes as quadrature weights, truncation corrected; default) or
+    /// `chapter` (eq. 9.39: uniform weights vol/K). The CLI's flag is `--cloud-normalization`.
+    #[serde(skip_serializing_if = "is_symmetric")]
+    #[arg(id = "cloud_normalization", long = "cloud-normalization", default_value = "symmetric", value_parser = parse_normalization)]
+    pub normalization: CloudNormalization,
+}
+
+fn is_symmetric(n: &CloudNormalization) -> bool {
+    *n == CloudNormalization::Symmetric
+}
+
+fn parse_normalization(s: &str) -> Result<CloudNormalization, String> {
+    match s {
+        "symmetric" => Ok(CloudNormalization::Symmetric),
+        "chapter" => Ok(CloudNormalization::Chapter),
+        _ => Err(format!("unknown point-cloud normalization '{s}'; one of: symmetric, chapter")),
+    }
 }
 
 fn parse_operator(s: &str) -> Result<OperatorKind, String> {
@@ -68,6 +95,9 @@ impl Default for OperatorSpec {
             neighbours: kac_core::operators::DEFAULT_NEIGHBOURS,
             time: None,
             neighbourhood: Neighbourhood::Radius,
+            radius: None,
+            intrinsic_dimension: None,
+            normalization: CloudNormalization::Symmetric,
         }
     }
 }

@@ -122,7 +122,21 @@ pub(crate) fn merge(mut a: Value, b: Value) -> Value {
 
 pub fn measures(v: &Validated, op: Option<&Operator>) -> Measures {
     let mass_total = op.map(|o| o.pair.mass.iter().sum::<f64>());
-    Measures::of(&v.summary(), mass_total)
+    let m = Measures::of(&v.summary(), mass_total);
+    // A point cloud's measure is its operator's total mass, in the intrinsic dimension the operator used (a
+    // curve's length, a surface's area, a solid's volume; none above 3).
+    match (&v.shape, op) {
+        (Shape::PointCloud(_), Some(o)) if o.pair.dimension != Some(2) => {
+            let d = o.pair.dimension.unwrap_or(0);
+            Measures {
+                dimension: d,
+                length: mass_total.filter(|_| d == 1),
+                area: None,
+                volume: mass_total.filter(|_| d == 3),
+            }
+        }
+        _ => m,
+    }
 }
 
 /// The shape-DNA of a shape, typed (for `shape-dna` jobs and comparisons), with the eigenpairs it came from and

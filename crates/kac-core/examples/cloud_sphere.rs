@@ -7,7 +7,7 @@ use kac_core::spectrum::{eigs, Control, EigenOptions};
 fn main() {
     let n: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(40_000);
     let points = kac_core::geometry::generate::random_sphere_points(n, 7);
-    let s = Shape::PointCloud(PointCloud { points, normals: None });
+    let s = Shape::PointCloud(PointCloud { points, normals: None, ambient: None });
     for kind in [OperatorKind::PointCloud, OperatorKind::Robust] {
         let t = std::time::Instant::now();
         let o = operators::build(&s, &OperatorOptions { operator: Some(kind), ..Default::default() }).unwrap();

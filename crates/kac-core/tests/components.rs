@@ -284,10 +284,12 @@ fn clusters_of_points() {
     };
     let mut expected: Vec<f64> = parts
         .iter()
-        .flat_map(|p| all_eigenvalues(&Shape::PointCloud(PointCloud { points: p.clone(), normals: None }), &op))
+        .flat_map(|p| {
+            all_eigenvalues(&Shape::PointCloud(PointCloud { points: p.clone(), normals: None, ambient: None }), &op)
+        })
         .collect();
     expected.sort_by(f64::total_cmp);
-    let shape = Shape::PointCloud(PointCloud { points, normals: None });
+    let shape = Shape::PointCloud(PointCloud { points, normals: None, ambient: None });
     for k in ks(7) {
         check(&solve(&shape, &op, k, Method::Sparse), &expected, 7, k, 1e-8, &format!("clusters, k = {k}"));
     }

@@ -252,7 +252,11 @@ fn flat_meshes_have_linear_precision_and_cotan_reports_it() {
 
 #[test]
 fn point_cloud_knn_neighbourhoods() {
-    let s = Shape::PointCloud(PointCloud { points: generate::random_sphere_points(4000, 11), normals: None });
+    let s = Shape::PointCloud(PointCloud {
+        points: generate::random_sphere_points(4000, 11),
+        normals: None,
+        ambient: None,
+    });
     let o = operators::build(
         &s,
         &OperatorOptions {
@@ -275,7 +279,7 @@ fn point_cloud_knn_neighbourhoods() {
 fn point_cloud_laplacians_on_a_random_sample_of_the_sphere() {
     // Randomly (not evenly) sampled: the local areas must still add up to 4π and λ₂..λ₄ must be near 2.
     let pts = generate::random_sphere_points(6000, 7);
-    let s = Shape::PointCloud(PointCloud { points: pts, normals: None });
+    let s = Shape::PointCloud(PointCloud { points: pts, normals: None, ambient: None });
     // Measured (6000 points): Belkin–Niyogi ΣM = 12.72, λ₂..₄ ≈ 1.94–1.96; robust ΣM = 11.72, λ₂..₄ ≈ 1.83–1.87
     // (its local triangles do not all appear three times on random samples, so dividing by 3 undercounts).
     for (kind, mass_tol, l_tol) in [(OperatorKind::PointCloud, 0.03, 0.1), (OperatorKind::Robust, 0.1, 0.25)] {

@@ -153,6 +153,32 @@ fn csv_xyz_and_json_inputs() {
     assert_eq!(mesh.report.kind, ShapeKind::TriangleMesh);
 }
 
+/// Points in Rⁿ: 4 or more columns are coordinates (6 are a position and a normal unless a header names the
+/// fourth column otherwise); rows that agree in their first three coordinates stay distinct points, exact
+/// duplicates merge; the order of the rows does not change the id; .npy arrays read the same.
+#[test]
+fn points_in_rn_keep_every_coordinate() {
+    let ambient = |v: &Validated| match &v.shape {
+        Shape::PointCloud(c) => c.ambient.as_ref().map(|a| (a.dim, a.len())),
+        _ => panic!("not a cloud"),
+    };
+    let four = ok(b"0,0,0,1\n0,0,0,-1\n1,0,0,0\n0,1,0,0\n0,1,0,0\n", Format::Csv);
+    assert_eq!(ambient(&four), Some((4, 4)), "two rows share x, y, z but differ in w; one exact duplicate");
+    assert_eq!(four.report.repairs[0].code, "duplicate_points");
+    let shuffled = ok(b"0,1,0,0\n1,0,0,0\n0,0,0,-1\n0,0,0,1\n", Format::Csv);
+    assert_eq!(four.id, shuffled.id);
+    let six = ok(b"0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n", Format::Xyz);
+    assert_eq!(ambient(&six), None, "x y z nx ny nz");
+    let Shape::PointCloud(c) = &six.shape else { panic!() };
+    assert!(c.normals.is_some());
+    let named = ok(b"a,b,c,d,e,f\n0,0,0,0,0,1\n1,0,0,0,0,1\n0,1,0,0,0,1\n", Format::Csv);
+    assert_eq!(ambient(&named), Some((6, 3)), "a header naming the columns otherwise: points in R^6");
+    let rows = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0];
+    let npy = ok(&kac_core::io::npy::encode_f64(4, 4, &rows), Format::Npy);
+    assert_eq!(npy.id, four.id);
+    assert!(matches!(err(b"1\n2\n", Format::Xyz), ShapeError::Syntax { .. }));
+}
+
 #[test]
 fn fatal_errors_name_the_element_rule_and_place() {
     match err(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 5\n", Format::Obj) {

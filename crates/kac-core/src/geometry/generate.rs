@@ -320,15 +320,33 @@ pub fn petersen_graph() -> Graph {
 
 /// `n` points uniformly at random on the unit sphere (deterministic for a seed; SplitMix64): a randomly, not
 /// evenly, sampled cloud with known spectrum l(l+1) and area 4π.
-pub fn random_sphere_points(n: usize, seed: u64) -> Vec<Point> {
+/// A uniform random number generator on [0, 1) (splitmix64), deterministic per seed.
+fn uniform(seed: u64) -> impl FnMut() -> f64 {
     let mut state = seed;
-    let mut next = || {
+    move || {
         state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = state;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
         ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    }
+}
+
+/// n points drawn uniformly at random on the flat torus (cos u, sin u, cos v, sin v) ⊂ R⁴ (u, v uniform in
+/// [0, 2π)), row-major with 4 coordinates each: a flat 2-manifold of area 4π², whose Laplace–Beltrami eigenvalues
+/// are a² + b² (a, b integers): 0, 1 (×4), 2 (×4), 4 (×4), 5 (×8), …
+pub fn random_flat_torus_r4(n: usize, seed: u64) -> Vec<f64> {
+    let mut next = uniform(seed);
+    (0..n)
+        .flat_map(|_| {
+            let (u, v) = (2.0 * std::f64::consts::PI * next(), 2.0 * std::f64::consts::PI * next());
+            [u.cos(), u.sin(), v.cos(), v.sin()]
+        })
+        .collect()
+}
+
+pub fn random_sphere_points(n: usize, seed: u64) -> Vec<Point> {
+    let mut next = uniform(seed);
     (0..n)
         .map(|_| {
             let z = 2.0 * next() - 1.0;

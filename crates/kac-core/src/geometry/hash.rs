@@ -94,8 +94,33 @@ fn canonical_order(points: &[[f64; 3]]) -> Vec<u32> {
     rank
 }
 
+/// The id of a point cloud in Rⁿ: its dimension and its rows (quantized to f32, as positions are) in
+/// lexicographic order, so that neither the order of the points nor a coincidence of their first three
+/// coordinates changes it.
+fn ambient_id(a: &super::Ambient) -> ShapeId {
+    let mut rows: Vec<Vec<f32>> = (0..a.len()).map(|i| a.row(i).iter().map(|&c| q(c)).collect()).collect();
+    rows.sort_unstable_by(|x, y| {
+        x.iter().zip(y).map(|(a, b)| a.total_cmp(b)).find(|o| o.is_ne()).unwrap_or(Ordering::Equal)
+    });
+    let mut h = Sha256::new();
+    h.update(b"kac-shape/1\nambient\n");
+    h.update((a.dim as u64).to_le_bytes());
+    h.update((rows.len() as u64).to_le_bytes());
+    let mut buf = Vec::with_capacity(4 * a.coords.len());
+    for r in &rows {
+        for c in r {
+            buf.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    h.update(&buf);
+    ShapeId(h.finalize().into())
+}
+
 /// Computes the id of a validated shape.
 pub fn shape_id(shape: &Shape) -> ShapeId {
+    if let Shape::PointCloud(super::PointCloud { ambient: Some(a), .. }) = shape {
+        return ambient_id(a);
+    }
     let mut h = Sha256::new();
     h.update(b"kac-shape/1\n");
     let kind: u8 = match shape {

@@ -30,11 +30,33 @@ pub struct TetMesh {
     pub tets: Vec<[u32; 4]>,
 }
 
-/// Points sampled from a surface, optionally with normals.
+/// Points sampled from a surface (or, with `ambient`, from a manifold in Rⁿ), optionally with normals.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct PointCloud {
+    /// The first three coordinates of each point (all of them in R³ and the plane).
     pub points: Vec<Point>,
     pub normals: Option<Vec<Point>>,
+    /// Points in Rⁿ, n ≥ 4 (manifold learning): every coordinate; `points` holds the first three, for drawing.
+    pub ambient: Option<Ambient>,
+}
+
+/// Coordinates of points in Rⁿ (n ≥ 4), row-major: point i is `coords[i * dim..(i + 1) * dim]`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Ambient {
+    pub dim: usize,
+    pub coords: Vec<f64>,
+}
+
+impl Ambient {
+    pub fn row(&self, i: usize) -> &[f64] {
+        &self.coords[i * self.dim..(i + 1) * self.dim]
+    }
+    pub fn len(&self) -> usize {
+        self.coords.len() / self.dim.max(1)
+    }
+    pub fn is_empty(&self) -> bool {
+        self.coords.is_empty()
+    }
 }
 
 /// A weighted undirected graph on `vertex_count` vertices; `positions` where the input gives them.
@@ -182,6 +204,8 @@ pub struct RawShape {
     pub weights: Option<Vec<f64>>,
     /// Per-vertex normals of a point cloud.
     pub normals: Option<Vec<Point>>,
+    /// Point coordinates in Rⁿ, n ≥ 4 (`vertices` then holds the first three of each).
+    pub ambient: Option<Ambient>,
     /// The input declares its segments to be a graph (edges), not a polyline.
     pub is_graph: bool,
     /// Vertex count of a graph given without positions (then `vertices` is empty).

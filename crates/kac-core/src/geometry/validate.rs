@@ -103,6 +103,8 @@ pub struct GraphFacts {
 pub struct CloudFacts {
     pub points: usize,
     pub has_normals: bool,
+    /// n for points in Rⁿ (3 for clouds in space and the plane).
+    pub ambient_dimension: usize,
 }
 
 /// Kind-specific facts.
@@ -777,7 +779,14 @@ fn cloud(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs) -> Result<Outcome
     if raw.vertices.is_empty() {
         return Err(ShapeError::Empty { what: "no vertices or points".into() });
     }
-    let (points, map, merged) = weld(&raw.vertices, o.weld);
+    // Points in Rⁿ merge only where every coordinate agrees (the first three may coincide for distinct points).
+    let (points, map, merged, ambient) = match &raw.ambient {
+        Some(a) => weld_rows(a, &raw.vertices),
+        None => {
+            let (points, map, merged) = weld(&raw.vertices, o.weld);
+            (points, map, merged, None)
+        }
+    };
     let mut first = vec![usize::MAX; points.len()];
     let mut dup_examples = Vec::new();
     for (i, &m) in map.iter().enumerate() {
@@ -799,6 +808,27 @@ fn cloud(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs) -> Result<Outcome
         }
         out
     });
-    let facts = CloudFacts { points: points.len(), has_normals: normals.is_some() };
-    Ok((Shape::PointCloud(PointCloud { points, normals }), map, Facts::Cloud(facts)))
+    let ambient_dimension = ambient.as_ref().map_or(3, |a: &super::Ambient| a.dim);
+    let facts = CloudFacts { points: points.len(), has_normals: normals.is_some(), ambient_dimension };
+    Ok((Shape::PointCloud(PointCloud { points, normals, ambient }), map, Facts::Cloud(facts)))
+}
+
+/// Exact duplicates among points in Rⁿ merged (all coordinates equal; ±0 alike): the unique points' first three
+/// coordinates, the input → unique map, the merged count, and the unique rows.
+fn weld_rows(a: &super::Ambient, first3: &[Point]) -> (Vec<Point>, Vec<u32>, usize, Option<super::Ambient>) {
+    let mut seen: HashMap<Vec<u64>, u32> = HashMap::with_capacity_and_hasher(a.len(), Default::default());
+    let (mut points, mut coords) = (Vec::with_capacity(a.len()), Vec::with_capacity(a.coords.len()));
+    let map: Vec<u32> = (0..a.len())
+        .map(|i| {
+            let row = a.row(i);
+            let key: Vec<u64> = row.iter().map(|&c| if c == 0.0 { 0 } else { c.to_bits() }).collect();
+            *seen.entry(key).or_insert_with(|| {
+                points.push(first3[i]);
+                coords.extend_from_slice(row);
+                (points.len() - 1) as u32
+            })
+        })
+        .collect();
+    let merged = a.len() - points.len();
+    (points, map, merged, Some(super::Ambient { dim: a.dim, coords }))
 }

@@ -41,14 +41,16 @@ pub enum Format {
     Gmsh,
     /// Legacy VTK, ASCII.
     Vtk,
-    /// Whitespace-separated point coordinates (3 or 6 columns).
+    /// Whitespace-separated point coordinates (2 or 3 columns, 6 with normals, 4 or more: points in Rⁿ).
     Xyz,
-    /// Comma-separated point coordinates (3 or 6 columns, optional header line).
+    /// Comma-separated point coordinates (as `xyz`, with an optional header line).
     Csv,
     /// kac's JSON: vertices with faces, tets, edges (+ weights), segments, or nothing (points).
     Json,
     /// Matrix Market coordinate matrix read as a weighted graph's adjacency.
     Mtx,
+    /// NumPy `.npy`: an (N × n) float64 or float32 array of N points in Rⁿ (n = 2, 3 or more).
+    Npy,
 }
 
 impl Format {
@@ -56,7 +58,7 @@ impl Format {
     pub fn names() -> String {
         Format::ALL.iter().map(|f| f.name()).collect::<Vec<_>>().join(", ")
     }
-    pub const ALL: [Format; 13] = [
+    pub const ALL: [Format; 14] = [
         Format::Obj,
         Format::Off,
         Format::Ply,
@@ -70,6 +72,7 @@ impl Format {
         Format::Csv,
         Format::Json,
         Format::Mtx,
+        Format::Npy,
     ];
 
     pub fn name(self) -> &'static str {
@@ -87,11 +90,12 @@ impl Format {
             Format::Csv => "csv",
             Format::Json => "json",
             Format::Mtx => "mtx",
+            Format::Npy => "npy",
         }
     }
 
     /// A format by name or file extension (case-insensitive): `obj`, `off`, `ply`, `stl`, `gltf`, `glb`,
-    /// `mesh`/`medit`, `msh`/`gmsh`, `vtk`, `xyz`/`pts`/`txt`, `csv`, `json`.
+    /// `mesh`/`medit`, `msh`/`gmsh`, `vtk`, `xyz`/`pts`/`txt`, `csv`, `json`, `mtx`, `npy`.
     pub fn from_name(name: &str) -> Option<Format> {
         let n = name.trim().trim_start_matches('.').to_ascii_lowercase();
         Some(match n.as_str() {
@@ -108,6 +112,7 @@ impl Format {
             "csv" => Format::Csv,
             "json" => Format::Json,
             "mtx" => Format::Mtx,
+            "npy" => Format::Npy,
             _ => return None,
         })
     }
@@ -138,6 +143,9 @@ impl Format {
     pub fn sniff(bytes: &[u8]) -> Option<Format> {
         if bytes.starts_with(b"glTF") {
             return Some(Format::Glb);
+        }
+        if bytes.starts_with(b"\x93NUMPY") {
+            return Some(Format::Npy);
         }
         if stl::is_binary_by_size(bytes) {
             return Some(Format::Stl);
@@ -296,6 +304,7 @@ fn read_as(bytes: &[u8], format: Format, options: &ReadOptions) -> Result<RawSha
         Format::Csv => xyz::read(bytes, options, true),
         Format::Json => json::read(bytes, options),
         Format::Mtx => mtx::read_graph(bytes, options),
+        Format::Npy => npy::read_points(bytes, options),
     }
 }
 

@@ -1,4 +1,47 @@
-//! NumPy `.npy` (format version 1.0) for per-vertex arrays: little-endian f64, C order, shape (rows, cols).
+//! NumPy `.npy` (format version 1.0) for per-vertex arrays: little-endian f64, C order, shape (rows, cols); and
+//! as an input format, an (N × n) array of points in Rⁿ.
+
+use super::ReadOptions;
+use crate::error::{Location, Result, ShapeError};
+use crate::geometry::{Ambient, RawShape};
+
+/// An (N × n) array as a point cloud: n = 2 (the plane), 3, or more (points in Rⁿ).
+pub fn read_points(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
+    let (rows, cols, data) = decode_f64(bytes).map_err(|message| ShapeError::Syntax {
+        format: "npy",
+        location: Location::Unknown,
+        message,
+    })?;
+    options.check_vertices(rows as u64)?;
+    if rows == 0 {
+        return Err(ShapeError::Empty { what: "the npy array has no rows (points)".into() });
+    }
+    if cols < 2 {
+        return Err(ShapeError::Syntax {
+            format: "npy",
+            location: Location::Unknown,
+            message: format!("an ({rows} × {cols}) array; points need 2 or more coordinates per row"),
+        });
+    }
+    let mut raw = RawShape { planar_input: cols == 2, ..Default::default() };
+    raw.vertices.reserve(rows);
+    for (i, r) in data.chunks_exact(cols).enumerate() {
+        if let Some(j) = r.iter().position(|v| !v.is_finite()) {
+            return Err(ShapeError::NonFinite {
+                element: crate::error::Element::Vertex,
+                index: i,
+                value: format!("coordinate {}: {}", j + 1, r[j]),
+                location: Location::Unknown,
+            });
+        }
+        raw.vertices.push([r[0], r[1], if cols >= 3 { r[2] } else { 0.0 }]);
+    }
+    if cols >= 4 {
+        raw.notes.push(format!("npy: {cols} coordinates per point: a point cloud in R^{cols}"));
+        raw.ambient = Some(Ambient { dim: cols, coords: data });
+    }
+    Ok(raw)
+}
 
 /// The bytes of an .npy file holding `data` (row-major, rows × cols).
 pub fn encode_f64(rows: usize, cols: usize, data: &[f64]) -> Vec<u8> {

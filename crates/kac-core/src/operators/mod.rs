@@ -6,6 +6,7 @@ pub mod boundary;
 pub mod cotan_laplacian;
 pub mod graph_laplacian;
 pub mod intrinsic_delaunay;
+pub mod manifold;
 pub mod mass;
 pub mod point_cloud;
 pub mod properties;
@@ -131,8 +132,12 @@ pub struct CloudParams {
     pub neighbourhood: Neighbourhood,
     /// Heat-kernel time t; default (2h)², h the mean distance to the nearest neighbour.
     pub t: Option<f64>,
-    /// Kernel support radius; default 3√t.
+    /// Kernel support radius; default 3√t (6√t for the chapter's normalization).
     pub radius: Option<f64>,
+    /// Intrinsic dimension m of the sampled manifold; default 2 for points in R³ (surfaces), estimated from the
+    /// neighbourhoods for points in Rⁿ, n ≥ 4 ([`manifold`]).
+    pub dimension: Option<usize>,
+    pub normalization: manifold::CloudNormalization,
 }
 
 /// Neighbours per point of the point-cloud operator unless asked otherwise (the one place this default is written:
@@ -141,7 +146,14 @@ pub const DEFAULT_NEIGHBOURS: usize = 16;
 
 impl Default for CloudParams {
     fn default() -> Self {
-        CloudParams { k: DEFAULT_NEIGHBOURS, neighbourhood: Neighbourhood::Radius, t: None, radius: None }
+        CloudParams {
+            k: DEFAULT_NEIGHBOURS,
+            neighbourhood: Neighbourhood::Radius,
+            t: None,
+            radius: None,
+            dimension: None,
+            normalization: manifold::CloudNormalization::Symmetric,
+        }
     }
 }
 
@@ -285,6 +297,8 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
             parameters.insert("mollify_delta".into(), delta.into());
             pair
         }
+        // The robust operator triangulates tangent planes in R³; points in Rⁿ have only the point-cloud operator.
+        (OperatorKind::Robust, Shape::PointCloud(c)) if c.ambient.is_some() => return Err(not_applicable()),
         (OperatorKind::Robust, Shape::PointCloud(c)) => {
             let (pair, delta) = robust::robust_cloud_pair(&c.points, options.cloud.k, options.mollify)?;
             parameters.insert("mollify_delta".into(), delta.into());
@@ -293,7 +307,29 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
         }
         (OperatorKind::PointCloud, s) => {
             let pts = s.positions().filter(|_| !matches!(s, Shape::Graph(_))).ok_or_else(not_applicable)?;
-            let (pair, used) = point_cloud::belkin_niyogi_pair(pts, &options.cloud)?;
+            let cloud = &options.cloud;
+            let ambient = match s {
+                Shape::PointCloud(c) => c.ambient.as_ref(),
+                _ => None,
+            };
+            // Surfaces in R³ with local areas (the operator of `point_cloud`), unless the points lie in Rⁿ, the
+            // intrinsic dimension is not 2, or the chapter's normalization is asked for.
+            let general = ambient.is_some()
+                || cloud.dimension.is_some_and(|m| m != 2)
+                || cloud.normalization != manifold::CloudNormalization::Symmetric;
+            let (pair, used) = if general {
+                let flat: Vec<f64>;
+                let points = match ambient {
+                    Some(a) => manifold::Points { dim: a.dim, coords: &a.coords },
+                    None => {
+                        flat = pts.iter().flatten().copied().collect();
+                        manifold::Points { dim: 3, coords: &flat }
+                    }
+                };
+                manifold::manifold_pair(points, cloud)?
+            } else {
+                point_cloud::belkin_niyogi_pair(pts, cloud)?
+            };
             parameters.extend(used);
             pair
         }

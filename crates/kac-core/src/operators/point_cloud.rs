@@ -276,6 +276,9 @@ pub fn belkin_niyogi_pair(
     used.insert("t".into(), t.into());
     used.insert("radius".into(), r.into());
     used.insert("total_area".into(), areas.iter().sum::<f64>().into());
+    used.insert("normalization".into(), "symmetric".into());
+    used.insert("ambient_dimension".into(), 3.into());
+    used.insert("intrinsic_dimension".into(), 2.into());
     Ok((
         SparsePair {
             pattern: Arc::new(pattern),
