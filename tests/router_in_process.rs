@@ -614,3 +614,87 @@ async fn point_clouds_in_rn_are_heard_over_http() {
         call(&app, analyze(json!({ "analysis": "spectrum", "operator": { "intrinsic_dimension": 7 } }))).await;
     assert_eq!((status, r["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-parameter")), "{r}");
 }
+
+/// A multipart body from (name, filename, bytes) parts.
+fn multipart(uri: &str, parts: &[(&str, Option<&str>, Vec<u8>)]) -> Request<Body> {
+    let boundary = "kac-test-boundary-7e3f";
+    let mut body = Vec::new();
+    for (name, file, bytes) in parts {
+        body.extend_from_slice(format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").as_bytes());
+        if let Some(f) = file {
+            body.extend_from_slice(format!("; filename=\"{f}\"\r\nContent-Type: application/octet-stream").as_bytes());
+        }
+        body.extend_from_slice(b"\r\n\r\n");
+        body.extend_from_slice(bytes);
+        body.extend_from_slice(b"\r\n");
+    }
+    body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
+    Request::post(uri)
+        .header("content-type", format!("multipart/form-data; boundary={boundary}"))
+        .body(Body::from(body))
+        .unwrap()
+}
+
+/// Initial data as `.npy` uploads: a multipart job request with the JSON in `request` and u₀ as an `.npy` part is
+/// the same job as the JSON request with u₀ inline; `/v1/analyze` takes the part beside the shape; an array
+/// that is not one column, a field given twice, or an unknown part is refused.
+#[tokio::test]
+async fn initial_data_comes_as_npy_parts() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let sphere = kac_core::geometry::generate::icosphere(2);
+    let off = kac_core::io::write::off(&sphere);
+    let (status, shape) =
+        call(&app, Request::post("/v1/shapes?format=off").body(Body::from(off.clone())).unwrap()).await;
+    assert_eq!(status, StatusCode::CREATED, "{shape}");
+    let id = shape["id"].as_str().unwrap();
+    let u0: Vec<f64> = sphere.vertices.iter().map(|p| p[2]).collect();
+    let npy = kac_core::io::npy::encode_f64(u0.len(), 1, &u0);
+    let request = json!({ "shape_id": id, "analysis": "wave", "k": 10, "times": [0.0, 0.5] });
+    let parts = [("request", None, request.to_string().into_bytes()), ("initial", Some("u0.npy"), npy.clone())];
+    let (status, by_part) = call(&app, multipart("/v1/jobs", &parts)).await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{by_part}");
+    let mut inline = request.clone();
+    inline["initial"] = json!(u0);
+    let (status, by_json) = call(&app, post_json("/v1/jobs", inline)).await;
+    assert_eq!((status, &by_json["id"]), (StatusCode::OK, &by_part["id"]), "the same request either way");
+    // Beside the shape in one request: z evolves as cos(√λ t) z with λ = 2 (up to the mesh's error).
+    let analysis = json!({ "analysis": "wave", "k": 10, "times": [0.5] }).to_string().into_bytes();
+    let parts = [
+        ("file", Some("s.off"), off.clone().into_bytes()),
+        ("analysis", None, analysis),
+        ("initial", Some("u0.npy"), npy.clone()),
+    ];
+    let (status, r) = call(&app, multipart("/v1/analyze?wait=60", &parts)).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    let w: Vec<f64> =
+        r["arrays"]["wave"]["values"].as_array().unwrap().iter().map(|x| x[0].as_f64().unwrap()).collect();
+    let c = (2f64.sqrt() * 0.5).cos();
+    assert!(w.iter().zip(&u0).all(|(a, b)| (a - c * b).abs() < 0.02), "{:?}", &w[..4]);
+    // Refused: two columns, a field twice, an unknown part.
+    let two = kac_core::io::npy::encode_f64(u0.len() / 2, 2, &u0[..u0.len() / 2 * 2]);
+    for (parts, says) in [
+        (vec![("request", None, request.to_string().into_bytes()), ("initial", Some("a.npy"), two)], "one column"),
+        (
+            vec![
+                (
+                    "request",
+                    None,
+                    json!({ "shape_id": id, "analysis": "wave", "times": [0.1], "initial": u0 })
+                        .to_string()
+                        .into_bytes(),
+                ),
+                ("initial", Some("a.npy"), npy.clone()),
+            ],
+            "both",
+        ),
+        (
+            vec![("request", None, request.to_string().into_bytes()), ("speed", Some("a.npy"), npy.clone())],
+            "unknown multipart part",
+        ),
+    ] {
+        let (status, p) = call(&app, multipart("/v1/jobs", &parts)).await;
+        assert_eq!((status, p["code"].as_str()), (StatusCode::BAD_REQUEST, Some("invalid-request")), "{p}");
+        assert!(p["detail"].as_str().unwrap().contains(says), "{p}");
+    }
+}

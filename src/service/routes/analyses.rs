@@ -11,6 +11,64 @@ pub struct JobRequest {
     pub analysis: Analysis,
 }
 
+/// A job request as `multipart/form-data`: the request as JSON in a `request` part, and per-vertex inputs of the
+/// analysis as `.npy` parts named after their fields (1-D or one column, float64 or float32, rows in the
+/// upload's vertex numbering), in place of JSON arrays.
+#[derive(utoipa::ToSchema)]
+#[allow(dead_code)]
+pub struct JobForm {
+    /// The job request (`JobRequest`) as JSON text.
+    request: String,
+    /// `wave`, `schrodinger`, `diffuse`: u₀ (or Re ψ₀).
+    #[schema(value_type = Option<String>, format = Binary)]
+    initial: Option<Vec<u8>>,
+    /// `wave`: the initial velocity.
+    #[schema(value_type = Option<String>, format = Binary)]
+    velocity: Option<Vec<u8>>,
+    /// `schrodinger`: Im ψ₀.
+    #[schema(value_type = Option<String>, format = Binary)]
+    initial_imag: Option<Vec<u8>>,
+    /// `poisson`: g.
+    #[schema(value_type = Option<String>, format = Binary)]
+    g: Option<Vec<u8>>,
+    /// `dirichlet-energy`, `smooth`: the function.
+    #[schema(value_type = Option<String>, format = Binary)]
+    function: Option<Vec<u8>>,
+}
+
+/// The per-vertex fields of analyses that a multipart request may send as `.npy` parts.
+pub(crate) const ARRAY_FIELDS: &[&str] = &["initial", "velocity", "initial_imag", "g", "function"];
+
+/// Puts the `.npy` parts of a multipart request into its JSON as arrays of numbers; a field given both ways,
+/// an array that is not one column, or a value that is not finite is refused (400 `invalid-request`).
+pub(crate) fn merge_arrays(value: &mut Value, arrays: &[(String, Bytes)]) -> Result<(), ApiError> {
+    for (name, bytes) in arrays {
+        let obj =
+            value.as_object_mut().ok_or_else(|| ApiError::invalid_request("the request must be a JSON object"))?;
+        if obj.contains_key(name) {
+            return Err(ApiError::invalid_request(format!("`{name}` is given both in the JSON and as an .npy part")));
+        }
+        let (rows, cols, data) = kac_core::io::npy::decode_f64(bytes)
+            .map_err(|e| ApiError::invalid_request(format!("the .npy part `{name}`: {e}")))?;
+        if cols != 1 {
+            return Err(ApiError::invalid_request(format!(
+                "the .npy part `{name}` is ({rows} × {cols}); give one value per vertex (1-D, or one column)"
+            )));
+        }
+        let numbers = data
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| {
+                serde_json::Number::from_f64(x).map(Value::Number).ok_or_else(|| {
+                    ApiError::invalid_request(format!("the .npy part `{name}`: row {i} is not finite ({x})"))
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        obj.insert(name.clone(), Value::Array(numbers));
+    }
+    Ok(())
+}
+
 pub(crate) fn job_response(status: StatusCode, v: &JobView) -> Response {
     with_location((status, Json(job_json(v))).into_response(), &format!("/v1/jobs/{}", v.id))
 }
@@ -27,7 +85,10 @@ pub(crate) fn job_json(v: &JobView) -> Value {
 }
 
 /// Submit an analysis of a stored shape: 202 with the job (a repeated request returns the existing job, 200).
-#[utoipa::path(post, path = "/v1/jobs", tag = "jobs", request_body = JobRequest,
+/// The request is JSON, or `multipart/form-data` with the JSON in a `request` part and per-vertex inputs
+/// (`initial`, `velocity`, `initial_imag`, `g`, `function`) as `.npy` parts.
+#[utoipa::path(post, path = "/v1/jobs", tag = "jobs",
+    request_body(content((JobRequest = "application/json"), (JobForm = "multipart/form-data"))),
     responses(
         (status = 202, description = "enqueued", body = JobView, headers(("Location" = String))),
         (status = 200, description = "the same request was already submitted", body = JobView, headers(("Location" = String))),
@@ -35,11 +96,21 @@ pub(crate) fn job_json(v: &JobView) -> Value {
         (status = 404, description = "no such shape", body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "k above --max-k", body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 503, description = "queue full", body = crate::service::error::Problem, content_type = "application/problem+json", headers(("Retry-After" = u64)))))]
-pub(crate) async fn create_job(
-    State(st): State<AppState>,
-    body: Result<Json<Value>, JsonRejection>,
-) -> Result<Response, ApiError> {
-    let req: JobRequest = strict_body(&st, body, "JobRequest")?;
+pub(crate) async fn create_job(State(st): State<AppState>, request: Request) -> Result<Response, ApiError> {
+    let multipart = request
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|ct| ct.to_ascii_lowercase().starts_with("multipart/form-data"));
+    let req: JobRequest = if multipart {
+        let (text, arrays) = job_form(&st, request).await?;
+        let mut value: Value =
+            serde_json::from_str(&text).map_err(|e| ApiError::invalid_json(format!("request: {e}")))?;
+        merge_arrays(&mut value, &arrays)?;
+        strict_body(&st, Ok(Json(value)), "JobRequest")?
+    } else {
+        strict_body(&st, Json::<Value>::from_request(request, &st).await, "JobRequest")?
+    };
     let shape = st
         .shapes
         .get(&req.shape_id)
@@ -47,6 +118,44 @@ pub(crate) async fn create_job(
         .ok_or(ApiError::NotFound { what: "shape", id: req.shape_id.clone() })?;
     let (job, created) = jobs::submit(&st, shape, req.analysis)?;
     Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job))
+}
+
+/// The parts of a multipart job request: the `request` JSON and the `.npy` parts.
+async fn job_form(st: &AppState, request: Request) -> Result<(String, Vec<(String, Bytes)>), ApiError> {
+    let mut mp = Multipart::from_request(request, st)
+        .await
+        .map_err(|e| ApiError::invalid_request(format!("multipart: {}", e.body_text())))?;
+    let (mut text, mut arrays) = (None, vec![]);
+    loop {
+        let field = match mp.next_field().await {
+            Ok(Some(f)) => f,
+            Ok(None) => break,
+            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+                return Err(ApiError::BodyTooLarge { limit: st.config.max_body_bytes })
+            }
+            Err(e) => return Err(ApiError::invalid_request(format!("multipart: {}", e.body_text()))),
+        };
+        let name = field.name().unwrap_or("").to_string();
+        let data = field.bytes().await.map_err(|e| {
+            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::BodyTooLarge { limit: st.config.max_body_bytes }
+            } else {
+                ApiError::invalid_request(format!("multipart: {}", e.body_text()))
+            }
+        })?;
+        match name.as_str() {
+            "request" => text = Some(String::from_utf8_lossy(&data).into_owned()),
+            n if ARRAY_FIELDS.contains(&n) => arrays.push((name, data)),
+            other => {
+                return Err(ApiError::invalid_request(format!(
+                    "unknown multipart part `{other}`: give `request` (JSON) and .npy parts named {}",
+                    ARRAY_FIELDS.join(", ")
+                )))
+            }
+        }
+    }
+    let text = text.ok_or_else(|| ApiError::invalid_request("the multipart body has no `request` part (the JSON)"))?;
+    Ok((text, arrays))
 }
 
 #[derive(Deserialize, utoipa::IntoParams)]
@@ -154,8 +263,9 @@ pub struct AnalyzeQuery {
     pub analysis: Option<String>,
 }
 
-/// Upload and analyse in one request: multipart with a `file` part and an `analysis` part (JSON), or the raw
-/// shape as the body and `?analysis=JSON`. Returns the result (200) when it is ready within `wait` seconds, the
+/// Upload and analyse in one request: multipart with a `file` part and an `analysis` part (JSON), with per-vertex
+/// inputs as `.npy` parts named after their fields as for `/v1/jobs`, or the raw shape as the body and
+/// `?analysis=JSON`. Returns the result (200) when it is ready within `wait` seconds, the
 /// job (202) otherwise, or the job's problem if it failed.
 #[utoipa::path(post, path = "/v1/analyze", tag = "jobs", params(AnalyzeQuery),
     request_body(content = Vec<u8>, description = "multipart/form-data with 'file' and 'analysis' parts, or the raw shape", content_type = "multipart/form-data"),
@@ -181,7 +291,8 @@ pub(crate) async fn analyze(
         .clone()
         .or_else(|| up.fields.iter().find(|(n, _)| n == "analysis").map(|(_, v)| v.clone()))
         .ok_or_else(|| ApiError::invalid_request("give the analysis as a multipart part or ?analysis=JSON"))?;
-    let value: Value = serde_json::from_str(&text).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
+    let mut value: Value = serde_json::from_str(&text).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
+    merge_arrays(&mut value, &up.arrays)?;
     crate::service::strict::check_body(&value, "Analysis").map_err(ApiError::UnknownField)?;
     let analysis: Analysis =
         serde_json::from_value(value).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;

@@ -46,6 +46,8 @@ pub(crate) struct Upload {
     media_type: Option<String>,
     /// Other multipart text fields (the synchronous form reads `analysis` from here).
     pub(crate) fields: Vec<(String, String)>,
+    /// Per-vertex inputs of the analysis sent as `.npy` parts, by field name ([`super::analyses::ARRAY_FIELDS`]).
+    pub(crate) arrays: Vec<(String, Bytes)>,
 }
 
 pub(crate) fn parse_format(name: &str) -> Result<Format, ApiError> {
@@ -61,6 +63,7 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
         filename: None,
         media_type: None,
         fields: vec![],
+        arrays: vec![],
     };
     if ct.to_ascii_lowercase().starts_with("multipart/form-data") {
         let mut mp = Multipart::from_request(req, st)
@@ -91,7 +94,9 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
                     ApiError::invalid_request(format!("multipart: {}", e.body_text()))
                 }
             })?;
-            if !got && (filename.is_some() || name == "file" || name == "shape") {
+            if super::analyses::ARRAY_FIELDS.contains(&name.as_str()) {
+                up.arrays.push((name, data));
+            } else if !got && (filename.is_some() || name == "file" || name == "shape") {
                 up.bytes = data;
                 up.filename = filename;
                 up.media_type = media;
