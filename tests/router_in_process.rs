@@ -698,3 +698,47 @@ async fn initial_data_comes_as_npy_parts() {
         assert!(p["detail"].as_str().unwrap().contains(says), "{p}");
     }
 }
+
+/// Quadratic elements over HTTP: `"order": 2` on the unit square (Dirichlet) is two orders of magnitude nearer
+/// to 2π² than P1 on the same mesh, per-vertex outputs keep one row per vertex, and the operator counts the
+/// edge unknowns; a lumped mass or a graph operator with order 2 is refused.
+#[tokio::test]
+async fn quadratic_elements_over_http() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::unit_square(8));
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(off.clone())).unwrap()
+    };
+    let exact = 2.0 * std::f64::consts::PI.powi(2);
+    let mut err = vec![];
+    for order in [1, 2] {
+        let op = json!({ "boundary": "dirichlet", "order": order });
+        let (status, r) =
+            call(&app, analyze(json!({ "analysis": "spectrum", "k": 3, "eigenvectors": true, "operator": op }))).await;
+        assert_eq!(status, StatusCode::OK, "{r}");
+        assert_eq!(r["arrays"]["eigenvectors"]["rows"], 81);
+        err.push((r["eigenvalues"][0].as_f64().unwrap() - exact).abs() / exact);
+    }
+    assert!(err[1] < 0.01 * err[0], "P1 {} vs P2 {}", err[0], err[1]);
+    let (status, o) = call(&app, analyze(json!({ "analysis": "operator", "operator": { "order": 2 } }))).await;
+    assert_eq!(status, StatusCode::OK, "{o}");
+    assert_eq!((o["unknowns"].as_u64(), o["parameters"]["edge_unknowns"].as_u64()), (Some(81 + 208), Some(208)));
+    // Dirichlet: 49 interior vertices and the 176 edges not on the boundary; each unknown's two vertices.
+    let (status, d) =
+        call(&app, analyze(json!({ "analysis": "operator", "operator": { "order": 2, "boundary": "dirichlet" } })))
+            .await;
+    assert_eq!(status, StatusCode::OK, "{d}");
+    let map = &d["arrays"]["unknown_vertices"];
+    assert_eq!(
+        (d["unknowns"].as_u64(), map["rows"].as_u64(), map["cols"].as_u64()),
+        (Some(49 + 176), Some(225), Some(2))
+    );
+    for op in
+        [json!({ "order": 2, "mass": "lumped" }), json!({ "order": 2, "operator": "graph" }), json!({ "order": 3 })]
+    {
+        let (status, p) = call(&app, analyze(json!({ "analysis": "spectrum", "operator": op }))).await;
+        assert_eq!((status, p["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-parameter")), "{p}");
+    }
+}

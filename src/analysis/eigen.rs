@@ -88,6 +88,7 @@ pub fn build_operator(v: &Validated, spec: &OperatorSpec) -> Result<Operator, An
             dimension: spec.intrinsic_dimension,
             normalization: spec.normalization,
         },
+        order: spec.order,
         ..Default::default()
     };
     Ok(operators::build(&v.shape, &o)?)

@@ -17,17 +17,22 @@ pub fn is_per_vertex(name: &str) -> bool {
 }
 
 /// For each unknown of the operator, its vertex in the upload's numbering (the first input vertex welded into
-/// it): the interior map under Dirichlet conditions, and the inverse of validation's renumbering.
-pub fn unknown_vertices(v: &Validated, op: &Operator) -> Vec<u32> {
+/// it): the interior map under Dirichlet conditions, and the inverse of validation's renumbering. With P2
+/// elements each unknown has two: a vertex unknown its vertex twice, an edge unknown the edge's endpoints.
+pub fn unknown_vertices(v: &Validated, op: &Operator) -> Vec<[u32; 2]> {
     let mut first = vec![u32::MAX; v.shape.vertex_count()];
     for (input, &w) in v.vertex_map.iter().enumerate() {
         if w != u32::MAX && first[w as usize] == u32::MAX {
             first[w as usize] = input as u32;
         }
     }
+    let mut all: Vec<[u32; 2]> = first.iter().map(|&i| [i, i]).collect();
+    if let Some(edges) = &op.edge_unknowns {
+        all.extend(edges.iter().map(|e| [first[e[0] as usize], first[e[1] as usize]]));
+    }
     match &op.interior {
-        Some(keep) => keep.iter().map(|&w| first[w as usize]).collect(),
-        None => first,
+        Some(keep) => keep.iter().map(|&u| all[u as usize]).collect(),
+        None => all,
     }
 }
 
@@ -72,10 +77,13 @@ pub(crate) fn operator_output(
                 hooks.limits.max_values
             )));
         }
-        let map: Vec<f64> = unknown_vertices(v, &op).iter().map(|&i| i as f64).collect();
+        let cols = if op.edge_unknowns.is_some() { 2 } else { 1 };
+        let map: Vec<f64> =
+            unknown_vertices(v, &op).iter().flat_map(|p| p[..cols].to_vec()).map(|i| i as f64).collect();
         summary["matrices"] = json!({
             "numbering": "rows and columns are the operator's unknowns, 0-based; unknown_vertices gives each \
-                          unknown's vertex in the upload's numbering (the interior map under Dirichlet conditions)",
+                          unknown's vertex in the upload's numbering (the interior map under Dirichlet conditions; \
+                          with order 2 two columns: a vertex twice, or an edge unknown's endpoints)",
             "stiffness": { "name": "L", "nonzeros_upper": l.len() / 3 },
             "mass": { "name": "M", "nonzeros_upper": m.len() / 3 },
             "triplets": "row, column, value of the upper triangle (row ≤ column), explicit zeros left out",
@@ -83,7 +91,7 @@ pub(crate) fn operator_output(
         for (name, data) in [("stiffness", l), ("mass", m)] {
             arrays.push(VertexArray { name, rows: data.len() / 3, cols: 3, data, columns: None });
         }
-        arrays.push(VertexArray { name: "unknown_vertices", rows: map.len(), cols: 1, data: map, columns: None });
+        arrays.push(VertexArray { name: "unknown_vertices", rows: map.len() / cols, cols, data: map, columns: None });
     }
     Ok(Output { fingerprints: vec![], summary, arrays })
 }

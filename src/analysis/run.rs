@@ -361,17 +361,27 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             }
             let (ubar, what) = match function {
                 Some(f) => {
-                    let mapped = from_input_rows(v, f, "function")?;
+                    let mapped = op.restrict(&from_input_rows(v, f, "function")?);
                     (faer::Mat::from_fn(n, 1, |i, _| mapped[i]), "function")
                 }
                 None => {
                     let pos = v.shape.positions().ok_or_else(|| {
                         AnalysisError::not_applicable("the shape has no coordinates; give a function")
                     })?;
-                    (faer::Mat::from_fn(n, 3, |i, j| pos[i][j]), "coordinates")
+                    let c: Vec<Vec<f64>> =
+                        (0..3).map(|j| op.restrict(&pos.iter().map(|p| p[j]).collect::<Vec<_>>())).collect();
+                    (faer::Mat::from_fn(n, 3, |i, j| c[j][i]), "coordinates")
                 }
             };
-            let fixed = fixed_boundary.then(|| operators::boundary::boundary_vertices(&v.shape));
+            let fixed = fixed_boundary.then(|| {
+                // P2: an edge unknown is held where both its endpoints are.
+                let b = operators::boundary::boundary_vertices(&v.shape);
+                let mut all = b.clone();
+                if let Some(edges) = &op.edge_unknowns {
+                    all.extend(edges.iter().map(|e| b[e[0] as usize] && b[e[1] as usize]));
+                }
+                all
+            });
             let u = pde::smooth(&op.pair, ubar.as_ref(), *alpha, fixed.as_deref())?;
             let a = to_input_rows(v, &op, u.as_ref(), "smoothed");
             let summary = merge(

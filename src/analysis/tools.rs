@@ -155,14 +155,10 @@ pub(crate) fn run(
                     let pos = v.shape.positions().ok_or_else(|| {
                         AnalysisError::not_applicable("the shape has no coordinates; give a function")
                     })?;
-                    let rows: Vec<usize> = match &op.interior {
-                        None => (0..pos.len()).collect(),
-                        Some(keep) => keep.iter().map(|&i| i as usize).collect(),
-                    };
                     ["x", "y", "z"]
                         .iter()
                         .enumerate()
-                        .map(|(c, n)| (n.to_string(), rows.iter().map(|&i| pos[i][c]).collect()))
+                        .map(|(c, n)| (n.to_string(), op.restrict(&pos.iter().map(|p| p[c]).collect::<Vec<_>>())))
                         .collect()
                 }
             };
@@ -190,11 +186,7 @@ pub(crate) fn input_function(v: &Validated, op: &Operator, f: &[f64], what: &str
     if let Some(i) = f.iter().position(|x| !x.is_finite()) {
         return Err(AnalysisError::invalid_parameter(format!("{what}: value {i} is not a finite number")));
     }
-    let mapped = from_input_rows(v, f, what)?;
-    Ok(match &op.interior {
-        None => mapped,
-        Some(keep) => keep.iter().map(|&i| mapped[i as usize]).collect(),
-    })
+    Ok(op.restrict(&from_input_rows(v, f, what)?))
 }
 
 /// The initial data of an evolution over the operator's unknowns, and how it was given.
@@ -224,11 +216,7 @@ pub(crate) fn initial_function(
                 .iter()
                 .map(|p| (-(0..3).map(|k| (p[k] - c[k]).powi(2)).sum::<f64>() / (2.0 * w * w)).exp())
                 .collect();
-            let values = match &op.interior {
-                None => bump,
-                Some(keep) => keep.iter().map(|&i| bump[i as usize]).collect(),
-            };
-            Ok((values, json!({ "source": s, "width": w })))
+            Ok((op.restrict(&bump), json!({ "source": s, "width": w })))
         }
         _ => Err(AnalysisError::invalid_parameter(
             "give either `initial` (per vertex) or `source` (with an optional `width`)",

@@ -35,9 +35,57 @@ pub fn apply(
     pair: SparsePair,
     boundary: &Boundary,
 ) -> Result<(SparsePair, Option<Vec<u32>>), OperatorError> {
-    let n = pair.n();
+    match fixed_vertices(shape, pair.n(), boundary)? {
+        None => Ok((pair, None)),
+        Some(fixed) => eliminate(pair, &fixed),
+    }
+}
+
+/// The P2 version of [`apply`]: besides the vertices, the edge unknowns (after the `n_vertices` vertex ones,
+/// `edges` their endpoints) of boundary edges (a surface's boundary edges, edges on a solid's boundary faces), or
+/// with given vertices, of edges between two of them.
+pub fn apply_p2(
+    shape: &Shape,
+    pair: SparsePair,
+    edges: &[[u32; 2]],
+    boundary: &Boundary,
+) -> Result<(SparsePair, Option<Vec<u32>>), OperatorError> {
+    let nv = shape.vertex_count();
+    let Some(mut fixed) = fixed_vertices(shape, nv, boundary)? else { return Ok((pair, None)) };
+    let on_boundary: Vec<[u32; 2]> = match (shape, boundary) {
+        (_, Boundary::DirichletVertices(_)) => {
+            edges.iter().copied().filter(|e| fixed[e[0] as usize] && fixed[e[1] as usize]).collect()
+        }
+        (Shape::TriangleMesh(m), _) => {
+            let topo = topology::EdgeTopology::new(&m.faces);
+            topo.edges.iter().enumerate().filter(|&(e, _)| topo.valence(e) == 1).map(|(_, &e)| e).collect()
+        }
+        (Shape::TetMesh(m), _) => {
+            let (faces, _) = topology::tet_boundary(&m.tets);
+            let mut b: Vec<[u32; 2]> = faces
+                .iter()
+                .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
+                .map(|[a, b]| [a.min(b), a.max(b)])
+                .collect();
+            b.sort_unstable();
+            b.dedup();
+            b
+        }
+        _ => vec![],
+    };
+    fixed.resize(nv + edges.len(), false);
+    for e in on_boundary {
+        if let Ok(k) = edges.binary_search(&e) {
+            fixed[nv + k] = true;
+        }
+    }
+    eliminate(pair, &fixed)
+}
+
+/// The vertices a boundary condition fixes (`None`: Neumann, nothing fixed).
+fn fixed_vertices(shape: &Shape, n: usize, boundary: &Boundary) -> Result<Option<Vec<bool>>, OperatorError> {
     let fixed: Vec<bool> = match boundary {
-        Boundary::Neumann => return Ok((pair, None)),
+        Boundary::Neumann => return Ok(None),
         Boundary::Dirichlet => {
             let b = boundary_vertices(shape);
             if !b.iter().any(|&x| x) {
@@ -60,6 +108,12 @@ pub fn apply(
             b
         }
     };
+    Ok(Some(fixed))
+}
+
+/// The principal submatrix on the unknowns not `fixed`, with the kept indices.
+pub fn eliminate(pair: SparsePair, fixed: &[bool]) -> Result<(SparsePair, Option<Vec<u32>>), OperatorError> {
+    let n = pair.n();
     let keep: Vec<usize> = (0..n).filter(|&i| !fixed[i]).collect();
     if keep.is_empty() {
         return Err(OperatorError::Boundary { message: "every vertex is on the boundary; nothing is left".into() });

@@ -8,6 +8,7 @@ pub mod graph_laplacian;
 pub mod intrinsic_delaunay;
 pub mod manifold;
 pub mod mass;
+pub mod p2;
 pub mod point_cloud;
 pub mod properties;
 pub mod robust;
@@ -20,6 +21,7 @@ use crate::geometry::{Shape, ShapeKind};
 use graph_laplacian::GraphKind;
 use serde::{Deserialize, Serialize};
 use sparse::SparsePair;
+use std::sync::Arc;
 
 /// The operators kac builds (CLI and API names in kebab-case).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -168,6 +170,8 @@ pub struct OperatorOptions {
     pub cloud: CloudParams,
     /// Mollification factor of the robust Laplacian (δ relative to the mean edge length; default 1e-5).
     pub mollify: f64,
+    /// Polynomial degree of the finite elements: 1 (default) or 2 ([`p2`]: `cotan` on triangle meshes, `tet`).
+    pub order: u8,
 }
 
 impl Default for OperatorOptions {
@@ -178,6 +182,7 @@ impl Default for OperatorOptions {
             boundary: Boundary::Neumann,
             cloud: CloudParams::default(),
             mollify: 1e-5,
+            order: 1,
         }
     }
 }
@@ -238,20 +243,43 @@ pub struct Operator {
     pub interior: Option<Vec<u32>>,
     /// Parameters chosen automatically (point clouds: t, radius, h; robust: δ), echoed in results.
     pub parameters: serde_json::Map<String, serde_json::Value>,
+    /// P2 elements: the edges whose midpoint unknowns follow the vertices' (`None`: one unknown per vertex).
+    pub edge_unknowns: Option<Arc<Vec<[u32; 2]>>>,
 }
 
 impl Operator {
-    /// Puts a vector of the (possibly condensed) operator back on all vertices, zeros on the Dirichlet boundary.
+    /// Unknowns before a Dirichlet elimination: the vertices, and the edges of P2 elements.
+    pub fn unknowns(&self) -> usize {
+        self.full_size + self.edge_unknowns.as_ref().map_or(0, |e| e.len())
+    }
+
+    /// Puts a vector of the (possibly condensed) operator back on all vertices, zeros on the Dirichlet boundary
+    /// (P2: the values at the vertices; a P2 function's value at a vertex is its vertex unknown).
     pub fn expand(&self, x: &[f64]) -> Vec<f64> {
-        match &self.interior {
+        let mut out = match &self.interior {
             None => x.to_vec(),
             Some(keep) => {
-                let mut out = vec![0.0; self.full_size];
+                let mut out = vec![0.0; self.unknowns()];
                 for (k, &i) in keep.iter().enumerate() {
                     out[i as usize] = x[k];
                 }
                 out
             }
+        };
+        out.truncate(self.full_size);
+        out
+    }
+
+    /// A function given at the vertices as a vector over the operator's unknowns: P2 edge unknowns take the mean
+    /// of their endpoints (the P1 interpolant, exact for linear functions); Dirichlet-eliminated ones are dropped.
+    pub fn restrict(&self, per_vertex: &[f64]) -> Vec<f64> {
+        let mut all = per_vertex.to_vec();
+        if let Some(edges) = &self.edge_unknowns {
+            all.extend(edges.iter().map(|e| 0.5 * (per_vertex[e[0] as usize] + per_vertex[e[1] as usize])));
+        }
+        match &self.interior {
+            None => all,
+            Some(keep) => keep.iter().map(|&i| all[i as usize]).collect(),
         }
     }
 }
@@ -280,6 +308,14 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
         return Err(OperatorError::MassNotApplicable { operator: op.name(), mass: mass.name() });
     }
     let mut parameters = serde_json::Map::new();
+    if options.order == 2 {
+        return build_p2(shape, op, mass, options);
+    } else if options.order != 1 {
+        return Err(OperatorError::InvalidParameter {
+            name: "order",
+            message: format!("{}: the elements are linear (1) or quadratic (2)", options.order),
+        });
+    }
     let pair = match (op, shape) {
         (OperatorKind::Cotan, Shape::TriangleMesh(m)) => cotan_laplacian::cotan_pair(
             m.vertices.len(),
@@ -348,7 +384,57 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
     };
     let full_size = pair.n();
     let (pair, interior) = boundary::apply(shape, pair, &options.boundary)?;
-    Ok(Operator { pair, kind: op, mass, boundary: options.boundary.name(), full_size, interior, parameters })
+    Ok(Operator {
+        pair,
+        kind: op,
+        mass,
+        boundary: options.boundary.name(),
+        full_size,
+        interior,
+        parameters,
+        edge_unknowns: None,
+    })
+}
+
+/// Quadratic elements ([`p2`]): `cotan` on triangle meshes and `tet` on tet meshes, consistent mass only (a
+/// lumped P2 mass has zero or negative vertex entries).
+fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptions) -> Result<Operator, OperatorError> {
+    if mass != Mass::Consistent {
+        return Err(OperatorError::InvalidParameter {
+            name: "order",
+            message: format!("quadratic elements take the consistent mass, not '{}'", mass.name()),
+        });
+    }
+    let (pair, edges) = match (op, shape) {
+        (OperatorKind::Cotan, Shape::TriangleMesh(m)) => p2::triangle_p2_pair(&m.vertices, &m.faces, None)?,
+        (OperatorKind::Tet, Shape::TetMesh(m)) => p2::tet_p2_pair(&m.vertices, &m.tets, None)?,
+        _ => {
+            return Err(OperatorError::InvalidParameter {
+                name: "order",
+                message: format!(
+                "quadratic elements are built for 'cotan' on triangle meshes and 'tet' on tet meshes, not '{}' on a {}",
+                op.name(),
+                shape.kind().as_str()
+            ),
+            })
+        }
+    };
+    let full_size = shape.vertex_count();
+    let (pair, interior) = boundary::apply_p2(shape, pair, &edges, &options.boundary)?;
+    let mut parameters = serde_json::Map::new();
+    parameters.insert("order".into(), 2.into());
+    parameters.insert("edge_unknowns".into(), edges.len().into());
+    parameters.insert("midpoints".into(), "on the straight edges (flat elements: the input mesh's geometry)".into());
+    Ok(Operator {
+        pair,
+        kind: op,
+        mass,
+        boundary: options.boundary.name(),
+        full_size,
+        interior,
+        parameters,
+        edge_unknowns: Some(Arc::new(edges)),
+    })
 }
 
 /// The edge graph of a shape with unit weights (graphs keep theirs); none for point clouds.

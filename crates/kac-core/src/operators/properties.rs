@@ -78,6 +78,14 @@ pub fn report(shape: &Shape, op: &Operator) -> PropertyReport {
         check(negative == 0, negative as f64, "number of negative edge weights (positive off-diagonal entries of L)");
     // Local support against the input's own neighbourhoods.
     let index = |k: usize| op.interior.as_ref().map_or(k, |keep| keep[k] as usize);
+    // The vertices an unknown stands for: itself, or a P2 edge unknown's two endpoints.
+    let nv = shape.vertex_count();
+    let members = |u: usize| -> [u32; 2] {
+        match &op.edge_unknowns {
+            Some(e) if u >= nv => e[u - nv],
+            _ => [u as u32, u as u32],
+        }
+    };
     let local_support = match (op.kind, edge_graph(shape)) {
         (OperatorKind::PointCloud, _) | (_, None) => {
             check(true, 0.0, "entries join points within the kernel radius or local Delaunay neighbourhoods")
@@ -90,8 +98,10 @@ pub fn report(shape: &Shape, op: &Operator) -> PropertyReport {
                 for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
                     let i = p.row_idx[pos];
                     if i < j && l[pos] != 0.0 {
-                        let (a, b) = (index(i) as u32, index(j) as u32);
-                        if !set.contains(&(a.min(b), a.max(b))) {
+                        let (ma, mb) = (members(index(i)), members(index(j)));
+                        let joined =
+                            ma.iter().all(|&a| mb.iter().all(|&b| a == b || set.contains(&(a.min(b), a.max(b)))));
+                        if !joined {
                             outside += 1;
                         }
                     }
@@ -111,11 +121,17 @@ pub fn report(shape: &Shape, op: &Operator) -> PropertyReport {
         let diam = crate::geometry::topology::BoundingBox::of(pos).map_or(1.0, |b| b.diagonal()).max(f64::MIN_POSITIVE);
         let mut worst = 0.0f64;
         let mut y = vec![0.0; n];
+        // A linear function at an unknown: at its vertex, or at its edge's midpoint (P2).
+        let at = |k: usize, axis: [f64; 3]| {
+            let [a, b] = members(index(k));
+            0.5 * (vec3::dot(pos[a as usize], axis) + vec3::dot(pos[b as usize], axis))
+        };
         for axis in axes {
-            let u: Vec<f64> = (0..n).map(|k| vec3::dot(pos[index(k)], axis)).collect();
+            let u: Vec<f64> = (0..n).map(|k| at(k, axis)).collect();
             matvec(p, l, &u, &mut y);
             for (k, v) in y.iter().enumerate() {
-                if !boundary[index(k)] {
+                let [a, b] = members(index(k));
+                if !(boundary[a as usize] && boundary[b as usize]) {
                     worst = worst.max(v.abs());
                 }
             }

@@ -1,0 +1,142 @@
+//! Quadratic (P2) elements against closed forms: the observed order of convergence of eigenvalues under
+//! uniform refinement is about 4 (P1: 2) on the unit square (Dirichlet and Neumann), the flat torus (given by
+//! edge lengths alone) and the unit cube (tets); on the unit disk it is 4 only when the boundary edges are
+//! curved onto the circle (isoparametric), and 2 with straight ones (the polygon's own error).
+
+use kac_core::geometry::{generate, Shape};
+use kac_core::operators::sparse::SparsePair;
+use kac_core::operators::{self, boundary, p2, Boundary, OperatorKind, OperatorOptions};
+use kac_core::spectrum::{eigs, Control, EigenOptions};
+use std::f64::consts::PI;
+
+fn smallest(pair: &SparsePair, k: usize) -> Vec<f64> {
+    eigs(pair, &EigenOptions { k, ..Default::default() }, None, Control::default()).unwrap().values
+}
+
+fn build(shape: &Shape, order: u8, boundary: Boundary) -> SparsePair {
+    let o = OperatorOptions { order, boundary, ..Default::default() };
+    operators::build(shape, &o).unwrap_or_else(|e| panic!("{e}")).pair
+}
+
+/// Relative errors of eigenvalues `index` at each refinement, and the observed orders log₂(e_h / e_{h/2}).
+fn orders(errors: &[f64]) -> Vec<f64> {
+    errors.windows(2).map(|w| (w[0] / w[1]).log2()).collect()
+}
+
+fn sci(v: &[f64]) -> String {
+    v.iter().map(|x| format!("{x:.2e}")).collect::<Vec<_>>().join(", ")
+}
+
+fn rel(got: &[f64], exact: &[f64], skip: usize) -> f64 {
+    got.iter().zip(exact).skip(skip).map(|(g, e)| (g - e).abs() / e).fold(0.0, f64::max)
+}
+
+#[test]
+fn unit_square_converges_at_order_four() {
+    let dirichlet = [2.0, 5.0, 5.0, 8.0, 10.0, 10.0].map(|x| x * PI * PI);
+    let neumann = [0.0, 1.0, 1.0, 2.0, 4.0, 4.0].map(|x| x * PI * PI);
+    for (exact, bc) in [(dirichlet, Boundary::Dirichlet), (neumann, Boundary::Neumann)] {
+        let skip = usize::from(bc == Boundary::Neumann);
+        let (mut e1, mut e2) = (vec![], vec![]);
+        for n in [4, 8, 16] {
+            let s = Shape::TriangleMesh(generate::unit_square(n));
+            e1.push(rel(&smallest(&build(&s, 1, bc.clone()), 6), &exact, skip));
+            e2.push(rel(&smallest(&build(&s, 2, bc.clone()), 6), &exact, skip));
+        }
+        let (o1, o2) = (orders(&e1), orders(&e2));
+        eprintln!("square {bc:?}: P1 {} orders {o1:.2?}; P2 {} orders {o2:.2?}", sci(&e1), sci(&e2));
+        assert!(o2.iter().all(|&o| o > 3.6), "P2 orders {o2:?}");
+        assert!(o1[1] < 2.5, "P1 orders {o1:?}");
+        assert!(e2[2] < 1e-2 * e1[2], "{e1:?} {e2:?}");
+    }
+}
+
+/// The flat torus [0, 1)² with periodic identification has no embedding in R³ with flat triangles; it is given
+/// by its edge lengths. λ = 4π²(a² + b²): 0, 4π² ×4, 8π² ×4.
+#[test]
+fn flat_torus_by_lengths_converges_at_order_four() {
+    let exact = [0.0, 1.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0, 2.0].map(|x| 4.0 * PI * PI * x);
+    let mut errors = vec![];
+    for n in [4usize, 8, 16] {
+        let idx = |i: usize, j: usize| ((j % n) * n + i % n) as u32;
+        let faces: Vec<[u32; 3]> = (0..n)
+            .flat_map(|j| {
+                (0..n).flat_map(move |i| {
+                    [[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)], [idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]]
+                })
+            })
+            .collect();
+        let h = 1.0 / n as f64;
+        // Lengths opposite corners 0, 1, 2: the hypotenuse is opposite the right angle.
+        let lengths = |f: usize| if f.is_multiple_of(2) { [h, h * 2f64.sqrt(), h] } else { [h, h, h * 2f64.sqrt()] };
+        let (pair, edges) = p2::triangle_p2_pair_intrinsic(n * n, &faces, lengths).unwrap();
+        assert_eq!(edges.len(), 3 * n * n);
+        errors.push(rel(&smallest(&pair, 9), &exact, 1));
+    }
+    let o = orders(&errors);
+    eprintln!("flat torus P2: {} orders {o:.2?}", sci(&errors));
+    assert!(o.iter().all(|&x| x > 3.6), "{o:?}");
+}
+
+#[test]
+fn unit_cube_tets_converge_at_order_four() {
+    let exact = [3.0, 6.0, 6.0, 6.0].map(|x| x * PI * PI);
+    let (mut e1, mut e2) = (vec![], vec![]);
+    for n in [3, 6, 12] {
+        let s = Shape::TetMesh(generate::unit_cube_tets(n));
+        e1.push(rel(&smallest(&build(&s, 1, Boundary::Dirichlet), 4), &exact, 0));
+        e2.push(rel(&smallest(&build(&s, 2, Boundary::Dirichlet), 4), &exact, 0));
+    }
+    let (o1, o2) = (orders(&e1), orders(&e2));
+    eprintln!("cube: P1 {} orders {o1:.2?}; P2 {} orders {o2:.2?}", sci(&e1), sci(&e2));
+    assert!(o2[1] > 3.5 && e2[2] < 1e-3, "P2 {e2:?} orders {o2:?}");
+    assert!(e2[2] < 0.02 * e1[2]);
+}
+
+/// The unit disk, Dirichlet: λ₁ = j₀,₁² (j₀,₁ = 2.404825557695773, the first zero of J₀; Abramowitz & Stegun
+/// table 9.5), λ₂ = λ₃ = j₁,₁² (j₁,₁ = 3.831705970207512). Straight boundary edges cut the disk to a polygon
+/// whose own eigenvalues differ by O(h²); midpoints on the circle restore order 4.
+#[test]
+fn disk_needs_curved_boundary_edges() {
+    let (j01, j11) = (2.404_825_557_695_773_f64, 3.831_705_970_207_512_f64);
+    let exact = [j01 * j01, j11 * j11, j11 * j11];
+    let (mut flat, mut curved) = (vec![], vec![]);
+    for rings in [4, 8, 16] {
+        let m = generate::unit_disk(rings);
+        let s = Shape::TriangleMesh(m.clone());
+        flat.push(rel(&smallest(&build(&s, 2, Boundary::Dirichlet), 3), &exact, 0));
+        let on_circle = |e: [u32; 2]| {
+            let (a, b) = (m.vertices[e[0] as usize], m.vertices[e[1] as usize]);
+            let mid = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.0];
+            let boundary = |p: [f64; 3]| (p[0].hypot(p[1]) - 1.0).abs() < 1e-12;
+            if boundary(a) && boundary(b) {
+                let r = mid[0].hypot(mid[1]);
+                [mid[0] / r, mid[1] / r, 0.0]
+            } else {
+                mid
+            }
+        };
+        let (pair, edges) = p2::triangle_p2_pair(&m.vertices, &m.faces, Some(&on_circle)).unwrap();
+        let (pair, _) = boundary::apply_p2(&s, pair, &edges, &Boundary::Dirichlet).unwrap();
+        curved.push(rel(&smallest(&pair, 3), &exact, 0));
+    }
+    let (of, oc) = (orders(&flat), orders(&curved));
+    eprintln!("disk: straight {} orders {of:.2?}; curved {} orders {oc:.2?}", sci(&flat), sci(&curved));
+    assert!(of.iter().all(|&o| o < 2.5), "straight edges: {of:?}");
+    assert!(oc[1] > 3.5 && curved[2] < 0.01 * flat[2], "curved: {curved:?} {oc:?}");
+}
+
+#[test]
+fn p2_needs_the_consistent_mass_and_a_fem_operator() {
+    let s = Shape::TriangleMesh(generate::unit_square(2));
+    let lumped = OperatorOptions { order: 2, mass: Some(operators::Mass::Lumped), ..Default::default() };
+    assert!(operators::build(&s, &lumped).is_err());
+    let graph = OperatorOptions { order: 2, operator: Some(OperatorKind::Graph), ..Default::default() };
+    assert!(operators::build(&s, &graph).is_err());
+    let o = operators::build(&s, &OperatorOptions { order: 2, ..Default::default() }).unwrap();
+    // 9 vertices and 16 edges; the vertex values of a P2 vector are its first 9 unknowns.
+    assert_eq!((o.pair.n(), o.unknowns(), o.expand(&[1.0; 25]).len()), (25, 25, 9));
+    let r = operators::properties::report(&s, &o);
+    assert!(r.symmetric.holds && r.local_support.holds && r.positive_semidefinite.holds, "{r:?}");
+    assert!(r.linear_precision.unwrap().holds && r.constants_in_kernel.unwrap().holds);
+}
