@@ -69,6 +69,11 @@ impl SolverLimits {
 }
 
 pub fn build_operator(v: &Validated, spec: &OperatorSpec) -> Result<Operator, AnalysisError> {
+    Ok(operators::build(&v.shape, &operator_options(v, spec)?)?)
+}
+
+/// The core's options for an operator request (vertex indices mapped to the validated numbering).
+pub fn operator_options(v: &Validated, spec: &OperatorSpec) -> Result<OperatorOptions, AnalysisError> {
     let boundary = match (&spec.dirichlet_vertices, spec.boundary) {
         (Some(list), _) => Boundary::DirichletVertices(
             map_vertices(v, list, "dirichlet_vertices")?.iter().map(|&i| i as u32).collect(),
@@ -91,7 +96,7 @@ pub fn build_operator(v: &Validated, spec: &OperatorSpec) -> Result<Operator, An
         order: spec.order,
         ..Default::default()
     };
-    Ok(operators::build(&v.shape, &o)?)
+    Ok(o)
 }
 
 /// Zero modes to expect: connected components of the operator for a Neumann problem, none for Dirichlet.

@@ -24,6 +24,7 @@ use std::sync::Arc;
 
 mod eigen;
 mod error;
+mod extrapolate;
 mod operator;
 mod output;
 mod request;

@@ -268,6 +268,14 @@ pub enum Analysis {
         /// (two terms where the boundary's measure is known).
         #[serde(default, skip_serializing_if = "std::ops::Not::not")]
         counting: bool,
+        /// Continuum eigenvalues with error bars: solve again on `refinements` uniform refinements of the mesh
+        /// and extrapolate (Richardson, at the observed order), for flat triangle meshes and tet meshes.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        extrapolate: bool,
+        /// Uniform refinements for `extrapolate`: 1 (two levels, the nominal order) to 3 (default 2: three levels,
+        /// the order observed).
+        #[serde(default = "refinements_default", skip_serializing_if = "is_two")]
+        refinements: usize,
         #[serde(default)]
         operator: OperatorSpec,
         #[serde(default)]
@@ -493,6 +501,12 @@ pub fn k_default() -> usize {
 }
 pub(crate) fn k_signature() -> usize {
     100
+}
+pub(crate) fn refinements_default() -> usize {
+    2
+}
+fn is_two(r: &usize) -> bool {
+    *r == 2
 }
 pub(crate) fn yes() -> bool {
     true

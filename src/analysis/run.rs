@@ -165,7 +165,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
     // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
     let reused = std::cell::Cell::new(false);
     let out = match analysis {
-        Analysis::Spectrum { k, band, eigenvectors, counting, operator, solver } => {
+        Analysis::Spectrum { k, band, eigenvectors, counting, extrapolate, refinements, operator, solver } => {
             let (e, k) = match band {
                 Some(band) => {
                     let e = Arc::new(band_pairs(v, operator, solver, *band, hooks)?);
@@ -178,6 +178,13 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             if *counting {
                 let values = &e.spectrum.values[..k.min(e.spectrum.values.len())];
                 out.summary["counting"] = operator::counting_json(v, &e, values, operator);
+            }
+            if *extrapolate {
+                if band.is_some() {
+                    return Err(AnalysisError::invalid_parameter("extrapolate takes the k smallest pairs, not a band"));
+                }
+                hooks.control.phase("extrapolating", 0, 0)?;
+                out.summary["extrapolation"] = extrapolate::extrapolation(v, operator, solver, k, *refinements, hooks)?;
             }
             out
         }

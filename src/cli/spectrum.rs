@@ -36,6 +36,13 @@ pub struct SpectrumCmd {
     /// Add the counting function N(λ) at each eigenvalue beside Weyl's law (`counting`).
     #[arg(long)]
     pub counting: bool,
+    /// Continuum eigenvalues with error bars by Richardson extrapolation over uniform refinements (flat triangle
+    /// meshes and tet meshes; `extrapolate`).
+    #[arg(long)]
+    pub extrapolate: bool,
+    /// Uniform refinements for --extrapolate (1 to 3).
+    #[arg(long, default_value_t = crate::analysis::refinements_default())]
+    pub refinements: usize,
     /// Check by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the found ones was missed, and
     /// solve again for any that were: the default (the result's `solver.completeness`); the flag is kept for
     /// scripts written when it was not.
@@ -59,6 +66,8 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
         band,
         eigenvectors: a.eigenvectors.is_some(),
         counting: a.counting,
+        extrapolate: a.extrapolate,
+        refinements: a.refinements,
         operator: a.op.clone(),
         solver: SolverSpec { method: a.method.unwrap_or(a.solver.method), ..a.solver.clone() },
     };

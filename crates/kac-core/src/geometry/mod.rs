@@ -6,6 +6,7 @@
 pub mod generate;
 pub mod hash;
 pub mod numbering;
+pub mod refine;
 pub mod summary;
 pub mod topology;
 pub mod triangulate;

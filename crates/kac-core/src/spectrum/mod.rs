@@ -35,6 +35,7 @@ pub mod basis_products;
 mod blocks;
 mod completeness;
 pub mod dense;
+pub mod extrapolate;
 pub mod factor;
 pub mod lanczos;
 pub mod null_space;
