@@ -92,6 +92,7 @@ pub fn operator_options(v: &Validated, spec: &OperatorSpec) -> Result<OperatorOp
             radius: spec.radius,
             dimension: spec.intrinsic_dimension,
             normalization: spec.normalization,
+            denoise: spec.denoise,
         },
         order: spec.order,
         ..Default::default()

@@ -5,7 +5,7 @@ use super::*;
 use kac_core::operators::manifold::CloudNormalization;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
-pub const ALGORITHM_VERSION: u32 = 3;
+pub const ALGORITHM_VERSION: u32 = 4;
 
 /// Which operator to build (see `kac_core::operators`): one type for the service's `operator` object and the
 /// CLI's operator flags (`--operator`, `--mass`, `--boundary`, `--dirichlet-vertices`, `--neighbours`, `--time`,
@@ -57,6 +57,12 @@ pub struct OperatorSpec {
     #[serde(skip_serializing_if = "is_one")]
     #[arg(long, default_value_t = 1)]
     pub order: u8,
+    /// Point clouds in R³: project the points onto a moving-least-squares surface before building the operator
+    /// where their neighbourhoods show noise (default true; the CLI's `--no-denoise` turns it off). The scale,
+    /// the noise level and how far points moved are reported under `parameters.denoise`.
+    #[serde(skip_serializing_if = "is_true")]
+    #[arg(long = "no-denoise", action = clap::ArgAction::SetFalse)]
+    pub denoise: bool,
 }
 
 fn is_one(o: &u8) -> bool {
@@ -109,6 +115,7 @@ impl Default for OperatorSpec {
             intrinsic_dimension: None,
             normalization: CloudNormalization::Symmetric,
             order: 1,
+            denoise: true,
         }
     }
 }

@@ -4,6 +4,7 @@
 
 pub mod boundary;
 pub mod cotan_laplacian;
+pub mod denoise;
 pub mod graph_laplacian;
 pub mod intrinsic_delaunay;
 pub mod manifold;
@@ -140,6 +141,9 @@ pub struct CloudParams {
     /// neighbourhoods for points in Rⁿ, n ≥ 4 ([`manifold`]).
     pub dimension: Option<usize>,
     pub normalization: manifold::CloudNormalization,
+    /// Scanned clouds in R³: project the points onto a moving-least-squares surface first ([`denoise`]) where
+    /// the neighbourhoods show noise (default true).
+    pub denoise: bool,
 }
 
 /// Neighbours per point of the point-cloud operator unless asked otherwise (the one place this default is written:
@@ -155,6 +159,7 @@ impl Default for CloudParams {
             radius: None,
             dimension: None,
             normalization: manifold::CloudNormalization::Symmetric,
+            denoise: true,
         }
     }
 }
@@ -364,7 +369,18 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
                 };
                 manifold::manifold_pair(points, cloud)?
             } else {
-                point_cloud::belkin_niyogi_pair(pts, cloud)?
+                match s {
+                    // A cloud (not a mesh's vertices) may be a noisy scan: denoised where its neighbourhoods say
+                    // so (the finest scale being the flattest means there is no noise to remove).
+                    Shape::PointCloud(c) if cloud.denoise => {
+                        let (projected, report) = denoise::denoise(pts, c.normals.as_deref())?;
+                        let applied = report.k > 16;
+                        parameters
+                            .insert("denoise".into(), serde_json::json!({ "applied": applied, "report": report }));
+                        point_cloud::belkin_niyogi_pair(if applied { &projected } else { pts }, cloud)?
+                    }
+                    _ => point_cloud::belkin_niyogi_pair(pts, cloud)?,
+                }
             };
             parameters.extend(used);
             pair

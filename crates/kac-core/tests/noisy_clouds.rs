@@ -1,0 +1,102 @@
+//! Point clouds as scanners deliver them (issue 21, item 2, in part): random samples of the unit sphere and of
+//! a torus with Gaussian noise across the surface, σ = 0, 0.01, 0.02 and 0.04 of the (tube) radius. After the
+//! moving-least-squares projection (`operators::denoise`, on by default for clouds) the point-cloud operator's
+//! total measure stays within 3 % of the area and its first eigenvalues within 3 % (5 % at σ = 0.04) of the
+//! sphere's 2 and of a fine torus mesh's; without it the noise reads as a shell three times the area (checked,
+//! so that the test shows what the projection does). The noise level it reports is the σ put in.
+
+use kac_core::geometry::{generate, PointCloud, Shape};
+use kac_core::operators::{self, CloudParams, OperatorKind, OperatorOptions};
+use kac_core::spectrum::{eigs, Control, EigenOptions};
+use std::f64::consts::PI;
+
+fn gaussians(n: usize, seed: u64) -> Vec<f64> {
+    let mut state = seed;
+    let mut uniform = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    (0..n).map(|_| (-2.0 * uniform().ln()).sqrt() * (2.0 * PI * uniform()).cos()).collect()
+}
+
+fn spectrum(points: Vec<[f64; 3]>, denoise: bool, k: usize) -> (Vec<f64>, f64, serde_json::Value) {
+    let s = Shape::PointCloud(PointCloud { points, ..Default::default() });
+    let cloud = CloudParams { denoise, ..Default::default() };
+    let o = operators::build(
+        &s,
+        &OperatorOptions { operator: Some(OperatorKind::PointCloud), cloud, ..Default::default() },
+    )
+    .unwrap();
+    let e = eigs(&o.pair, &EigenOptions { k, ..Default::default() }, None, Control::default()).unwrap();
+    (e.values, o.pair.mass.iter().sum(), o.parameters.get("denoise").cloned().unwrap_or_default())
+}
+
+#[test]
+fn a_noisy_sphere_is_heard_as_the_sphere() {
+    let n = 20_000;
+    let clean = generate::random_sphere_points(n, 3);
+    let g = gaussians(n, 99);
+    for sigma in [0.0, 0.01, 0.02, 0.04] {
+        let noisy: Vec<[f64; 3]> = clean.iter().zip(&g).map(|(p, e)| p.map(|c| c * (1.0 + sigma * e))).collect();
+        let (l, total, report) = spectrum(noisy.clone(), true, 4);
+        eprintln!("sphere σ = {sigma}: total {total:.3}, λ₂..₄ {:.3?}, {report}", &l[1..]);
+        let tol = if sigma > 0.03 { 0.05 } else { 0.03 };
+        assert!(l[1..].iter().all(|x| (x - 2.0).abs() < 2.0 * tol), "σ = {sigma}: {l:?}");
+        assert!((total - 4.0 * PI).abs() < 0.03 * 4.0 * PI, "σ = {sigma}: {total}");
+        if sigma > 0.0 {
+            let noise = report["report"]["noise"].as_f64().unwrap();
+            assert!((noise - sigma).abs() < 0.2 * sigma, "σ = {sigma}: estimated {noise}");
+            assert_eq!(report["applied"], true);
+        } else {
+            assert_eq!(report["applied"], false, "a clean cloud is left as it is");
+        }
+        if sigma == 0.04 {
+            // With the scanner's normals (here the exact radial ones) the fits are oriented by them.
+            let s =
+                Shape::PointCloud(PointCloud { points: noisy.clone(), normals: Some(clean.clone()), ambient: None });
+            let o = operators::build(&s, &OperatorOptions::default()).unwrap();
+            let e = eigs(&o.pair, &EigenOptions { k: 4, ..Default::default() }, None, Control::default()).unwrap();
+            assert_eq!(o.parameters["denoise"]["report"]["normals_used"], true);
+            assert!(e.values[1..].iter().all(|x| (x - 2.0).abs() < 0.1), "with normals: {:?}", e.values);
+            let (_, raw_total, _) = spectrum(noisy, false, 2);
+            assert!(raw_total > 2.0 * 4.0 * PI, "without the projection the shell reads as {raw_total}");
+        }
+    }
+}
+
+#[test]
+fn a_noisy_torus_is_heard_as_a_fine_mesh_of_it() {
+    let (big, small) = (1.0, 0.4);
+    // The reference: the cotan spectrum of a fine mesh of the same torus.
+    let mesh = Shape::TriangleMesh(generate::torus(big, small, 240, 96));
+    let o = operators::build(&mesh, &OperatorOptions::default()).unwrap();
+    let reference =
+        eigs(&o.pair, &EigenOptions { k: 6, ..Default::default() }, None, Control::default()).unwrap().values;
+    // Area-uniform samples (rejection on the tube angle's area factor) with noise along the tube's normal.
+    let n = 12_000;
+    let mut points = vec![];
+    // A simple deterministic stream of uniforms for the angles.
+    let mut state = 7u64;
+    let mut uniform = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let noise = gaussians(n, 17);
+    for sigma in [0.0, 0.01, 0.02, 0.04] {
+        points.clear();
+        while points.len() < n {
+            let (u, v) = (2.0 * PI * uniform(), 2.0 * PI * uniform());
+            if uniform() * (big + small) > big + small * v.cos() {
+                continue;
+            }
+            let r = small * (1.0 + sigma * noise[points.len()]);
+            points.push([(big + r * v.cos()) * u.cos(), (big + r * v.cos()) * u.sin(), r * v.sin()]);
+        }
+        let (l, total, report) = spectrum(points.clone(), true, 6);
+        let area = 4.0 * PI * PI * big * small;
+        let worst = l.iter().zip(&reference).skip(1).map(|(a, b)| (a - b).abs() / b).fold(0.0, f64::max);
+        eprintln!("torus σ = {sigma}: total {total:.3} (area {area:.3}), worst {worst:.3}, λ {l:.3?} vs {reference:.3?}, {report}");
+        assert!((total - area).abs() < 0.03 * area, "σ = {sigma}: {total}");
+        assert!(worst < 0.05, "σ = {sigma}: {l:?} vs {reference:?}");
+    }
+}
