@@ -102,7 +102,7 @@ pub fn operator_options(v: &Validated, spec: &OperatorSpec) -> Result<OperatorOp
 
 /// Zero modes to expect: connected components of the operator for a Neumann problem, none for Dirichlet.
 pub(crate) fn expected_zero_modes(op: &Operator) -> usize {
-    if op.interior.is_some() {
+    if op.dirichlet() {
         0
     } else {
         components(&op.pair).1

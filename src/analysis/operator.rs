@@ -106,7 +106,7 @@ pub(crate) fn counting_json(v: &Validated, e: &Eigen, values: &[f64], spec: &Ope
     let m = measures(v, Some(&e.operator));
     let dimension = (!matches!(v.shape, Shape::Graph(_)) && m.dimension > 0).then_some(m.dimension);
     let measure = dimension.and(m.measure());
-    let dirichlet = e.operator.interior.is_some();
+    let dirichlet = e.operator.dirichlet();
     let boundary = match (spec.dirichlet_vertices.is_some(), kac_core::geometry::topology::boundary_measure(&v.shape)) {
         (false, Some(b)) if b > 0.0 => Some(b),
         _ => None,

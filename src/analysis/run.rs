@@ -263,9 +263,9 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                         arrays.push(a);
                     }
                     // Dirichlet problems also lose heat through the boundary: Q(t) = ∫ u(t) from u₀ = 1.
-                    let content = match e.operator.interior {
-                        Some(_) => Some(kac_core::descriptors::heat::heat_content(&b, &e.operator.pair, &times)?),
-                        None => None,
+                    let content = match e.operator.dirichlet() {
+                        true => Some(kac_core::descriptors::heat::heat_content(&b, &e.operator.pair, &times)?),
+                        false => None,
                     };
                     let summary = merge(
                         json!({ "method": "spectral", "k": k, "times": times, "heat_content": content, "heat_trace": trace, "heat_trace_tail_bound": tail, "sources": rows_json, "arrays": "one per source: the heat kernel k_t(source, ·), a column per time" }),
@@ -361,7 +361,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
         Analysis::Smooth { alpha, function, fixed_boundary, operator } => {
             let op = build_operator(v, operator)?;
             let n = op.pair.n();
-            if op.interior.is_some() {
+            if op.dirichlet() {
                 return Err(AnalysisError::invalid_parameter(
                     "smoothing takes a Neumann operator; use fixed_boundary to clamp",
                 ));
@@ -381,13 +381,10 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 }
             };
             let fixed = fixed_boundary.then(|| {
-                // P2: an edge unknown is held where both its endpoints are.
-                let b = operators::boundary::boundary_vertices(&v.shape);
-                let mut all = b.clone();
-                if let Some(edges) = &op.edge_unknowns {
-                    all.extend(edges.iter().map(|e| b[e[0] as usize] && b[e[1] as usize]));
-                }
-                all
+                // Over the operator's unknowns (P2: an edge unknown is held where both its endpoints are).
+                let b: Vec<f64> =
+                    operators::boundary::boundary_vertices(&v.shape).iter().map(|&x| f64::from(u8::from(x))).collect();
+                op.restrict(&b).iter().map(|&x| x > 0.75).collect::<Vec<bool>>()
             });
             let u = pde::smooth(&op.pair, ubar.as_ref(), *alpha, fixed.as_deref())?;
             let a = to_input_rows(v, &op, u.as_ref(), "smoothed");
@@ -399,7 +396,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
         }
         Analysis::Interpolate { values, labels, operator } => {
             let op = build_operator(v, operator)?;
-            if op.interior.is_some() {
+            if op.dirichlet() {
                 return Err(AnalysisError::invalid_parameter(
                     "interpolation fixes its own vertices; use a Neumann operator",
                 ));

@@ -59,7 +59,7 @@ pub(crate) fn run(
             let mut arrays = vec![to_input_rows(v, &e.operator, column(&hc.k).as_ref(), "heat_curvature")];
             let mut summary =
                 json!({ "k": k, "heat_curvature": finite_stats(&hc.k), "fit": hc, "boundary_vertices": on_boundary });
-            if on_boundary > 0 || e.operator.interior.is_some() {
+            if on_boundary > 0 || e.operator.dirichlet() {
                 summary["boundary_note"] = json!(
                     "the shape has a boundary: boundary vertices get no value, and within about √t of it the heat kernel's boundary term biases the estimate"
                 );

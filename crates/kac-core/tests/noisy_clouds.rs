@@ -28,7 +28,12 @@ fn spectrum(points: Vec<[f64; 3]>, denoise: bool, k: usize) -> (Vec<f64>, f64, s
     )
     .unwrap();
     let e = eigs(&o.pair, &EigenOptions { k, ..Default::default() }, None, Control::default()).unwrap();
-    (e.values, o.pair.mass.iter().sum(), o.parameters.get("denoise").cloned().unwrap_or_default())
+    let mut report = o.parameters.get("denoise").cloned().unwrap_or_default();
+    for key in ["t", "radius", "spacing_h", "outliers"] {
+        report[key] = o.parameters.get(key).cloned().unwrap_or_default();
+    }
+    report["components"] = o.pair.components().1.into();
+    (e.values, o.pair.mass.iter().sum(), report)
 }
 
 #[test]
@@ -99,4 +104,59 @@ fn a_noisy_torus_is_heard_as_a_fine_mesh_of_it() {
         assert!((total - area).abs() < 0.03 * area, "σ = {sigma}: {total}");
         assert!(worst < 0.05, "σ = {sigma}: {l:?} vs {reference:?}");
     }
+}
+
+/// 1 % of the points replaced by uniform outliers in the bounding box, on top of noise σ = 0.02: the outliers far
+/// from the surface are dropped (they get no value, NaN, in per-vertex outputs), the rest is heard as the sphere.
+#[test]
+fn outliers_are_dropped_and_reported() {
+    let n = 20_000;
+    let clean = generate::random_sphere_points(n, 8);
+    let g = gaussians(n, 31);
+    let mut state = 99u64;
+    let mut uniform = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let mut points: Vec<[f64; 3]> = clean.iter().zip(&g).map(|(p, e)| p.map(|c| c * (1.0 + 0.02 * e))).collect();
+    let mut far = 0;
+    for p in points.iter_mut().step_by(100) {
+        *p = [2.0 * uniform() - 1.0, 2.0 * uniform() - 1.0, 2.0 * uniform() - 1.0];
+        let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        far += usize::from((r - 1.0).abs() > 0.25);
+    }
+    let s = Shape::PointCloud(PointCloud { points, ..Default::default() });
+    let o = operators::build(&s, &OperatorOptions::default()).unwrap();
+    let dropped = o.parameters["outliers"]["dropped"].as_u64().unwrap() as usize;
+    let e = eigs(&o.pair, &EigenOptions { k: 4, ..Default::default() }, None, Control::default()).unwrap();
+    let total: f64 = o.pair.mass.iter().sum();
+    eprintln!("outliers: {far} far of 200, {dropped} dropped; total {total:.3}, λ {:.3?}", e.values);
+    assert!(dropped >= far * 9 / 10 && dropped <= 200, "{dropped} dropped, {far} far from the surface");
+    assert!((total - 4.0 * PI).abs() < 0.03 * 4.0 * PI, "{total}");
+    assert!(e.values[1..].iter().all(|x| (x - 2.0).abs() < 0.06), "{:?}", e.values);
+    assert_eq!(o.pair.n(), n - dropped);
+    let vertex_values = o.expand(&vec![1.0; o.pair.n()]);
+    assert_eq!(vertex_values.iter().filter(|x| x.is_nan()).count(), dropped);
+}
+
+/// Density varying tenfold from pole to pole (accepted with probability (1 + 9(z + 1)/2)/10): the local areas
+/// weigh the measure out (ΣM within 3 % of 4π), and the kernel, widened until it reaches every point's 4th
+/// neighbour, keeps the cloud in one piece (before, the sparse pole fell apart into four components: four zero
+/// eigenvalues). One global t is still too narrow for the sparse pole: λ₂..₄ measured 1.889–1.971, within 6 % of
+/// 2 (the 3 % is not met: a bandwidth that follows the local spacing would be the next step).
+#[test]
+fn tenfold_density_variation_is_weighed_out() {
+    let mut state = 4242u64;
+    let mut uniform = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let candidates = generate::random_sphere_points(60_000, 12);
+    let points: Vec<[f64; 3]> =
+        candidates.into_iter().filter(|p| uniform() * 10.0 < 1.0 + 4.5 * (p[2] + 1.0)).collect();
+    let (l, total, rep) = spectrum(points.clone(), true, 4);
+    eprintln!("uneven ({} points): total {total:.3}, λ {l:.3?} {rep}", points.len());
+    assert!((total - 4.0 * PI).abs() < 0.03 * 4.0 * PI, "{total}");
+    assert_eq!(rep["components"], 1);
+    assert!(l[1..].iter().all(|x| (x - 2.0).abs() < 0.12), "{l:?}");
 }

@@ -5,6 +5,13 @@
 //! directions of its neighbourhood, or the given normals), a quadratic height function fitted over it by
 //! weighted least squares, and the point projected onto that surface along the plane's normal.
 //!
+//! Outliers (points off the surface, such as a scanner's stray returns) are found first: a point whose mean
+//! distance to its 16 nearest neighbours exceeds five times the median of that distance over the cloud (a
+//! robust form of the statistical outlier removal of Rusu et al. 2008). Five times leaves surface regions sampled
+//! ten times more sparsely than the median (√10 ≈ 3.2 times the distance) alone; stray points within a few
+//! spacings of the surface are not found, and need not be: the projection moves them onto it. A clump of stray
+//! points close together is not found either.
+//!
 //! The neighbourhood must be wider than the noise is thick. Its size is chosen once for the cloud, among
 //! k = 16, 32, …, 512 neighbours, as the one where the median surface variation σ₃/(σ₁ + σ₂ + σ₃) of the
 //! neighbourhoods (the smallest principal variance's share; Pauly, Gross & Kobbelt 2002) is lowest: noise raises
@@ -212,6 +219,21 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
         normals_used: normals.is_some(),
     };
     Ok((fits.into_iter().map(|f| f.0).collect(), report))
+}
+
+/// Points off the surface (see the module documentation): a flag per point, and the distance threshold.
+pub fn outliers(points: &[Point]) -> Result<(Vec<bool>, f64), OperatorError> {
+    let nb = Neighbourhoods::knn(points, 16)?;
+    let mean: Vec<f64> = (0..points.len())
+        .into_par_iter()
+        .map(|i| {
+            nb.of(i).iter().map(|&j| vec3::norm(vec3::sub(points[j as usize], points[i]))).sum::<f64>() / nb.k as f64
+        })
+        .collect();
+    let mut sorted = mean.clone();
+    sorted.sort_by(f64::total_cmp);
+    let threshold = 5.0 * sorted[sorted.len() / 2];
+    Ok((mean.iter().map(|&d| d > threshold).collect(), threshold))
 }
 
 /// Solves a 6 × 6 symmetric system by Gaussian elimination with partial pivoting (None when singular).

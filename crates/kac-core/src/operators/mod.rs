@@ -18,7 +18,7 @@ pub mod tet_laplacian;
 
 pub use mass::Mass;
 
-use crate::geometry::{Shape, ShapeKind};
+use crate::geometry::{Point, Shape, ShapeKind};
 use graph_laplacian::GraphKind;
 use serde::{Deserialize, Serialize};
 use sparse::SparsePair;
@@ -253,6 +253,11 @@ pub struct Operator {
 }
 
 impl Operator {
+    /// Whether a Dirichlet condition removed unknowns (points dropped as outliers are removed too, without one).
+    pub fn dirichlet(&self) -> bool {
+        self.boundary == "dirichlet"
+    }
+
     /// Unknowns before a Dirichlet elimination: the vertices, and the edges of P2 elements.
     pub fn unknowns(&self) -> usize {
         self.full_size + self.edge_unknowns.as_ref().map_or(0, |e| e.len())
@@ -264,7 +269,9 @@ impl Operator {
         let mut out = match &self.interior {
             None => x.to_vec(),
             Some(keep) => {
-                let mut out = vec![0.0; self.unknowns()];
+                // Zero on a Dirichlet boundary; no value (NaN) at points dropped as outliers.
+                let fill = if self.dirichlet() { 0.0 } else { f64::NAN };
+                let mut out = vec![fill; self.unknowns()];
                 for (k, &i) in keep.iter().enumerate() {
                     out[i as usize] = x[k];
                 }
@@ -313,6 +320,8 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
         return Err(OperatorError::MassNotApplicable { operator: op.name(), mass: mass.name() });
     }
     let mut parameters = serde_json::Map::new();
+    // Points of a cloud dropped as outliers: the operator is built on the others (kept, sorted).
+    let mut kept_points: Option<Vec<u32>> = None;
     if options.order == 2 {
         return build_p2(shape, op, mass, options);
     } else if options.order != 1 {
@@ -373,11 +382,34 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
                     // A cloud (not a mesh's vertices) may be a noisy scan: denoised where its neighbourhoods say
                     // so (the finest scale being the flattest means there is no noise to remove).
                     Shape::PointCloud(c) if cloud.denoise => {
-                        let (projected, report) = denoise::denoise(pts, c.normals.as_deref())?;
+                        let (outlier, threshold) = denoise::outliers(pts)?;
+                        let kept: Vec<u32> = (0..pts.len() as u32).filter(|&i| !outlier[i as usize]).collect();
+                        let dropped: Vec<usize> = (0..pts.len()).filter(|&i| outlier[i]).collect();
+                        parameters.insert(
+                            "outliers".into(),
+                            serde_json::json!({
+                                "dropped": dropped.len(),
+                                "examples": &dropped[..dropped.len().min(10)],
+                                "threshold": threshold,
+                                "rule": "mean distance to the 16 nearest neighbours above 5 × its median over the cloud",
+                            }),
+                        );
+                        let (sub, normals): (Vec<Point>, Option<Vec<Point>>) = if dropped.is_empty() {
+                            (pts.to_vec(), c.normals.clone())
+                        } else {
+                            (
+                                kept.iter().map(|&i| pts[i as usize]).collect(),
+                                c.normals.as_ref().map(|ns| kept.iter().map(|&i| ns[i as usize]).collect()),
+                            )
+                        };
+                        if !dropped.is_empty() {
+                            kept_points = Some(kept);
+                        }
+                        let (projected, report) = denoise::denoise(&sub, normals.as_deref())?;
                         let applied = report.k > 16;
                         parameters
                             .insert("denoise".into(), serde_json::json!({ "applied": applied, "report": report }));
-                        point_cloud::belkin_niyogi_pair(if applied { &projected } else { pts }, cloud)?
+                        point_cloud::belkin_niyogi_pair(if applied { &projected } else { &sub }, cloud)?
                     }
                     _ => point_cloud::belkin_niyogi_pair(pts, cloud)?,
                 }
@@ -398,8 +430,18 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
         }
         _ => return Err(not_applicable()),
     };
-    let full_size = pair.n();
-    let (pair, interior) = boundary::apply(shape, pair, &options.boundary)?;
+    let full_size = shape.vertex_count().max(pair.n());
+    let (pair, interior) =
+        match kept_points {
+            // Outliers dropped: the operator's unknowns are the kept points (a cloud has no boundary to fix).
+            Some(kept) if options.boundary == Boundary::Neumann => (pair, Some(kept)),
+            Some(_) => return Err(OperatorError::Boundary {
+                message:
+                    "a cloud with outliers dropped takes no Dirichlet vertices; give --no-denoise to keep every point"
+                        .into(),
+            }),
+            None => boundary::apply(shape, pair, &options.boundary)?,
+        };
     Ok(Operator {
         pair,
         kind: op,

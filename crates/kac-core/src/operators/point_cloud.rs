@@ -209,7 +209,15 @@ pub fn belkin_niyogi_pair(
                 / n as f64;
             hk * hk / 9.0
         }
-        None => 4.0 * h * h,
+        // (2h)², widened where the sampling is uneven: the kernel's radius 3√t must reach the 4th nearest
+        // neighbour of every point, or the sparse parts fall apart into pieces of their own (a uniform sample
+        // keeps (2h)²; a tenfold density variation widens t about threefold).
+        None => {
+            let d4 = (0..n)
+                .map(|i| vec3::norm(vec3::sub(points[nb.of(i)[3.min(nb.k - 1)] as usize], points[i])))
+                .fold(0.0, f64::max);
+            (4.0 * h * h).max(d4 * d4 / 9.0)
+        }
     };
     let r = match params.radius {
         Some(r) if r > 0.0 && r.is_finite() => r,

@@ -140,7 +140,7 @@ pub fn report(shape: &Shape, op: &Operator) -> PropertyReport {
         check(rel <= 1e-10, rel, "max |(L u)_i| at interior vertices for linear u, relative to max |L_ij| · diameter")
     });
     // Constants in the kernel (Neumann only: Dirichlet elimination removes them).
-    let constants_in_kernel = op.interior.is_none().then(|| {
+    let constants_in_kernel = (!op.dirichlet()).then(|| {
         let ones = vec![1.0; n];
         let mut y = vec![0.0; n];
         matvec(p, l, &ones, &mut y);
@@ -181,14 +181,14 @@ pub fn report(shape: &Shape, op: &Operator) -> PropertyReport {
         check(false, f64::NAN, "not computed: L is not positive semidefinite")
     } else {
         let zero = 1e-8 * scale;
-        let expected = if op.interior.is_some() { 0 } else { comps };
+        let expected = if op.dirichlet() { 0 } else { comps };
         match symbolic.as_ref().map(|s| spectrum::factor::count_below(s, &op.pair, zero)) {
             Some(Ok(dim)) => check(
                 dim == expected,
                 dim as f64,
                 format!(
                     "eigenvalues below {zero:e} (inertia of L − τM); connected components: {comps}{}",
-                    if op.interior.is_some() { " (Dirichlet: none expected)" } else { "" }
+                    if op.dirichlet() { " (Dirichlet: none expected)" } else { "" }
                 ),
             ),
             Some(Err(e)) => check(false, f64::NAN, format!("the inertia count failed: {e}")),
