@@ -146,11 +146,23 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
         k *= 2;
     }
     let (best, _) = scales.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or((16, 0.0));
-    let nb = Neighbourhoods::knn(points, best)?;
+    // The fits need the neighbourhood's extent, not every point in it: above 64 neighbours they are drawn from a
+    // subsample of one point in `stride` (chosen by a hash of the index, so that no order of the input, such as
+    // a scanner's lines, aliases with it), which holds about 64 in the same radius.
+    let stride = (best / 64).max(1);
+    let keep = |i: usize| stride == 1 || (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40 & (stride as u64 - 1) == 0;
+    let chosen: Vec<u32> = (0..n as u32).filter(|&i| keep(i as usize)).collect();
+    let mut tree: kiddo::KdTree<f64, 3> = kiddo::KdTree::with_capacity(chosen.len());
+    for &i in &chosen {
+        tree.add(&points[i as usize], u64::from(i));
+    }
+    let per = (best / stride).min(chosen.len().saturating_sub(1)).max(3);
     let fits: Vec<(Point, f64)> = (0..n)
         .into_par_iter()
         .map(|i| {
-            let near = nb.of(i);
+            let found = tree.nearest_n::<kiddo::SquaredEuclidean>(&points[i], per + 1);
+            let near: Vec<u32> = found.iter().map(|f| f.item as u32).filter(|&j| j as usize != i).take(per).collect();
+            let near = &near[..];
             let (c, cov, r) = moments(points, i, near);
             let (_, vecs) = eigen3(cov);
             let mut normal = vecs[0];
