@@ -13,7 +13,7 @@
 //! points close together is not found either.
 //!
 //! The neighbourhood must be wider than the noise is thick. Its size is chosen once for the cloud, among
-//! k = 16, 32, …, 512 neighbours, as the one where the median surface variation σ₃/(σ₁ + σ₂ + σ₃) of the
+//! k = 16, 32, …, 4096 neighbours (at most an eighth of the cloud), as the one where the median surface variation σ₃/(σ₁ + σ₂ + σ₃) of the
 //! neighbourhoods (the smallest principal variance's share; Pauly, Gross & Kobbelt 2002) is lowest: noise raises
 //! it at small scales, curvature at large ones (Mitra & Nguyen 2003 make the same trade-off for normals). The
 //! noise level reported is the median, over points, of the weighted RMS distance of the neighbours to the fitted
@@ -141,16 +141,26 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
     let mut scales = vec![];
     let mut k = 16usize;
     let tree = Neighbourhoods::knn(points, 3)?.tree;
-    while k <= 512 && k < n {
+    // Up to 4,096 neighbours (the noise's thickness, not the count, sets the scale: a dense cloud needs more
+    // neighbours for the same radius) and at most an eighth of the cloud.
+    while k <= 4096 && (k == 16 || k <= n / 8) {
         scales.push((k, variation(points, &tree, k, &sample)));
+        // Past a small least variation (the neighbourhoods are already flat: below 0.01, where pure noise gives
+        // about 1/3) once it has risen at two scales in a row, curvature has taken over: no need to look further.
+        let least = scales.iter().map(|s| s.1).fold(f64::INFINITY, f64::min);
+        if least < 0.01 && scales.len() >= 3 && scales[scales.len() - 2..].iter().all(|s| s.1 > least) {
+            break;
+        }
         k *= 2;
     }
     let (best, _) = scales.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or((16, 0.0));
-    // The fits need the neighbourhood's extent, not every point in it: above 64 neighbours they are drawn from a
+    // The fits need the neighbourhood's extent, not every point in it: above 256 neighbours they are drawn from a
     // subsample of one point in `stride` (chosen by a hash of the index, so that no order of the input, such as
-    // a scanner's lines, aliases with it), which holds about 64 in the same radius.
-    let stride = (best / 64).max(1);
-    let keep = |i: usize| stride == 1 || (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40 & (stride as u64 - 1) == 0;
+    // a scanner's lines, aliases with it), which holds about 256 in the same radius (fewer would leave the fitted
+    // surface itself noisy by more than a dense cloud's spacing).
+    let stride = (best / 256).max(1);
+    let keep =
+        |i: usize| stride == 1 || (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40 & (stride as u64 - 1) == 0;
     let chosen: Vec<u32> = (0..n as u32).filter(|&i| keep(i as usize)).collect();
     let mut tree: kiddo::KdTree<f64, 3> = kiddo::KdTree::with_capacity(chosen.len());
     for &i in &chosen {
