@@ -803,3 +803,38 @@ async fn extrapolated_spectra_carry_their_error_and_order() {
     let (status, s) = call(&app, run(sphere, json!({ "analysis": "spectrum", "k": 4, "extrapolate": true }))).await;
     assert_eq!((status, s["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("not-applicable")), "{s}");
 }
+
+/// The polygon Laplacian over HTTP: a quad mesh uploaded as OBJ keeps its quads for `"operator": "polygon"`
+/// (reported), whose spectrum on a regular grid of the unit square approaches π²(a² + b²); a mesh of triangles
+/// only gets the cotan Laplacian under that name (and says so).
+#[tokio::test]
+async fn quad_meshes_keep_their_polygons_for_the_polygon_laplacian() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let n = 16;
+    let mut obj = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            obj += &format!("v {} {} 0\n", i as f64 / n as f64, j as f64 / n as f64);
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let v = |a: usize, b: usize| b * (n + 1) + a + 1;
+            obj += &format!("f {} {} {} {}\n", v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1));
+        }
+    }
+    let uri = |format: &str, request: Value| {
+        format!("/v1/analyze?format={format}&wait=60&analysis={}", urlencode(&request.to_string()))
+    };
+    let req = json!({ "analysis": "spectrum", "k": 2, "operator": { "operator": "polygon", "boundary": "dirichlet" } });
+    let (status, r) = call(&app, Request::post(uri("obj", req.clone())).body(Body::from(obj.clone())).unwrap()).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    assert_eq!((r["operator"].as_str(), r["parameters"]["polygons"].as_u64()), (Some("polygon"), Some(256)));
+    let exact = 2.0 * std::f64::consts::PI.powi(2);
+    assert!((r["eigenvalues"][0].as_f64().unwrap() - exact).abs() < 0.01 * exact, "{}", r["eigenvalues"]);
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::unit_square(4));
+    let (status, t) = call(&app, Request::post(uri("off", req)).body(Body::from(off)).unwrap()).await;
+    assert_eq!(status, StatusCode::OK, "{t}");
+    assert!(t["parameters"]["polygons"].as_str().unwrap().contains("cotan"), "{}", t["parameters"]);
+}

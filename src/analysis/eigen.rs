@@ -95,6 +95,7 @@ pub fn operator_options(v: &Validated, spec: &OperatorSpec) -> Result<OperatorOp
             denoise: spec.denoise,
         },
         order: spec.order,
+        polygons: v.polygons.clone(),
         ..Default::default()
     };
     Ok(o)

@@ -14,7 +14,7 @@ pub const ALGORITHM_VERSION: u32 = 4;
 #[serde(remote = "Self")]
 #[serde(default, deny_unknown_fields)]
 pub struct OperatorSpec {
-    /// cotan, intrinsic-delaunay, robust, graph, graph-normalized, graph-random-walk, point-cloud, tet, string
+    /// cotan, intrinsic-delaunay, robust, graph, graph-normalized, graph-random-walk, point-cloud, tet, string, polygon
     /// (default: by shape kind).
     #[arg(long = "operator", value_parser = parse_operator)]
     pub operator: Option<OperatorKind>,

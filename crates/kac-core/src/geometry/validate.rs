@@ -154,6 +154,10 @@ pub struct Validated {
     pub report: Report,
     /// For each input vertex, its index in `shape`, or `u32::MAX` where it was dropped.
     pub vertex_map: Vec<u32>,
+    /// A surface read from polygons with more than three corners: those polygons as given (corners in the
+    /// shape's numbering), for the `polygon` operator; `None` where every face is a triangle, or where a repair
+    /// dropped or split faces (then the triangles are the mesh).
+    pub polygons: Option<std::sync::Arc<super::Polygons>>,
 }
 
 impl Validated {
@@ -377,8 +381,9 @@ pub fn validate(raw: RawShape, options: &ValidateOptions) -> Result<Validated> {
     }
     let mut repairs = Repairs(Vec::new());
     let mut warnings = Vec::new();
+    let mut polygons = None;
     let (shape, vertex_map, facts) = match kind {
-        ShapeKind::TriangleMesh => surface(&raw, options, &mut repairs, &mut warnings)?,
+        ShapeKind::TriangleMesh => surface(&raw, options, &mut repairs, &mut warnings, &mut polygons)?,
         ShapeKind::TetMesh => solid(&raw, options, &mut repairs, &mut warnings)?,
         ShapeKind::Polyline => curve(&raw, options, &mut repairs)?,
         ShapeKind::Graph => graph(&raw, &mut repairs)?,
@@ -391,12 +396,19 @@ pub fn validate(raw: RawShape, options: &ValidateOptions) -> Result<Validated> {
         id,
         report: Report { kind, input, repairs: repairs.0, warnings, notes, bbox, facts },
         vertex_map,
+        polygons: polygons.map(std::sync::Arc::new),
     })
 }
 
 type Outcome = (Shape, Vec<u32>, Facts);
 
-fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut Vec<String>) -> Result<Outcome> {
+fn surface(
+    raw: &RawShape,
+    o: &ValidateOptions,
+    r: &mut Repairs,
+    warnings: &mut Vec<String>,
+    polygons: &mut Option<super::Polygons>,
+) -> Result<Outcome> {
     let (verts, weld_map) = weld_recorded(raw, o, r);
     // Triangulate (after welding, so polygons see their true corners), remembering each triangle's polygon.
     let mut tris: Vec<[u32; 3]> = Vec::with_capacity(raw.polygons.len());
@@ -405,6 +417,8 @@ fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut 
     let mut polygon_examples = Vec::new();
     let mut polys_split = 0usize;
     let mut corners: Vec<u32> = Vec::new();
+    // The polygons as triangulated (welded numbering), kept for the polygon operator.
+    let mut loops: Vec<Vec<u32>> = Vec::new();
     for (pi, poly) in raw.polygons.iter().enumerate() {
         corners.clear();
         corners.extend(poly.iter().map(|&v| weld_map[v as usize]));
@@ -431,6 +445,7 @@ fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut 
                 polygon_examples.push(pi);
             }
         }
+        loops.push(corners.clone());
         let start = tris.len();
         triangulate(&verts, &corners, &mut tris);
         origin.extend(std::iter::repeat_n(pi as u32, tris.len() - start));
@@ -489,7 +504,15 @@ fn surface(raw: &RawShape, o: &ValidateOptions, r: &mut Repairs, warnings: &mut 
             what: format!("no usable triangle is left of {} face(s)", raw.polygons.len()),
         });
     }
+    let every_face_kept = faces.len() == tris.len() && repeated.is_empty() && loops.len() == raw.polygons.len();
     let (vertices, cmap, faces) = drop_unreferenced(&verts, &weld_map, &faces, "face", r);
+    if polys_split > 0 && every_face_kept {
+        let mut kept = super::Polygons::with_capacity(loops.len(), loops.iter().map(Vec::len).sum());
+        for l in &loops {
+            kept.push(&l.iter().map(|&v| cmap[v as usize]).collect::<Vec<u32>>());
+        }
+        *polygons = Some(kept);
+    }
     let mesh = TriangleMesh { vertices, faces };
     let topo = EdgeTopology::new(&mesh.faces);
     let facts = topology::surface_facts(&mesh, &topo);

@@ -11,6 +11,7 @@ pub mod manifold;
 pub mod mass;
 pub mod p2;
 pub mod point_cloud;
+pub mod polygon;
 pub mod properties;
 pub mod robust;
 pub mod sparse;
@@ -48,10 +49,12 @@ pub enum OperatorKind {
     Tet,
     /// P1 FEM on a polyline (the 1-D string).
     String,
+    /// Bunge et al.'s polygon Laplacian on the input's own polygons (quads, general polygons), no triangulation.
+    Polygon,
 }
 
 impl OperatorKind {
-    pub const ALL: [OperatorKind; 9] = [
+    pub const ALL: [OperatorKind; 10] = [
         OperatorKind::Cotan,
         OperatorKind::IntrinsicDelaunay,
         OperatorKind::Robust,
@@ -61,6 +64,7 @@ impl OperatorKind {
         OperatorKind::PointCloud,
         OperatorKind::Tet,
         OperatorKind::String,
+        OperatorKind::Polygon,
     ];
     pub fn name(self) -> &'static str {
         match self {
@@ -73,6 +77,7 @@ impl OperatorKind {
             OperatorKind::PointCloud => "point-cloud",
             OperatorKind::Tet => "tet",
             OperatorKind::String => "string",
+            OperatorKind::Polygon => "polygon",
         }
     }
     pub fn from_name(s: &str) -> Option<Self> {
@@ -177,6 +182,10 @@ pub struct OperatorOptions {
     pub mollify: f64,
     /// Polynomial degree of the finite elements: 1 (default) or 2 ([`p2`]: `cotan` on triangle meshes, `tet`).
     pub order: u8,
+    /// The input's polygons, in the shape's vertex numbering, for the `polygon` operator (`None`: the shape's
+    /// triangles, where it is the cotan Laplacian).
+    #[serde(skip)]
+    pub polygons: Option<Arc<crate::geometry::Polygons>>,
 }
 
 impl Default for OperatorOptions {
@@ -188,6 +197,7 @@ impl Default for OperatorOptions {
             cloud: CloudParams::default(),
             mollify: 1e-5,
             order: 1,
+            polygons: None,
         }
     }
 }
@@ -311,6 +321,7 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
         OperatorKind::Cotan | OperatorKind::IntrinsicDelaunay => {
             matches!(mass, Mass::Consistent | Mass::Lumped | Mass::Voronoi)
         }
+        OperatorKind::Polygon => matches!(mass, Mass::Consistent | Mass::Lumped),
         OperatorKind::Tet | OperatorKind::String => matches!(mass, Mass::Consistent | Mass::Lumped),
         OperatorKind::Robust | OperatorKind::PointCloud => mass == Mass::Lumped,
         OperatorKind::Graph | OperatorKind::GraphNormalized => mass == Mass::Identity,
@@ -337,6 +348,20 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
             |f| cotan_laplacian::face_lengths(&m.vertices, &m.faces[f]),
             mass,
         )?,
+        (OperatorKind::Polygon, Shape::TriangleMesh(m)) => match &options.polygons {
+            Some(polygons) => {
+                parameters.insert("polygons".into(), polygons.len().into());
+                polygon::polygon_pair(&m.vertices, polygons, mass)?
+            }
+            None => {
+                parameters.insert("polygons".into(), "none kept: the mesh's triangles (the cotan Laplacian)".into());
+                let mut tris = crate::geometry::Polygons::with_capacity(m.faces.len(), 3 * m.faces.len());
+                for f in &m.faces {
+                    tris.push(f);
+                }
+                polygon::polygon_pair(&m.vertices, &tris, mass)?
+            }
+        },
         (OperatorKind::IntrinsicDelaunay, Shape::TriangleMesh(m)) => {
             let (pair, flips) = intrinsic_delaunay::intrinsic_delaunay_pair(m, mass)?;
             parameters.insert("flips".into(), flips.into());
