@@ -21,6 +21,11 @@ pub(crate) fn extrapolation(
     if !(1..=3).contains(&refinements) {
         return Err(AnalysisError::invalid_parameter(format!("refinements = {refinements}: give 1, 2 or 3")));
     }
+    if spec.operator == Some(OperatorKind::Polygon) {
+        return Err(AnalysisError::invalid_parameter(
+            "extrapolation refines the triangles; the polygon operator's polygons do not refine with them (use cotan)",
+        ));
+    }
     if spec.dirichlet_vertices.is_some() {
         return Err(AnalysisError::invalid_parameter(
             "extrapolation refines the mesh; give the boundary condition as `boundary`, not as vertices",

@@ -557,6 +557,30 @@ impl Analysis {
         }
     }
 
+    /// The operator an analysis builds, where it takes one.
+    pub fn operator_spec(&self) -> Option<&OperatorSpec> {
+        match self {
+            Analysis::Spectrum { operator, .. }
+            | Analysis::Operator { operator, .. }
+            | Analysis::Hks { operator, .. }
+            | Analysis::SiHks { operator, .. }
+            | Analysis::Wks { operator, .. }
+            | Analysis::Gps { operator, .. }
+            | Analysis::ShapeDna { operator, .. }
+            | Analysis::Heat { operator, .. }
+            | Analysis::HeatCurvature { operator, .. }
+            | Analysis::Wave { operator, .. }
+            | Analysis::Schrodinger { operator, .. }
+            | Analysis::Poisson { operator, .. }
+            | Analysis::Diffuse { operator, .. }
+            | Analysis::DirichletEnergy { operator, .. }
+            | Analysis::Embed { operator, .. }
+            | Analysis::Smooth { operator, .. }
+            | Analysis::Interpolate { operator, .. } => Some(operator),
+            Analysis::Geodesic { .. } | Analysis::Trees { .. } | Analysis::MeanCurvature { .. } => None,
+        }
+    }
+
     /// The eigensolver settings of an analysis that solves for eigenpairs.
     pub fn solver(&self) -> Option<&SolverSpec> {
         match self {

@@ -44,8 +44,13 @@ pub(crate) fn to_operator_rows(op: &Operator, list: &[usize]) -> Result<Vec<usiz
         Some(keep) => list
             .iter()
             .map(|&i| {
-                keep.binary_search(&(i as u32))
-                    .map_err(|_| AnalysisError::invalid_parameter(format!("vertex {i} is on the Dirichlet boundary")))
+                keep.binary_search(&(i as u32)).map_err(|_| {
+                    AnalysisError::invalid_parameter(if op.dirichlet() {
+                        format!("vertex {i} is on the Dirichlet boundary")
+                    } else {
+                        format!("vertex {i} was dropped as an outlier")
+                    })
+                })
             })
             .collect(),
     }

@@ -404,6 +404,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             match (values.is_empty(), labels.is_empty()) {
                 (false, true) => {
                     let idx = map_vertices(v, &values.iter().map(|x| x.0).collect::<Vec<_>>(), "values")?;
+                    let idx = to_operator_rows(&op, &idx)?;
                     let known: Vec<(usize, f64)> = idx.into_iter().zip(values.iter().map(|x| x.1)).collect();
                     let u = pde::harmonic(&op.pair, &known)?;
                     let um = faer::Mat::from_fn(u.len(), 1, |i, _| u[i]);
@@ -416,6 +417,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 }
                 (true, false) => {
                     let idx = map_vertices(v, &labels.iter().map(|x| x.0).collect::<Vec<_>>(), "labels")?;
+                    let idx = to_operator_rows(&op, &idx)?;
                     let l: Vec<(usize, u32)> = idx.into_iter().zip(labels.iter().map(|x| x.1)).collect();
                     let r = pde::labels(&op.pair, &l)?;
                     let lm = faer::Mat::from_fn(r.label.len(), 1, |i, _| r.label[i] as f64);

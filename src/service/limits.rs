@@ -46,6 +46,20 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
     Ok(())
 }
 
+/// The unknowns an analysis' operator will have, at most: the vertices, or with quadratic elements the vertices
+/// and the edges (about 4× a triangle mesh's vertices, 8× a tet mesh's; counted exactly from the elements).
+pub fn unknowns(a: &Analysis, shape: &kac_core::Shape) -> usize {
+    let n = shape.vertex_count();
+    if a.operator_spec().is_none_or(|o| o.order != 2) {
+        return n;
+    }
+    match shape {
+        kac_core::Shape::TriangleMesh(m) => n + kac_core::operators::p2::triangle_edges(&m.faces).len(),
+        kac_core::Shape::TetMesh(m) => n + kac_core::operators::p2::tet_edges(&m.tets).len(),
+        _ => n,
+    }
+}
+
 /// Bounded work: every list or grid of the request against `--max-samples`, and the widest per-vertex array the
 /// analysis will hold (eigenvectors included) against `--max-output-values`, before anything is allocated.
 pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(), ApiError> {

@@ -94,3 +94,48 @@ fn non_planar_quads_give_a_symmetric_semidefinite_operator_that_approaches_the_t
     eprintln!("saddle: polygon vs triangulated {gaps:?}");
     assert!(gaps[2] < gaps[0] / 3.0 && gaps[2] < 5e-3, "{gaps:?}");
 }
+
+/// The polygons are part of the shape's identity (the polygon operator reads them): a quad mesh and the same
+/// triangles uploaded as triangles are two shapes; a polygon with more corners than the operator takes is refused.
+#[test]
+fn polygons_are_part_of_the_id_and_bounded() {
+    let quads = read_obj(&quad_grid(2, |_, _| 0.0));
+    let v = |i: usize, j: usize| j * 3 + i + 1;
+    let mut tris = String::new();
+    for j in 0..=2 {
+        for i in 0..=2 {
+            tris += &format!("v {} {} 0\n", i as f64 / 2.0, j as f64 / 2.0);
+        }
+    }
+    for j in 0..2 {
+        for i in 0..2 {
+            tris += &format!(
+                "f {} {} {}\nf {} {} {}\n",
+                v(i, j),
+                v(i + 1, j),
+                v(i + 1, j + 1),
+                v(i, j),
+                v(i + 1, j + 1),
+                v(i, j + 1)
+            );
+        }
+    }
+    let tris = read_obj(&tris);
+    assert!(quads.polygons.is_some() && tris.polygons.is_none());
+    assert_ne!(quads.id, tris.id);
+    let n = operators::polygon::MAX_CORNERS + 1;
+    let mut big = String::new();
+    for i in 0..n {
+        let a = 2.0 * PI * i as f64 / n as f64;
+        big += &format!("v {} {} 0\n", a.cos(), a.sin());
+    }
+    big += "f";
+    for i in 1..=n {
+        big += &format!(" {i}");
+    }
+    big += "\n";
+    let v = read_obj(&big);
+    let o =
+        OperatorOptions { operator: Some(OperatorKind::Polygon), polygons: v.polygons.clone(), ..Default::default() };
+    assert!(operators::build(&v.shape, &o).is_err());
+}

@@ -18,7 +18,7 @@
 //! of floats) keeps the id of its 64-bit original: two uploads that agree to single precision are one shape.
 //! Graphs without positions hash their vertices in input order (graph isomorphism is not attempted).
 
-use super::Shape;
+use super::{Point, Shape};
 use serde::{Serialize, Serializer};
 use sha2::{Digest, Sha256};
 use std::cmp::Ordering;
@@ -113,6 +113,63 @@ fn ambient_id(a: &super::Ambient) -> ShapeId {
         }
     }
     h.update(&buf);
+    ShapeId(h.finalize().into())
+}
+
+/// The id of a validated shape with what its operators read beyond its elements: the polygons it was read from
+/// (the polygon operator uses them) and a cloud's normals (they orient its denoising). Without either it is
+/// [`shape_id`]; with them, that id and the extras in a canonical form (each polygon as its corners' quantized
+/// positions from the smallest one, polygons sorted; each normal with its point's position, sorted), so neither
+/// the numbering nor the order changes it.
+pub fn shape_id_with(shape: &Shape, polygons: Option<&super::Polygons>) -> ShapeId {
+    let base = shape_id(shape);
+    let normals = match shape {
+        Shape::PointCloud(c) => c.normals.as_ref().map(|ns| (&c.points, ns)),
+        _ => None,
+    };
+    if polygons.is_none() && normals.is_none() {
+        return base;
+    }
+    let mut h = Sha256::new();
+    h.update(b"kac-shape/1\nextras\n");
+    h.update(base.0);
+    let key = |p: Point| p.map(q);
+    let cmp =
+        |a: &[f32; 3], b: &[f32; 3]| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])).then(a[2].total_cmp(&b[2]));
+    if let (Some(polys), Some(points)) = (polygons, shape.positions()) {
+        let mut all: Vec<Vec<[f32; 3]>> = polys
+            .iter()
+            .map(|poly| {
+                let mut corners: Vec<[f32; 3]> = poly.iter().map(|&v| key(points[v as usize])).collect();
+                let first = (0..corners.len()).min_by(|&a, &b| cmp(&corners[a], &corners[b])).unwrap_or(0);
+                corners.rotate_left(first);
+                corners
+            })
+            .collect();
+        all.sort_by(|a, b| {
+            a.iter().zip(b).map(|(x, y)| cmp(x, y)).find(|o| o.is_ne()).unwrap_or(a.len().cmp(&b.len()))
+        });
+        h.update(b"polygons");
+        h.update((all.len() as u64).to_le_bytes());
+        for poly in &all {
+            h.update((poly.len() as u64).to_le_bytes());
+            for c in poly {
+                for x in c {
+                    h.update(x.to_le_bytes());
+                }
+            }
+        }
+    }
+    if let Some((points, ns)) = normals {
+        let mut pairs: Vec<([f32; 3], [f32; 3])> = points.iter().zip(ns).map(|(&p, &n)| (key(p), key(n))).collect();
+        pairs.sort_by(|a, b| cmp(&a.0, &b.0).then(cmp(&a.1, &b.1)));
+        h.update(b"normals");
+        for (p, n) in &pairs {
+            for x in p.iter().chain(n) {
+                h.update(x.to_le_bytes());
+            }
+        }
+    }
     ShapeId(h.finalize().into())
 }
 

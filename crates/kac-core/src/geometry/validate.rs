@@ -6,7 +6,7 @@
 //! index → drop zero-area faces → drop duplicate faces → drop unreferenced vertices. Tets, polylines, graphs and
 //! point clouds follow the same pattern with their own rules.
 
-use super::hash::{shape_id, ShapeId};
+use super::hash::ShapeId;
 use super::topology::{self, BoundingBox, EdgeTopology, SurfaceFacts, UnionFind};
 use super::triangulate::triangulate;
 use super::{vec3, Graph, Point, PointCloud, Polyline, RawShape, Shape, ShapeKind, TetMesh, TriangleMesh};
@@ -390,7 +390,7 @@ pub fn validate(raw: RawShape, options: &ValidateOptions) -> Result<Validated> {
         ShapeKind::PointCloud => cloud(&raw, options, &mut repairs)?,
     };
     let bbox = shape.positions().and_then(BoundingBox::of);
-    let id = shape_id(&shape);
+    let id = super::hash::shape_id_with(&shape, polygons.as_ref());
     Ok(Validated {
         shape,
         id,

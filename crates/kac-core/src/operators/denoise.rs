@@ -184,7 +184,7 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
                     m = vec3::add(m, if vec3::dot(nj, ns[i]) < 0.0 { vec3::scale(nj, -1.0) } else { nj });
                 }
                 let l = vec3::norm(m);
-                if l > 0.0 {
+                if l > 0.0 && l.is_finite() {
                     normal = vec3::scale(m, 1.0 / l);
                 }
             }

@@ -42,7 +42,10 @@ const CHAPTER_T_POINTS: f64 = 1000.0;
 
 /// Non-zeros the operator may hold (about 16 bytes each in the pair): beyond, the request is refused with the
 /// count it would need, before the pairs are searched.
-const MAX_PAIRS: f64 = 1e8;
+pub const MAX_PAIRS: f64 = 1e8;
+
+/// Points an exhaustive neighbour search (more than 8 coordinates) takes.
+pub const MAX_EXHAUSTIVE: usize = 50_000;
 
 /// How the point-cloud operator weighs its points (see the module documentation).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -346,6 +349,16 @@ pub fn manifold_pair(
     let invalid = |name: &'static str, message: String| OperatorError::InvalidParameter { name, message };
     if n < 4 {
         return Err(invalid("points", format!("{n} points; a point-cloud Laplacian needs at least 4")));
+    }
+    if p.dim > 8 && n > MAX_EXHAUSTIVE {
+        return Err(invalid(
+            "points",
+            format!(
+                "{n} points in R^{}: above 8 coordinates neighbours are found exhaustively (n² distances), for at most \
+                 {MAX_EXHAUSTIVE} points; reduce the dimension (e.g. by PCA) or the count",
+                p.dim
+            ),
+        ));
     }
     let k = params.k.clamp(3, n - 1);
     // First the k nearest (spacing, dimension, tangent spaces); the radius pairs once t is known.

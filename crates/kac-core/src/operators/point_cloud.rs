@@ -209,14 +209,22 @@ pub fn belkin_niyogi_pair(
                 / n as f64;
             hk * hk / 9.0
         }
-        // (2h)², widened where the sampling is uneven: the kernel's radius 3√t must reach the 4th nearest
-        // neighbour of every point, or the sparse parts fall apart into pieces of their own (a uniform sample
-        // keeps (2h)²; a tenfold density variation widens t about threefold).
+        // (2h)², widened where the sampling is uneven: the kernel's radius 3√t must reach every point's 4th
+        // nearest neighbour, or the sparse parts fall apart into pieces of their own (a uniform sample keeps
+        // (2h)²; a tenfold density variation widens t about threefold). Where that would join more pairs than a
+        // quarter of the limit (a stray point far away, with denoising off), the most isolated 0.1 % are left out.
         None => {
-            let d4 = (0..n)
-                .map(|i| vec3::norm(vec3::sub(points[nb.of(i)[3.min(nb.k - 1)] as usize], points[i])))
-                .fold(0.0, f64::max);
-            (4.0 * h * h).max(d4 * d4 / 9.0)
+            let mut d4: Vec<f64> =
+                (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[3.min(nb.k - 1)] as usize], points[i]))).collect();
+            d4.sort_by(f64::total_cmp);
+            let dk = (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[nb.k - 1] as usize], points[i]))).sum::<f64>()
+                / n as f64;
+            let pairs = |d: f64| 0.5 * n as f64 * nb.k as f64 * (d / dk.max(f64::MIN_POSITIVE)).powi(2);
+            let mut q = d4[n - 1];
+            if pairs(q) > 0.25 * super::manifold::MAX_PAIRS {
+                q = d4[(999 * n / 1000).min(n - 1)];
+            }
+            (4.0 * h * h).max(q * q / 9.0)
         }
     };
     let r = match params.radius {
@@ -229,6 +237,21 @@ pub fn belkin_niyogi_pair(
         }
         None => 3.0 * t.sqrt(),
     };
+    // The pairs within r, estimated from the mean distance to the k-th neighbour (k (r / d_k)² per point): a
+    // kernel that would join too many is refused before the search (a given t or radius far above the spacing).
+    let dk =
+        (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[nb.k - 1] as usize], points[i]))).sum::<f64>() / n as f64;
+    let expected = 0.5 * n as f64 * nb.k as f64 * (r / dk.max(f64::MIN_POSITIVE)).powi(2);
+    if params.neighbourhood == Neighbourhood::Radius && expected > super::manifold::MAX_PAIRS {
+        return Err(OperatorError::InvalidParameter {
+            name: "radius",
+            message: format!(
+                "a kernel of radius {r:.4e} (t = {t:.4e}) joins about {expected:.2e} pairs of the {n} points, above the \
+                 limit of {:.0e}; give a smaller time or radius",
+                super::manifold::MAX_PAIRS
+            ),
+        });
+    }
     if !(h > 0.0) {
         return Err(OperatorError::InvalidParameter {
             name: "points",

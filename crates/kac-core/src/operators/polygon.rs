@@ -14,6 +14,9 @@ use super::{Mass, OperatorError};
 use crate::geometry::{vec3, Point, Polygons};
 use std::sync::Arc;
 
+/// Corners a polygon may have: each polygon's local matrices are dense (n²) and its assembly n³.
+pub const MAX_CORNERS: usize = 256;
+
 /// The virtual vertex's affine weights for a polygon (see the module documentation).
 pub fn virtual_weights(x: &[Point]) -> Vec<f64> {
     let n = x.len();
@@ -134,6 +137,14 @@ pub fn polygon_pair(vertices: &[Point], polygons: &Polygons, mass: Mass) -> Resu
     let (mut dl, mut dm) = (vec![0.0; nv], vec![0.0; nv]);
     for (fi, poly) in polygons.iter().enumerate() {
         let n = poly.len();
+        if n > MAX_CORNERS {
+            return Err(OperatorError::InvalidParameter {
+                name: "operator",
+                message: format!(
+                    "polygon {fi} has {n} corners; the polygon operator takes at most {MAX_CORNERS} (its local matrices are dense)"
+                ),
+            });
+        }
         let x: Vec<Point> = poly.iter().map(|&v| vertices[v as usize]).collect();
         // Local (n × n) matrices on the corners.
         let (mut lk, mut lm) = (vec![0.0; n * n], vec![0.0; n * n]);
