@@ -125,7 +125,8 @@ pub(crate) fn counting_json(v: &Validated, e: &Eigen, values: &[f64], spec: &Ope
         "measure": measure,
         "boundary_measure": boundary,
         "terms": match (&weyl, boundary) {
-            (None, _) => "none: a graph has no Weyl law",
+            (None, _) if matches!(v.shape, Shape::Graph(_)) => "none: a graph has no Weyl law",
+            (None, _) => "none: the operator's intrinsic dimension is above 3 (Weyl's law is written here for 1 to 3)",
             (Some(_), Some(_)) if dirichlet => "two: ω_d|Ω|λ^{d/2}/(2π)^d − ω_{d−1}|∂Ω|λ^{(d−1)/2}/(4(2π)^{d−1}) (Dirichlet)",
             (Some(_), Some(_)) => "two: ω_d|Ω|λ^{d/2}/(2π)^d + ω_{d−1}|∂Ω|λ^{(d−1)/2}/(4(2π)^{d−1}) (Neumann)",
             (Some(_), None) => "one: ω_d|Ω|λ^{d/2}/(2π)^d",
