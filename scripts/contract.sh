@@ -11,18 +11,9 @@ if [ ! -x "$VENV/bin/schemathesis" ]; then
   python3 -m venv "$VENV"
   "$VENV/bin/pip" install --quiet --disable-pip-version-check 'schemathesis==4.32.5'
 fi
-WORK=$(mktemp -d)
 # The Dockerfile's environment, on a free loopback port.
-KAC_ADDR=127.0.0.1:0 KAC_DATA_DIR="$WORK/data" KAC_MAX_WAIT_S=2 KAC_JOB_TIMEOUT_S=30 RUST_LOG=warn \
-  "$KAC_BIN" serve > "$WORK/serve.out" 2> "$WORK/serve.err" &
-PID=$!
-trap 'kill $PID 2>/dev/null || true; wait $PID 2>/dev/null || true; rm -rf "$WORK"' EXIT
-for _ in $(seq 1 100); do
-  ADDR=$(sed -n 's/.*"listening":"\([^"]*\)".*/\1/p' "$WORK/serve.out")
-  [ -n "$ADDR" ] && break
-  sleep 0.1
-done
-[ -n "${ADDR:-}" ] || { echo "the server did not start"; cat "$WORK/serve.err"; exit 1; }
+. scripts/serve_lib.sh
+start_kac "$KAC_BIN" KAC_MAX_WAIT_S=2 KAC_JOB_TIMEOUT_S=30
 curl -fsS "http://$ADDR/readyz" > /dev/null   # the Dockerfile's health check
 # positive_data_acceptance is left out: a shape file's validity (and the configured limits) cannot be stated in
 # a JSON Schema, so schema-valid bytes are rightly refused with 4xx. use_after_free is left out: DELETE

@@ -131,7 +131,7 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
     if values > max {
         return Err(ApiError::OutputTooLarge {
             detail: format!(
-                "this analysis holds a per-vertex array of {vertices} vertices × {columns} columns = {values} values, \
+                "this analysis holds an array of {vertices} rows (vertices; with order 2 also edges) × {columns} columns = {values} values, \
                  above the limit of {max} (--max-output-values, KAC_MAX_OUTPUT_VALUES)"
             ),
         });

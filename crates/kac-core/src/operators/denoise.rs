@@ -40,8 +40,8 @@ pub struct Denoised {
     pub normals_used: bool,
 }
 
-/// Eigen-decomposition of a symmetric 3×3 matrix by Jacobi rotations: eigenvalues ascending with vectors.
-fn eigen3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [Point; 3]) {
+/// Eigen-decomposition of a symmetric 3×3 matrix by Jacobi rotations: eigenvalues ascending with unit vectors.
+pub(crate) fn eigen3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [Point; 3]) {
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for _ in 0..50 {
         let (mut p, mut q, mut best) = (0, 1, 0.0);

@@ -74,7 +74,8 @@ pub fn local_frames(points: &[Point], nb: &Neighbourhoods) -> Vec<[Point; 3]> {
                     }
                 }
             }
-            let n = smallest_eigenvector(c);
+            // The eigenvector of the smallest eigenvalue of the neighbourhood's covariance.
+            let n = super::denoise::eigen3(c).1[0];
             let helper = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
             let u = vec3::cross(n, helper);
             let u = vec3::scale(u, 1.0 / vec3::norm(u));
@@ -82,52 +83,6 @@ pub fn local_frames(points: &[Point], nb: &Neighbourhoods) -> Vec<[Point; 3]> {
             [u, v, n]
         })
         .collect()
-}
-
-/// Eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix (Jacobi rotations).
-fn smallest_eigenvector(mut a: [[f64; 3]; 3]) -> Point {
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    for _ in 0..30 {
-        let (mut p, mut q, mut best) = (0, 1, 0.0);
-        for (i, j) in [(0, 1), (0, 2), (1, 2)] {
-            if a[i][j].abs() > best {
-                best = a[i][j].abs();
-                p = i;
-                q = j;
-            }
-        }
-        if best < 1e-300 {
-            break;
-        }
-        let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-        let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-        let t = if theta == 0.0 { 1.0 } else { t };
-        let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
-        let mut b = a;
-        for k in 0..3 {
-            b[k][p] = c * a[k][p] - s * a[k][q];
-            b[k][q] = s * a[k][p] + c * a[k][q];
-        }
-        a = b;
-        for k in 0..3 {
-            b[p][k] = c * a[p][k] - s * a[q][k];
-            b[q][k] = s * a[p][k] + c * a[q][k];
-        }
-        a = b;
-        for row in v.iter_mut() {
-            let (x, y) = (row[p], row[q]);
-            row[p] = c * x - s * y;
-            row[q] = s * x + c * y;
-        }
-    }
-    let m = (0..3).min_by(|&i, &j| a[i][i].total_cmp(&a[j][j])).unwrap_or(2);
-    let e = [v[0][m], v[1][m], v[2][m]];
-    let l = vec3::norm(e);
-    if l > 0.0 {
-        vec3::scale(e, 1.0 / l)
-    } else {
-        [0.0, 0.0, 1.0]
-    }
 }
 
 /// The Voronoi cell of a point among its projected neighbours: its area and, in angular order, the neighbour
@@ -197,18 +152,20 @@ pub fn belkin_niyogi_pair(
 ) -> Result<(SparsePair, serde_json::Map<String, serde_json::Value>), OperatorError> {
     let nb = Neighbourhoods::knn(points, params.k)?;
     let n = points.len();
-    let h = (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[0] as usize], points[i]))).sum::<f64>() / n as f64;
+    // The mean distance to the j-th nearest neighbour (0-based).
+    let mean_to = |j: usize| {
+        (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[j] as usize], points[i]))).sum::<f64>() / n as f64
+    };
+    let (h, dk) = (mean_to(0), mean_to(nb.k - 1));
+    // The pairs within a radius d, estimated as k (d / d_k)² per point.
+    let pairs = |d: f64| 0.5 * n as f64 * nb.k as f64 * (d / dk.max(f64::MIN_POSITIVE)).powi(2);
     let t = match params.t {
         Some(t) if t > 0.0 && t.is_finite() => t,
         Some(t) => {
             return Err(OperatorError::InvalidParameter { name: "t", message: format!("{t} is not a positive time") })
         }
         // k-NN neighbourhoods: the k-th neighbour at about 3√t on average, as the radius mode's default.
-        None if params.neighbourhood == Neighbourhood::Knn => {
-            let hk = (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[nb.k - 1] as usize], points[i]))).sum::<f64>()
-                / n as f64;
-            hk * hk / 9.0
-        }
+        None if params.neighbourhood == Neighbourhood::Knn => dk * dk / 9.0,
         // (2h)², widened where the sampling is uneven: the kernel's radius 3√t must reach every point's 4th
         // nearest neighbour, or the sparse parts fall apart into pieces of their own (a uniform sample keeps
         // (2h)²; a tenfold density variation widens t about threefold). Where that would join more pairs than a
@@ -217,9 +174,6 @@ pub fn belkin_niyogi_pair(
             let mut d4: Vec<f64> =
                 (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[3.min(nb.k - 1)] as usize], points[i]))).collect();
             d4.sort_by(f64::total_cmp);
-            let dk = (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[nb.k - 1] as usize], points[i]))).sum::<f64>()
-                / n as f64;
-            let pairs = |d: f64| 0.5 * n as f64 * nb.k as f64 * (d / dk.max(f64::MIN_POSITIVE)).powi(2);
             let mut q = d4[n - 1];
             if pairs(q) > 0.25 * super::manifold::MAX_PAIRS {
                 q = d4[(999 * n / 1000).min(n - 1)];
@@ -237,11 +191,9 @@ pub fn belkin_niyogi_pair(
         }
         None => 3.0 * t.sqrt(),
     };
-    // The pairs within r, estimated from the mean distance to the k-th neighbour (k (r / d_k)² per point): a
-    // kernel that would join too many is refused before the search (a given t or radius far above the spacing).
-    let dk =
-        (0..n).map(|i| vec3::norm(vec3::sub(points[nb.of(i)[nb.k - 1] as usize], points[i]))).sum::<f64>() / n as f64;
-    let expected = 0.5 * n as f64 * nb.k as f64 * (r / dk.max(f64::MIN_POSITIVE)).powi(2);
+    // A kernel that would join too many pairs is refused before the search (a given t or radius far above the
+    // spacing).
+    let expected = pairs(r);
     if params.neighbourhood == Neighbourhood::Radius && expected > super::manifold::MAX_PAIRS {
         return Err(OperatorError::InvalidParameter {
             name: "radius",
