@@ -129,9 +129,12 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
     let values = vertices.saturating_mul(columns);
     let max = state.config.max_output_values;
     if values > max {
+        // With quadratic elements the rows are the unknowns: the vertices and the edges.
+        let rows =
+            if a.operator_spec().is_some_and(|o| o.order == 2) { "unknowns (vertices and edges)" } else { "vertices" };
         return Err(ApiError::OutputTooLarge {
             detail: format!(
-                "this analysis holds an array of {vertices} rows (vertices; with order 2 also edges) × {columns} columns = {values} values, \
+                "this analysis holds an array of {vertices} {rows} × {columns} columns = {values} values, \
                  above the limit of {max} (--max-output-values, KAC_MAX_OUTPUT_VALUES)"
             ),
         });
