@@ -4,8 +4,9 @@ P2 and their Richardson extrapolations (`kac spectrum --extrapolate`, two refine
 - the unit disk, Dirichlet: the first three eigenvalues j₀₁², j₁₁², j₁₁² (zeros of Bessel functions; Abramowitz &
   Stegun table 9.5), meshed by `kac generate disk` (a polygon: its own eigenvalues differ from the disk's by O(h²));
 - the L-shaped membrane of three unit squares, Dirichlet: λ₁ = 9.6397238440219410527 (Fox, Henrici & Moler 1967);
-- the Gordon–Webb–Wolpert drum 1 (`kac generate gww1`, half the size of Driscoll's: eigenvalues 4×), Dirichlet:
-  the first ten of Driscoll 1997 (SIAM Review 39, table of the first 25; λ₉ = 5π²/4 there in closed form);
+- the Gordon–Webb–Wolpert drums 1 and 2 (`kac generate gww1|gww2`, half the size of Driscoll's: eigenvalues 4×),
+  Dirichlet: the first 25 of Driscoll 1997 (SIAM Review 39, pp. 1–17, table 3; λ₉ = 5π²/4 and λ₂₁ = 5π²/2 there in
+  closed form);
 and a P1 peer in the same run: lapy's Solver (cotan stiffness, consistent mass, ARPACK shift-invert with SuperLU) on
 the same meshes.
 Prints a markdown table. Needs a Python with numpy, scipy and lapy (e.g. target/contract-venv after
@@ -21,7 +22,10 @@ J01, J11 = 2.404825557695773, 3.831705970207512
 DISK = [J01 ** 2, J11 ** 2, J11 ** 2]
 L1 = [9.6397238440219410527]
 DRISCOLL = [2.53794399980, 3.65550971352, 5.17555935622, 6.53755744376, 7.24807786256, 9.20929499840,
-            10.5969856913, 11.5413953956, 12.3370055014, 13.0536540557]
+            10.5969856913, 11.5413953956, 12.3370055014, 13.0536540557, 14.3138624643, 15.8713026200,
+            16.9417516880, 17.6651184368, 18.9810673877, 20.8823950433, 21.2480051774, 22.2328517930,
+            23.7112974848, 24.4792340693, 24.6740110027, 26.0802400997, 27.3040189211, 28.1751285815,
+            29.5697729132]
 GWW = [4 * x for x in DRISCOLL]
 
 
@@ -45,10 +49,13 @@ def l_shape(n, path):
         out.writelines("3 %d %d %d\n" % tuple(new[x] for x in t) for t in f)
 
 
-def kac_run(kac, path, k, order, extrapolate):
+def kac_run(kac, path, k, order, extrapolate, refinements=2):
+    """extrapolate: None, "uniform" or "graded" (toward re-entrant corners, kac's default)."""
     args = [kac, "spectrum", path, "-k", str(k), "--boundary", "dirichlet", "--order", str(order), "--threads", "1"]
     if extrapolate:
-        args.append("--extrapolate")
+        args += ["--extrapolate", "--refinements", str(refinements)]
+    if extrapolate == "uniform":
+        args.append("--no-grading")
     t = time.perf_counter()
     r = json.loads(subprocess.run(args, check=True, capture_output=True, text=True).stdout)
     seconds = time.perf_counter() - t
@@ -87,18 +94,23 @@ def main():
     for rings in (8, 16, 32):
         p = os.path.join(work, "disk%d.off" % rings)
         subprocess.run([kac, "generate", "disk", "--n", str(rings), "--out", p], check=True, stdout=subprocess.DEVNULL)
-        cases.append(("disk, %d rings" % rings, p, DISK))
+        cases.append(("disk, %d rings" % rings, p, DISK, 2))
     for n in (4, 8, 16):
         p = os.path.join(work, "l%d.off" % n)
         l_shape(n, p)
-        cases.append(("L-shape, h = 1/%d" % n, p, L1))
-    for n in (2, 4, 8):
-        p = os.path.join(work, "gww%d.off" % n)
-        subprocess.run([kac, "generate", "gww1", "--n", str(n), "--out", p], check=True, stdout=subprocess.DEVNULL)
-        cases.append(("GWW 1, h = 1/%d" % (2 * n), p, GWW))
+        cases.append(("L-shape, h = 1/%d" % n, p, L1, 2))
+    for drum, n, refinements in ((1, 4, 2), (1, 4, 3), (2, 4, 3), (1, 8, 2), (1, 8, 3)):
+        p = os.path.join(work, "gww%d-%d.off" % (drum, n))
+        subprocess.run([kac, "generate", "gww%d" % drum, "--n", str(n), "--out", p], check=True,
+                       stdout=subprocess.DEVNULL)
+        cases.append(("GWW %d, h = 1/%d, %d refinements" % (drum, 2 * n, refinements), p, GWW, refinements))
+    # P1 at the unknowns of the graded P2 extrapolation's finest level (28,289): the same cost, no extrapolation.
+    p = os.path.join(work, "gww1-64.off")
+    subprocess.run([kac, "generate", "gww1", "--n", "64", "--out", p], check=True, stdout=subprocess.DEVNULL)
+    cases.append(("GWW 1, h = 1/128, P1 only", p, GWW, 0))
     print("| domain | method | unknowns (finest) | seconds | max rel. error | kac's estimate |")
     print("|---|---|---|---|---|---|")
-    for name, path, exact in cases:
+    for name, path, exact, refinements in cases:
         k = len(exact)
         try:
             vals, n, s = lapy_run(path, k)
@@ -106,9 +118,15 @@ def main():
         except Exception as e:  # noqa: BLE001 — the peer is optional; say why it is missing
             print("| %s | lapy P1 (peer) | – | – | not run: %s | |" % (name, type(e).__name__))
         for order in (1, 2):
-            for extrapolate in (False, True):
-                vals, n, s, est = kac_run(kac, path, k, order, extrapolate)
-                label = "kac P%d%s" % (order, " extrapolated" if extrapolate else "")
+            for extrapolate in (None, "uniform", "graded") if refinements else (None,) if order == 1 else ():
+                try:
+                    vals, n, s, est = kac_run(kac, path, k, order, extrapolate, refinements)
+                except subprocess.CalledProcessError as e:
+                    print("| %s | kac P%d%s | – | – | not run: %s | |" % (
+                        name, order, " extrapolated, %s" % extrapolate if extrapolate else "",
+                        e.stderr.strip().splitlines()[-1]))
+                    continue
+                label = "kac P%d%s" % (order, " extrapolated, %s" % extrapolate if extrapolate else "")
                 scale = max(exact)
                 print("| %s | %s | %d | %.3f | %.2e | %s |" % (name, label, n, s, rel(vals, exact),
                                                              "%.1e" % (est / scale) if est is not None else ""))

@@ -283,6 +283,11 @@ pub enum Analysis {
         /// the order observed).
         #[serde(default = "refinements_default", skip_serializing_if = "is_two")]
         refinements: usize,
+        /// With `extrapolate` on a flat triangle mesh: grade every level toward the domain's re-entrant corners
+        /// (radially, element size ∝ r^{1−α/p} for a corner of exponent α = π/ω), which restores the nominal order
+        /// there (default true; false: uniform levels).
+        #[serde(default = "yes", skip_serializing_if = "is_true")]
+        grading: bool,
         #[serde(default)]
         operator: OperatorSpec,
         #[serde(default)]

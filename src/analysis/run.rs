@@ -165,7 +165,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
     // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
     let reused = std::cell::Cell::new(false);
     let out = match analysis {
-        Analysis::Spectrum { k, band, eigenvectors, counting, extrapolate, refinements, operator, solver } => {
+        Analysis::Spectrum { k, band, eigenvectors, counting, extrapolate, refinements, grading, operator, solver } => {
             let (e, k) = match band {
                 Some(band) => {
                     let e = Arc::new(band_pairs(v, operator, solver, *band, hooks)?);
@@ -184,7 +184,8 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                     return Err(AnalysisError::invalid_parameter("extrapolate takes the k smallest pairs, not a band"));
                 }
                 hooks.control.phase("extrapolating", 0, 0)?;
-                out.summary["extrapolation"] = extrapolate::extrapolation(v, operator, solver, k, *refinements, hooks)?;
+                out.summary["extrapolation"] =
+                    extrapolate::extrapolation(v, operator, solver, k, *refinements, *grading, hooks)?;
             }
             out
         }

@@ -43,6 +43,9 @@ pub struct SpectrumCmd {
     /// Uniform refinements for --extrapolate (1 to 3).
     #[arg(long, default_value_t = crate::analysis::refinements_default())]
     pub refinements: usize,
+    /// With --extrapolate: uniform levels, without grading toward re-entrant corners (`grading: false`).
+    #[arg(long)]
+    pub no_grading: bool,
     /// Check by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the found ones was missed, and
     /// solve again for any that were: the default (the result's `solver.completeness`); the flag is kept for
     /// scripts written when it was not.
@@ -68,6 +71,7 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
         counting: a.counting,
         extrapolate: a.extrapolate,
         refinements: a.refinements,
+        grading: !a.no_grading,
         operator: a.op.clone(),
         solver: SolverSpec { method: a.method.unwrap_or(a.solver.method), ..a.solver.clone() },
     };

@@ -4,6 +4,7 @@
 //! This module has no I/O and no HTTP; readers live in [`crate::io`].
 
 pub mod generate;
+pub mod grading;
 pub mod hash;
 pub mod numbering;
 pub mod refine;
