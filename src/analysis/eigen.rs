@@ -96,6 +96,7 @@ pub fn operator_options(v: &Validated, spec: &OperatorSpec) -> Result<OperatorOp
         },
         order: spec.order,
         polygons: v.polygons.clone(),
+        edge_nodes: v.edge_nodes.clone(),
         ..Default::default()
     };
     Ok(o)

@@ -50,7 +50,9 @@ pub(crate) fn extrapolation(
             )))
         }
     };
-    let options = operator_options(v, spec)?;
+    let mut options = operator_options(v, spec)?;
+    // Refinement splits the straight edges: the input's curved edge nodes would fit its first level only.
+    let curved = options.edge_nodes.take().map(|n| n.len());
     // The levels' meshes: uniform refinements of the input, each graded toward the re-entrant corners of a flat
     // domain when asked (the same map on every level, so the size parameter still halves).
     let mut meshes = vec![v.shape.clone()];
@@ -128,6 +130,7 @@ pub(crate) fn extrapolation(
         "order_used": e.iter().map(|x| x.order_used).collect::<Vec<_>>(),
         "levels": levels,
         "grading": grading_report,
+        "curved_edges_ignored": curved,
         "method": "Richardson extrapolation at the order observed on the last three levels (mesh sizes h, h/2, h/4), \\
                    clamped to [0.5, 2 × nominal]; the nominal order with two levels or where the differences do not \\
                    shrink monotonically. error_estimate: the larger of the gap to the extrapolation at the nominal \\

@@ -117,17 +117,22 @@ fn ambient_id(a: &super::Ambient) -> ShapeId {
 }
 
 /// The id of a validated shape with what its operators read beyond its elements: the polygons it was read from
-/// (the polygon operator uses them) and a cloud's normals (they orient its denoising). Without either it is
-/// [`shape_id`]; with them, that id and the extras in a canonical form (each polygon as its corners' quantized
-/// positions from the smallest one, polygons sorted; each normal with its point's position, sorted), so neither
-/// the numbering nor the order changes it.
-pub fn shape_id_with(shape: &Shape, polygons: Option<&super::Polygons>) -> ShapeId {
+/// (the polygon operator uses them), a cloud's normals (they orient its denoising) and curved edges' middle nodes
+/// (quadratic elements use them). Without any it is [`shape_id`]; with them, that id and the extras in a canonical
+/// form (each polygon as its corners' quantized positions from the smallest one, polygons sorted; each normal with
+/// its point's position, sorted; each edge node with its edge's two corner positions, sorted), so neither the
+/// numbering nor the order changes it.
+pub fn shape_id_with(
+    shape: &Shape,
+    polygons: Option<&super::Polygons>,
+    edge_nodes: Option<&super::EdgeNodes>,
+) -> ShapeId {
     let base = shape_id(shape);
     let normals = match shape {
         Shape::PointCloud(c) => c.normals.as_ref().map(|ns| (&c.points, ns)),
         _ => None,
     };
-    if polygons.is_none() && normals.is_none() {
+    if polygons.is_none() && normals.is_none() && edge_nodes.is_none() {
         return base;
     }
     let mut h = Sha256::new();
@@ -168,6 +173,25 @@ pub fn shape_id_with(shape: &Shape, polygons: Option<&super::Polygons>) -> Shape
             for x in p.iter().chain(n) {
                 h.update(x.to_le_bytes());
             }
+        }
+    }
+    if let (Some(nodes), Some(points)) = (edge_nodes, shape.positions()) {
+        let mut all: Vec<[[f32; 3]; 3]> = nodes
+            .iter()
+            .map(|&([a, b], p)| {
+                let (x, y) = (key(points[a as usize]), key(points[b as usize]));
+                if cmp(&x, &y).is_le() {
+                    [x, y, key(p)]
+                } else {
+                    [y, x, key(p)]
+                }
+            })
+            .collect();
+        all.sort_by(|a, b| cmp(&a[0], &b[0]).then(cmp(&a[1], &b[1])).then(cmp(&a[2], &b[2])));
+        h.update(b"edge-nodes");
+        h.update((all.len() as u64).to_le_bytes());
+        for x in all.iter().flatten().flatten() {
+            h.update(x.to_le_bytes());
         }
     }
     ShapeId(h.finalize().into())

@@ -218,6 +218,41 @@ pub struct RawShape {
     pub reader_welded: usize,
     /// Notes of the reader: content skipped or interpreted, for the report.
     pub notes: Vec<String>,
+    /// Middle nodes of edges given by second-order elements (Gmsh 6-node triangles, 10-node tets, 8/9-node
+    /// quads, 3-node lines): the edge's two corners (this numbering) and the node's position.
+    pub edge_nodes: Vec<([u32; 2], Point)>,
+}
+
+/// Where the input placed the middle node of its mesh's edges (second-order elements), in the shape's numbering:
+/// the geometry of curved (isoparametric) quadratic elements. Sorted by edge (smaller index first), one per edge;
+/// edges without a node are straight.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EdgeNodes(Vec<([u32; 2], Point)>);
+
+impl EdgeNodes {
+    /// From (edge, position) pairs in any order and orientation; the first node of an edge given twice wins.
+    pub fn new(mut nodes: Vec<([u32; 2], Point)>) -> Self {
+        for (e, _) in &mut nodes {
+            e.sort_unstable();
+        }
+        nodes.sort_by_key(|(e, _)| *e);
+        nodes.dedup_by_key(|(e, _)| *e);
+        EdgeNodes(nodes)
+    }
+    /// The middle node of edge {a, b}, where the input gave one.
+    pub fn get(&self, [a, b]: [u32; 2]) -> Option<Point> {
+        let e = [a.min(b), a.max(b)];
+        self.0.binary_search_by_key(&e, |(x, _)| *x).ok().map(|i| self.0[i].1)
+    }
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+    pub fn iter(&self) -> impl Iterator<Item = &([u32; 2], Point)> + '_ {
+        self.0.iter()
+    }
 }
 
 /// Componentwise helpers on points.

@@ -158,6 +158,9 @@ pub struct Validated {
     /// shape's numbering), for the `polygon` operator; `None` where every face is a triangle, or where a repair
     /// dropped or split faces (then the triangles are the mesh).
     pub polygons: Option<std::sync::Arc<super::Polygons>>,
+    /// The input's middle nodes of curved edges (second-order elements), in the shape's numbering, for quadratic
+    /// elements; `None` where none is off its straight edge's midpoint.
+    pub edge_nodes: Option<std::sync::Arc<super::EdgeNodes>>,
 }
 
 impl Validated {
@@ -390,14 +393,66 @@ pub fn validate(raw: RawShape, options: &ValidateOptions) -> Result<Validated> {
         ShapeKind::PointCloud => cloud(&raw, options, &mut repairs)?,
     };
     let bbox = shape.positions().and_then(BoundingBox::of);
-    let id = super::hash::shape_id_with(&shape, polygons.as_ref());
+    let edge_nodes = edge_nodes(&raw, &shape, &vertex_map, &mut notes, &mut warnings);
+    let id = super::hash::shape_id_with(&shape, polygons.as_ref(), edge_nodes.as_ref());
     Ok(Validated {
         shape,
         id,
         report: Report { kind, input, repairs: repairs.0, warnings, notes, bbox, facts },
         vertex_map,
         polygons: polygons.map(std::sync::Arc::new),
+        edge_nodes: edge_nodes.map(std::sync::Arc::new),
     })
+}
+
+/// The input's edge middle nodes carried to the shape's numbering, for the mesh's edges only; `None` where there
+/// are none, where every one lies on its straight edge's midpoint (they change nothing), or where one lies more
+/// than a quarter of its edge's length from that midpoint (a map that far from affine may fold: then all are
+/// ignored, with a warning).
+fn edge_nodes(
+    raw: &RawShape,
+    shape: &Shape,
+    vertex_map: &[u32],
+    notes: &mut Vec<String>,
+    warnings: &mut Vec<String>,
+) -> Option<super::EdgeNodes> {
+    if raw.edge_nodes.is_empty() {
+        return None;
+    }
+    let (vertices, edges) = match shape {
+        Shape::TriangleMesh(m) => (&m.vertices, crate::operators::p2::triangle_edges(&m.faces)),
+        Shape::TetMesh(m) => (&m.vertices, crate::operators::p2::tet_edges(&m.tets)),
+        _ => return None,
+    };
+    let mapped = raw.edge_nodes.iter().filter_map(|&([a, b], p)| {
+        let (x, y) = (*vertex_map.get(a as usize)?, *vertex_map.get(b as usize)?);
+        let e = [x.min(y), x.max(y)];
+        (x != u32::MAX && y != u32::MAX && x != y && edges.binary_search(&e).is_ok()).then_some((e, p))
+    });
+    let nodes = super::EdgeNodes::new(mapped.collect());
+    let (mut curved, mut far) = (0usize, 0usize);
+    for &([a, b], p) in nodes.iter() {
+        let (pa, pb) = (vertices[a as usize], vertices[b as usize]);
+        let length = vec3::norm(vec3::sub(pb, pa));
+        let off = vec3::norm(vec3::sub(p, vec3::scale(vec3::add(pa, pb), 0.5)));
+        curved += usize::from(off > 1e-9 * length);
+        far += usize::from(off > 0.25 * length);
+    }
+    if far > 0 {
+        warnings.push(format!(
+            "{far} edge middle node(s) lie more than a quarter of their edge's length from its midpoint: every \
+             edge node is ignored (quadratic elements use straight edges)"
+        ));
+        return None;
+    }
+    if curved == 0 {
+        return None;
+    }
+    notes.push(format!(
+        "{curved} of {} edges curved by the input's middle nodes (used by quadratic elements, order 2)",
+        edges.len()
+    ));
+    Some(nodes)
 }
 
 type Outcome = (Shape, Vec<u32>, Facts);

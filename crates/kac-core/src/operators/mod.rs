@@ -19,7 +19,7 @@ pub mod tet_laplacian;
 
 pub use mass::Mass;
 
-use crate::geometry::{Point, Shape, ShapeKind};
+use crate::geometry::{vec3, Point, Shape, ShapeKind};
 use graph_laplacian::GraphKind;
 use serde::{Deserialize, Serialize};
 use sparse::SparsePair;
@@ -186,6 +186,9 @@ pub struct OperatorOptions {
     /// triangles, where it is the cotan Laplacian).
     #[serde(skip)]
     pub polygons: Option<Arc<crate::geometry::Polygons>>,
+    /// The input's middle nodes of curved edges (shape numbering), for quadratic elements (`None`: straight).
+    #[serde(skip)]
+    pub edge_nodes: Option<Arc<crate::geometry::EdgeNodes>>,
 }
 
 impl Default for OperatorOptions {
@@ -198,6 +201,7 @@ impl Default for OperatorOptions {
             mollify: 1e-5,
             order: 1,
             polygons: None,
+            edge_nodes: None,
         }
     }
 }
@@ -488,9 +492,18 @@ fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptio
             message: format!("quadratic elements take the consistent mass, not '{}'", mass.name()),
         });
     }
+    // The input's curved edges where it gave their middle nodes (second-order elements), else straight ones.
+    let straight = |v: &[Point], [a, b]: [u32; 2]| vec3::scale(vec3::add(v[a as usize], v[b as usize]), 0.5);
+    let nodes = options.edge_nodes.as_deref();
     let (pair, edges) = match (op, shape) {
-        (OperatorKind::Cotan, Shape::TriangleMesh(m)) => p2::triangle_p2_pair(&m.vertices, &m.faces, None)?,
-        (OperatorKind::Tet, Shape::TetMesh(m)) => p2::tet_p2_pair(&m.vertices, &m.tets, None)?,
+        (OperatorKind::Cotan, Shape::TriangleMesh(m)) => {
+            let at = |e: [u32; 2]| nodes.and_then(|n| n.get(e)).unwrap_or_else(|| straight(&m.vertices, e));
+            p2::triangle_p2_pair(&m.vertices, &m.faces, nodes.map(|_| &at as &(dyn Fn([u32; 2]) -> Point + Sync)))?
+        }
+        (OperatorKind::Tet, Shape::TetMesh(m)) => {
+            let at = |e: [u32; 2]| nodes.and_then(|n| n.get(e)).unwrap_or_else(|| straight(&m.vertices, e));
+            p2::tet_p2_pair(&m.vertices, &m.tets, nodes.map(|_| &at as &(dyn Fn([u32; 2]) -> Point + Sync)))?
+        }
         _ => {
             return Err(OperatorError::InvalidParameter {
                 name: "order",
@@ -507,7 +520,16 @@ fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptio
     let mut parameters = serde_json::Map::new();
     parameters.insert("order".into(), 2.into());
     parameters.insert("edge_unknowns".into(), edges.len().into());
-    parameters.insert("midpoints".into(), "on the straight edges (flat elements: the input mesh's geometry)".into());
+    let midpoints = match nodes {
+        Some(n) => format!(
+            "the input's middle nodes on {} of {} edges (curved, isoparametric elements), the straight edges' midpoints \
+             elsewhere",
+            n.len(),
+            edges.len()
+        ),
+        None => "on the straight edges (flat elements: the input mesh's geometry)".into(),
+    };
+    parameters.insert("midpoints".into(), midpoints.into());
     Ok(Operator {
         pair,
         kind: op,

@@ -1,7 +1,10 @@
 //! Gmsh `.msh`, versions 2.x and 4.1, ASCII and binary (either byte order; 4.1 binary with a 4- or 8-byte
 //! `size_t`). Node tags may be arbitrary; elements are read by type: tetrahedra (4, and the corners of 10-node
 //! tets), triangles (2, 9), quads (3, 10, 16) and lines (1, 8). With tetrahedra the file is a tet mesh; otherwise
-//! triangles make a surface and lines a polyline.
+//! triangles make a surface and lines a polyline. Of second-order elements the corners are the vertices and the
+//! middle node of each edge is kept as [`RawShape::edge_nodes`](crate::geometry::RawShape) (curved quadratic
+//! elements); the nodes stay in the vertex list, so the file's numbering is the input's (validation drops them as
+//! unreferenced).
 //!
 //! Only `$MeshFormat`, `$Nodes` and `$Elements` are read. Every other section is skipped, wherever it stands,
 //! and named in a note:
@@ -118,6 +121,28 @@ impl Builder {
                 location: loc(),
             })?;
         }
+        // Second-order elements: the middle node of each edge (Gmsh's node ordering: the corners, then one node
+        // per edge in this order).
+        let edges: &[[usize; 2]] = match ty {
+            8 => &[[0, 1]],
+            9 => &[[0, 1], [1, 2], [2, 0]],
+            10 | 16 => &[[0, 1], [1, 2], [2, 3], [3, 0]],
+            11 => &[[0, 1], [1, 2], [2, 0], [3, 0], [3, 2], [3, 1]],
+            _ => &[],
+        };
+        for (k, &[a, b]) in edges.iter().enumerate() {
+            if let Some(&tag) = nodes.get(arity + k) {
+                let node =
+                    *self.tags.get(&(tag as u64)).filter(|_| tag >= 0).ok_or_else(|| ShapeError::IndexOutOfRange {
+                        element,
+                        index,
+                        value: tag,
+                        vertex_count: self.raw.vertices.len(),
+                        location: loc(),
+                    })?;
+                self.raw.edge_nodes.push(([idx[a], idx[b]], self.raw.vertices[node as usize]));
+            }
+        }
         match element {
             Element::Tetrahedron => self.raw.tets.push(idx),
             Element::Face => self.polygons.push(&idx[..arity]),
@@ -217,7 +242,11 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
         polygons = Polygons::default();
     }
     if higher_order > 0 {
-        raw.notes.push(format!("gmsh: {higher_order} higher-order element(s) reduced to their corner vertices"));
+        raw.notes.push(format!(
+            "gmsh: {higher_order} higher-order element(s): their corners are the mesh's vertices; the middle nodes of \
+             second-order elements' edges ({}) place the edges of quadratic elements (order 2), other nodes are unused",
+            raw.edge_nodes.len()
+        ));
     }
     if other > 0 {
         raw.notes.push(format!("gmsh: {other} element(s) of other types (points, hexahedra, prisms, ...) ignored"));
