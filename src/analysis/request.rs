@@ -31,7 +31,8 @@ pub struct OperatorSpec {
     /// Point clouds: neighbours per point.
     #[arg(long, default_value_t = kac_core::operators::DEFAULT_NEIGHBOURS)]
     pub neighbours: usize,
-    /// Point clouds: heat-kernel time t (default (2h)², h the mean nearest-neighbour distance).
+    /// Point clouds: heat-kernel time t for every pair (default: surfaces in R³ a time per point following the
+    /// local spacing, about 5h² on a uniform sample, h the mean nearest-neighbour distance; in Rⁿ one (2h)²).
     #[arg(long)]
     pub time: Option<f64>,
     /// Point clouds: sum the heat kernel over `radius` (ε-ball, default) or `knn` (k nearest) neighbourhoods.

@@ -138,7 +138,8 @@ pub struct CloudParams {
     /// Neighbours per point for spacing, normals and local areas, and for `Knn` neighbourhoods (default 16).
     pub k: usize,
     pub neighbourhood: Neighbourhood,
-    /// Heat-kernel time t; default (2h)², h the mean distance to the nearest neighbour.
+    /// Heat-kernel time t for every pair; default: per point, following the local spacing (about 5h² on a
+    /// uniform sample, h the mean distance to the nearest neighbour; see [`point_cloud`]).
     pub t: Option<f64>,
     /// Kernel support radius; default 3√t (6√t for the chapter's normalization).
     pub radius: Option<f64>,
