@@ -95,6 +95,7 @@ pub fn operator_options(v: &Validated, spec: &OperatorSpec) -> Result<OperatorOp
             denoise: spec.denoise,
         },
         order: spec.order,
+        midpoints: spec.midpoints,
         polygons: v.polygons.clone(),
         edge_nodes: v.edge_nodes.clone(),
         ..Default::default()

@@ -3,6 +3,7 @@
 
 use super::*;
 use kac_core::operators::manifold::CloudNormalization;
+use kac_core::operators::p2::Midpoints;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
 pub const ALGORITHM_VERSION: u32 = 4;
@@ -58,6 +59,12 @@ pub struct OperatorSpec {
     #[serde(skip_serializing_if = "is_one")]
     #[arg(long, default_value_t = 1)]
     pub order: u8,
+    /// With order 2 on a triangle mesh whose file gives no edge nodes: `straight` edges (default; flat elements,
+    /// the polyhedron's spectrum) or edges curved by the vertex `normals` (a smooth surface's estimate; not for
+    /// meshes with sharp creases, whose averaged normals would round them).
+    #[serde(skip_serializing_if = "is_straight")]
+    #[arg(long, default_value = "straight", value_parser = parse_midpoints)]
+    pub midpoints: Midpoints,
     /// Point clouds in R³: project the points onto a moving-least-squares surface before building the operator
     /// where their neighbourhoods show noise (default true; the CLI's `--no-denoise` turns it off). The scale,
     /// the noise level and how far points moved are reported under `parameters.denoise`.
@@ -72,6 +79,18 @@ fn is_one(o: &u8) -> bool {
 
 fn is_symmetric(n: &CloudNormalization) -> bool {
     *n == CloudNormalization::Symmetric
+}
+
+fn is_straight(m: &Midpoints) -> bool {
+    *m == Midpoints::Straight
+}
+
+fn parse_midpoints(s: &str) -> Result<Midpoints, String> {
+    match s {
+        "straight" => Ok(Midpoints::Straight),
+        "normals" => Ok(Midpoints::Normals),
+        _ => Err(format!("unknown midpoints '{s}'; one of: straight, normals")),
+    }
 }
 
 fn parse_normalization(s: &str) -> Result<CloudNormalization, String> {
@@ -116,6 +135,7 @@ impl Default for OperatorSpec {
             intrinsic_dimension: None,
             normalization: CloudNormalization::Symmetric,
             order: 1,
+            midpoints: Midpoints::Straight,
             denoise: true,
         }
     }

@@ -250,3 +250,43 @@ fn second_order_gmsh_files_curve_the_elements() {
     let v = read(&second_order_msh(&cube.vertices, &elements, &off));
     assert!(v.edge_nodes.is_none() && v.report.warnings.iter().any(|w| w.contains("quarter")), "{:?}", v.report);
 }
+
+/// On a curved surface without file geometry, `midpoints: normals` curves the edges by the vertex normals: on a
+/// unit icosphere whose vertices were jittered along the sphere (no symmetry to help), λ₂..₉ (exactly 2 and 6)
+/// with P2 converge at order about 2.6–3 instead of the flat elements' 2 (the normals are estimated to O(h²)) and
+/// land 49× nearer at 2,562 vertices (measured 2.6·10⁻⁵ against 1.2·10⁻³). With order 1 or on tets it is refused.
+#[test]
+fn sphere_edges_curved_by_vertex_normals() {
+    let exact: Vec<f64> = [2.0; 3].into_iter().chain([6.0; 5]).collect();
+    let (mut flat, mut curved) = (vec![], vec![]);
+    for level in 1..=4 {
+        let mut m = generate::icosphere(level);
+        let mut state = 7u64 + level as u64;
+        let mut rnd = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 11) as f64) / (1u64 << 53) as f64 - 0.5
+        };
+        let h = 1.0 / f64::from(1u32 << level);
+        for p in &mut m.vertices {
+            let q = p.map(|x| x + 0.3 * h * rnd());
+            let r = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
+            *p = q.map(|x| x / r);
+        }
+        let s = Shape::TriangleMesh(m);
+        flat.push(rel(&smallest(&build(&s, 2, Boundary::Neumann), 9)[1..], &exact, 0));
+        let o = OperatorOptions { order: 2, midpoints: p2::Midpoints::Normals, ..Default::default() };
+        let op = operators::build(&s, &o).unwrap();
+        assert!(op.parameters["midpoints"].as_str().unwrap().contains("normals"), "{:?}", op.parameters);
+        curved.push(rel(&smallest(&op.pair, 9)[1..], &exact, 0));
+    }
+    let (of, oc) = (orders(&flat), orders(&curved));
+    eprintln!("jittered sphere: flat {} orders {of:.2?}; normals {} orders {oc:.2?}", sci(&flat), sci(&curved));
+    assert!(of.iter().all(|&o| o < 2.3), "flat: {of:?}");
+    assert!(oc[1] > 2.4 && oc[2] > 2.4 && curved[3] < 0.05 * flat[3], "normals: {curved:?} {oc:?}");
+    let sq = Shape::TriangleMesh(generate::unit_square(4));
+    let o = OperatorOptions { order: 1, midpoints: p2::Midpoints::Normals, ..Default::default() };
+    assert!(operators::build(&sq, &o).is_err(), "order 1 has no edge nodes");
+    let cube = Shape::TetMesh(generate::unit_cube_tets(2));
+    let o = OperatorOptions { order: 2, midpoints: p2::Midpoints::Normals, ..Default::default() };
+    assert!(operators::build(&cube, &o).is_err(), "tets take curved edges from files");
+}

@@ -190,6 +190,9 @@ pub struct OperatorOptions {
     /// The input's middle nodes of curved edges (shape numbering), for quadratic elements (`None`: straight).
     #[serde(skip)]
     pub edge_nodes: Option<Arc<crate::geometry::EdgeNodes>>,
+    /// Quadratic elements on a triangle mesh whose input gives no edge nodes: straight edges (default) or edges
+    /// curved by the vertex normals ([`p2::midpoints_from_normals`]).
+    pub midpoints: p2::Midpoints,
 }
 
 impl Default for OperatorOptions {
@@ -203,6 +206,7 @@ impl Default for OperatorOptions {
             order: 1,
             polygons: None,
             edge_nodes: None,
+            midpoints: p2::Midpoints::Straight,
         }
     }
 }
@@ -340,6 +344,11 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
     let mut kept_points: Option<Vec<u32>> = None;
     if options.order == 2 {
         return build_p2(shape, op, mass, options);
+    } else if options.midpoints != p2::Midpoints::Straight {
+        return Err(OperatorError::InvalidParameter {
+            name: "midpoints",
+            message: "edge midpoints place the nodes of quadratic elements: give order 2".into(),
+        });
     } else if options.order != 1 {
         return Err(OperatorError::InvalidParameter {
             name: "order",
@@ -493,9 +502,24 @@ fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptio
             message: format!("quadratic elements take the consistent mass, not '{}'", mass.name()),
         });
     }
-    // The input's curved edges where it gave their middle nodes (second-order elements), else straight ones.
+    // The input's curved edges where it gave their middle nodes (second-order elements), else straight ones or,
+    // when asked, edges curved by the vertex normals.
     let straight = |v: &[Point], [a, b]: [u32; 2]| vec3::scale(vec3::add(v[a as usize], v[b as usize]), 0.5);
-    let nodes = options.edge_nodes.as_deref();
+    let from_normals = match (options.midpoints, shape, &options.edge_nodes) {
+        (p2::Midpoints::Normals, Shape::TriangleMesh(m), None) => Some(p2::midpoints_from_normals(m)),
+        (p2::Midpoints::Normals, Shape::TriangleMesh(_), Some(_)) | (p2::Midpoints::Straight, _, _) => None,
+        (p2::Midpoints::Normals, _, _) => {
+            return Err(OperatorError::InvalidParameter {
+                name: "midpoints",
+                message: format!(
+                    "'normals' curves a triangle mesh's edges, not a {}'s (tet meshes take curved edges from \
+                     second-order files)",
+                    shape.kind().as_str()
+                ),
+            })
+        }
+    };
+    let nodes = options.edge_nodes.as_deref().or(from_normals.as_ref());
     let (pair, edges) = match (op, shape) {
         (OperatorKind::Cotan, Shape::TriangleMesh(m)) => {
             let at = |e: [u32; 2]| nodes.and_then(|n| n.get(e)).unwrap_or_else(|| straight(&m.vertices, e));
@@ -522,6 +546,11 @@ fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptio
     parameters.insert("order".into(), 2.into());
     parameters.insert("edge_unknowns".into(), edges.len().into());
     let midpoints = match nodes {
+        Some(n) if from_normals.is_some() => format!(
+            "curved by the vertex normals (angle-weighted; Hermite midpoints) on {} of {} edges",
+            n.len(),
+            edges.len()
+        ),
         Some(n) => format!(
             "the input's middle nodes on {} of {} edges (curved, isoparametric elements), the straight edges' midpoints \
              elsewhere",
