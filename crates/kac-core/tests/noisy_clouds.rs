@@ -139,6 +139,29 @@ fn outliers_are_dropped_and_reported() {
     assert_eq!(vertex_values.iter().filter(|x| x.is_nan()).count(), dropped);
 }
 
+/// A clump of 100 stray points close together (a Gaussian ball of σ = 0.01 half a radius off the sphere, as a
+/// scanner's returns from dust or a passer-by) passes the distance rule, each stray having close neighbours; it is
+/// found as a small piece of the neighbour graph and dropped, and the sphere is heard alone (without it the clump
+/// would be a second piece: another zero eigenvalue).
+#[test]
+fn a_clump_of_strays_is_dropped() {
+    let n = 20_000;
+    let mut points = generate::random_sphere_points(n, 21);
+    let g = gaussians(300, 77);
+    for (k, p) in points.iter_mut().take(100).enumerate() {
+        *p = [1.5 + 0.01 * g[3 * k], 0.01 * g[3 * k + 1], 0.01 * g[3 * k + 2]];
+    }
+    let s = Shape::PointCloud(PointCloud { points, ..Default::default() });
+    let o = operators::build(&s, &OperatorOptions::default()).unwrap();
+    let out = &o.parameters["outliers"];
+    eprintln!("clump: {out}");
+    assert_eq!((out["clumps"].as_u64(), out["clump_points"].as_u64()), (Some(1), Some(100)), "{out}");
+    assert_eq!(out["dropped"], 100);
+    let e = eigs(&o.pair, &EigenOptions { k: 4, ..Default::default() }, None, Control::default()).unwrap();
+    assert!(e.values[1..].iter().all(|x| (x - 2.0).abs() < 0.06), "{:?}", e.values);
+    assert_eq!(o.pair.components().1, 1);
+}
+
 /// Density varying tenfold from pole to pole (accepted with probability (1 + 9(z + 1)/2)/10): the local areas
 /// weigh the measure out (ΣM within 3 % of 4π), the kernel reaches every point's 4th neighbour and keeps the cloud
 /// in one piece (with one global (2h)² the sparse pole fell apart into four components: four zero eigenvalues),

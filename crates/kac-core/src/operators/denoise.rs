@@ -10,7 +10,8 @@
 //! robust form of the statistical outlier removal of Rusu et al. 2008). Five times leaves surface regions sampled
 //! ten times more sparsely than the median (√10 ≈ 3.2 times the distance) alone; stray points within a few
 //! spacings of the surface are not found, and need not be: the projection moves them onto it. A clump of stray
-//! points close together is not found either.
+//! points close together passes that rule; it is found as a small piece of the neighbour graph (below 1 % of the
+//! points, at least 16) and dropped too.
 //!
 //! The neighbourhood must be wider than the noise is thick. Its size is chosen once for the cloud, among
 //! k = 16, 32, …, 4096 neighbours (at most an eighth of the cloud), as the one where the median surface variation σ₃/(σ₁ + σ₂ + σ₃) of the
@@ -312,19 +313,68 @@ fn fit(points: &[Point], normals: Option<&[Point]>, i: usize, near: &[u32]) -> F
     }
     Fit { rms: (ss / ws.max(f64::MIN_POSITIVE)).sqrt(), ..f }
 }
-/// Points off the surface (see the module documentation): a flag per point, and the distance threshold.
-pub fn outliers(points: &[Point]) -> Result<(Vec<bool>, f64), OperatorError> {
+/// Points off the surface (see the module documentation).
+pub struct Outliers {
+    /// One flag per point: dropped.
+    pub flags: Vec<bool>,
+    /// The distance rule's threshold (5 × the median mean distance to the 16 nearest neighbours).
+    pub threshold: f64,
+    /// Points dropped by the distance rule.
+    pub isolated: usize,
+    /// Clumps dropped: pieces of the neighbour graph below `min_piece` points, and the points in them.
+    pub clumps: usize,
+    pub clump_points: usize,
+    pub min_piece: usize,
+}
+
+/// Finds the points off the surface: first those far from their neighbours (the distance rule), then clumps of
+/// stray points close together, which that rule cannot see: the pieces of the graph joining each point to its 16
+/// nearest neighbours within the threshold that hold fewer than max(16, 1 %) of the points (Rusu et al. 2008's
+/// Euclidean clustering with a minimum cluster size; a scan of several objects keeps every object above 1 %).
+pub fn outliers(points: &[Point]) -> Result<Outliers, OperatorError> {
+    let n = points.len();
     let nb = Neighbourhoods::knn(points, 16)?;
-    let mean: Vec<f64> = (0..points.len())
-        .into_par_iter()
-        .map(|i| {
-            nb.of(i).iter().map(|&j| vec3::norm(vec3::sub(points[j as usize], points[i]))).sum::<f64>() / nb.k as f64
-        })
-        .collect();
+    let dist = |i: usize, j: u32| vec3::norm(vec3::sub(points[j as usize], points[i]));
+    let mean: Vec<f64> =
+        (0..n).into_par_iter().map(|i| nb.of(i).iter().map(|&j| dist(i, j)).sum::<f64>() / nb.k as f64).collect();
     let mut sorted = mean.clone();
     sorted.sort_by(f64::total_cmp);
-    let threshold = 5.0 * sorted[sorted.len() / 2];
-    Ok((mean.iter().map(|&d| d > threshold).collect(), threshold))
+    let threshold = 5.0 * sorted[n / 2];
+    let mut flags: Vec<bool> = mean.iter().map(|&d| d > threshold).collect();
+    let isolated = flags.iter().filter(|&&f| f).count();
+    let mut sets = crate::geometry::topology::UnionFind::new(n);
+    for i in 0..n {
+        if flags[i] {
+            continue;
+        }
+        for &j in nb.of(i) {
+            if !flags[j as usize] && dist(i, j) <= threshold {
+                sets.union(i as u32, j);
+            }
+        }
+    }
+    let (labels, count) = sets.labels();
+    let mut size = vec![0usize; count];
+    for (i, &l) in labels.iter().enumerate() {
+        if !flags[i] {
+            size[l as usize] += 1;
+        }
+    }
+    let min_piece = (n / 100).max(16);
+    let small: Vec<bool> = size.iter().map(|&s| s > 0 && s < min_piece).collect();
+    // Never everything: where no piece is large enough (a cloud of scattered pieces), nothing is a clump.
+    let (mut clumps, mut clump_points) = (small.iter().filter(|&&x| x).count(), 0);
+    if size.iter().zip(&small).all(|(&s, &x)| s == 0 || x) {
+        clumps = 0;
+    } else {
+        for (i, &l) in labels.iter().enumerate() {
+            if !flags[i] && small[l as usize] {
+                flags[i] = true;
+                clump_points += 1;
+            }
+        }
+    }
+    Ok(Outliers { flags, threshold, isolated, clumps, clump_points, min_piece })
 }
 
 /// Solves a 6 × 6 symmetric system by Gaussian elimination with partial pivoting (None when singular).

@@ -421,7 +421,8 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
                     // A cloud (not a mesh's vertices) may be a noisy scan: denoised where its neighbourhoods say
                     // so (the finest scale being the flattest means there is no noise to remove).
                     Shape::PointCloud(c) if cloud.denoise => {
-                        let (outlier, threshold) = denoise::outliers(pts)?;
+                        let found = denoise::outliers(pts)?;
+                        let outlier = &found.flags;
                         let kept: Vec<u32> = (0..pts.len() as u32).filter(|&i| !outlier[i as usize]).collect();
                         let dropped: Vec<usize> = (0..pts.len()).filter(|&i| outlier[i]).collect();
                         parameters.insert(
@@ -429,8 +430,16 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
                             serde_json::json!({
                                 "dropped": dropped.len(),
                                 "examples": &dropped[..dropped.len().min(10)],
-                                "threshold": threshold,
-                                "rule": "mean distance to the 16 nearest neighbours above 5 × its median over the cloud",
+                                "threshold": found.threshold,
+                                "isolated": found.isolated,
+                                "clumps": found.clumps,
+                                "clump_points": found.clump_points,
+                                "rule": format!(
+                                    "mean distance to the 16 nearest neighbours above 5 × its median over the cloud \
+                                     (isolated); then pieces of the 16-nearest-neighbour graph within that distance \
+                                     with fewer than {} points (clumps)",
+                                    found.min_piece
+                                ),
                             }),
                         );
                         let (sub, normals): (Vec<Point>, Option<Vec<Point>>) = if dropped.is_empty() {
