@@ -39,7 +39,7 @@ pub(crate) fn extrapolation(
         Shape::TetMesh(_) => (8, "the polyhedron as meshed (uniform refinement keeps its flat faces)"),
         Shape::TriangleMesh(_) => {
             return Err(AnalysisError::not_applicable(
-                "extrapolation refines the mesh uniformly, which keeps a curved surface's facets flat: the limit \\
+                "extrapolation refines the mesh uniformly, which keeps a curved surface's facets flat: the limit \
                  would be the polyhedron's spectrum, not the surface's; it applies to flat triangle meshes and tet meshes",
             ))
         }
@@ -53,47 +53,9 @@ pub(crate) fn extrapolation(
     let mut options = operator_options(v, spec)?;
     // Refinement splits the straight edges: the input's curved edge nodes would fit its first level only.
     let curved = options.edge_nodes.take().map(|n| n.len());
-    // The levels' meshes: uniform refinements of the input, each graded toward the re-entrant corners of a flat
-    // domain when asked (the same map on every level, so the size parameter still halves).
-    let mut meshes = vec![v.shape.clone()];
-    for _ in 0..refinements {
-        meshes.push(match meshes.last() {
-            Some(Shape::TriangleMesh(m)) => Shape::TriangleMesh(refine::refine_triangles(m)),
-            Some(Shape::TetMesh(m)) => Shape::TetMesh(refine::refine_tets(m)),
-            _ => unreachable!("checked above"),
-        });
-    }
-    let grading_report = match (&v.shape, grading) {
-        (Shape::TriangleMesh(m), true) => match grading::reentrant_corners(m, u32::from(spec.order)) {
-            Ok(corners) if corners.is_empty() => json!({ "graded": false, "reason": "no re-entrant corners" }),
-            Ok(corners) => {
-                let graded: Option<Vec<Shape>> = meshes
-                    .iter()
-                    .map(|s| match s {
-                        Shape::TriangleMesh(m) => grading::grade(m, &corners).map(Shape::TriangleMesh),
-                        _ => None,
-                    })
-                    .collect();
-                match graded {
-                    Some(g) => {
-                        meshes = g;
-                        json!({ "graded": true, "corners": corners })
-                    }
-                    None => json!({
-                        "graded": false,
-                        "reason": "the grading map would fold a triangle of the input near a corner (too coarse there): \
-                                   levels left uniform",
-                        "corners": corners,
-                    }),
-                }
-            }
-            Err(why) => json!({ "graded": false, "reason": why }),
-        },
-        (Shape::TriangleMesh(_), false) => json!({ "graded": false, "reason": "grading: false" }),
-        _ => json!({ "graded": false, "reason": "tet meshes are refined uniformly (re-entrant edges are not graded)" }),
-    };
-    // What the finest level holds: its unknowns times the Krylov basis (about 3k columns).
-    let coarse = operators::build(&meshes[0], &options)?;
+    // What the finest level holds: its unknowns times the Krylov basis (about 3k columns); checked on the input
+    // before any refinement (grading moves vertices, it does not change the count).
+    let coarse = operators::build(&v.shape, &options)?;
     let finest = coarse.pair.n().saturating_mul(factor.pow(refinements as u32));
     let held = finest.saturating_mul(3 * k + 16);
     if held > hooks.limits.max_values {
@@ -103,20 +65,73 @@ pub(crate) fn extrapolation(
             hooks.limits.max_values
         )));
     }
-    let mut levels = vec![];
-    let mut values: Vec<Vec<f64>> = vec![];
-    for (level, shape) in meshes.iter().enumerate() {
-        hooks.control.check()?;
-        let t = std::time::Instant::now();
-        let op = if level == 0 { coarse.clone() } else { operators::build(shape, &options)? };
-        let s = spectrum::eigs(&op.pair, &solver.eigen_options(k, hooks.threads), None, hooks.control)?;
-        levels.push(json!({
-            "unknowns": op.pair.n(),
-            "eigenvalues": s.values,
-            "completeness": s.stats.completeness,
-            "seconds": t.elapsed().as_secs_f64(),
-        }));
-        values.push(s.values);
+    // The corners to grade toward (flat triangle meshes), in the validated numbering; reported in the input's.
+    let (corners, mut grading_report) = match (&v.shape, grading) {
+        (Shape::TriangleMesh(m), true) => match grading::reentrant_corners(m, u32::from(spec.order)) {
+            Ok(c) if c.is_empty() => (c, json!({ "graded": false, "reason": "no corner limits the order" })),
+            Ok(c) => {
+                let input_vertex = |shape_vertex: u32| v.vertex_map.iter().position(|&x| x == shape_vertex);
+                let listed: Vec<Value> = c
+                    .iter()
+                    .map(|x| {
+                        let mut j = json!(x);
+                        j["vertex"] = json!(input_vertex(x.vertex));
+                        j
+                    })
+                    .collect();
+                (c, json!({ "graded": true, "corners": listed }))
+            }
+            Err(why) => (vec![], json!({ "graded": false, "reason": why })),
+        },
+        (Shape::TriangleMesh(_), false) => (vec![], json!({ "graded": false, "reason": "grading: false" })),
+        _ => (
+            vec![],
+            json!({ "graded": false, "reason": "tet meshes are refined uniformly (re-entrant edges are not graded)" }),
+        ),
+    };
+    // The levels: uniform refinements of the input, each graded by the same map (so the size parameter still
+    // halves), built one at a time. Should the map fold a triangle on some level, every level is solved again
+    // uniform: the levels must be one family.
+    type Levels = (Vec<Value>, Vec<Vec<f64>>, bool);
+    let solve_levels = |graded: bool| -> Result<Levels, AnalysisError> {
+        let (mut levels, mut values) = (vec![], vec![]);
+        let mut plain = v.shape.clone();
+        for level in 0..=refinements {
+            hooks.control.check()?;
+            if level > 0 {
+                plain = match &plain {
+                    Shape::TriangleMesh(m) => Shape::TriangleMesh(refine::refine_triangles(m)),
+                    Shape::TetMesh(m) => Shape::TetMesh(refine::refine_tets(m)),
+                    _ => unreachable!("checked above"),
+                };
+            }
+            let t = std::time::Instant::now();
+            let op = match (&plain, graded) {
+                (Shape::TriangleMesh(m), true) => match grading::grade(m, &corners) {
+                    Some(g) => operators::build(&Shape::TriangleMesh(g), &options)?,
+                    None => return Ok((levels, values, true)),
+                },
+                _ if level == 0 => coarse.clone(),
+                _ => operators::build(&plain, &options)?,
+            };
+            let s = spectrum::eigs(&op.pair, &solver.eigen_options(k, hooks.threads), None, hooks.control)?;
+            levels.push(json!({
+                "unknowns": op.pair.n(),
+                "eigenvalues": s.values,
+                "completeness": s.stats.completeness,
+                "seconds": t.elapsed().as_secs_f64(),
+            }));
+            values.push(s.values);
+        }
+        Ok((levels, values, false))
+    };
+    let (mut levels, mut values, folded) = solve_levels(!corners.is_empty())?;
+    if folded {
+        grading_report["graded"] = json!(false);
+        grading_report["reason"] = json!(
+            "the grading map would fold a triangle near a corner (the input is too coarse there): levels left uniform"
+        );
+        (levels, values, _) = solve_levels(false)?;
     }
     let nominal = 2.0 * f64::from(spec.order);
     let e = richardson(&values, nominal);
@@ -131,9 +146,9 @@ pub(crate) fn extrapolation(
         "levels": levels,
         "grading": grading_report,
         "curved_edges_ignored": curved,
-        "method": "Richardson extrapolation at the order observed on the last three levels (mesh sizes h, h/2, h/4), \\
-                   clamped to [0.5, 2 × nominal]; the nominal order with two levels or where the differences do not \\
-                   shrink monotonically. error_estimate: the larger of the gap to the extrapolation at the nominal \\
+        "method": "Richardson extrapolation at the order observed on the last three levels (mesh sizes h, h/2, h/4), \
+                   clamped to [0.5, 2 × nominal]; the nominal order with two levels or where the differences do not \
+                   shrink monotonically. error_estimate: the larger of the gap to the extrapolation at the nominal \
                    order and a tenth of the correction",
     }))
 }

@@ -290,3 +290,50 @@ fn sphere_edges_curved_by_vertex_normals() {
     let o = OperatorOptions { order: 2, midpoints: p2::Midpoints::Normals, ..Default::default() };
     assert!(operators::build(&cube, &o).is_err(), "tets take curved edges from files");
 }
+
+/// A curved element that turns over is refused, not assembled: the metric's determinant cannot see a fold, the
+/// orientation check can. A moderately curved edge is accepted.
+#[test]
+fn a_folded_curved_element_is_refused() {
+    let vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let faces = [[0u32, 1, 2]];
+    let bend = |y: f64| {
+        move |e: [u32; 2]| {
+            let (a, b) = (vertices[e[0] as usize], vertices[e[1] as usize]);
+            let mid = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.0];
+            if e == [0, 1] {
+                [mid[0], y, 0.0]
+            } else {
+                mid
+            }
+        }
+    };
+    let mild = bend(-0.1);
+    assert!(p2::triangle_p2_pair(&vertices, &faces, Some(&mild)).is_ok());
+    let folded = bend(0.6);
+    let Err(e) = p2::triangle_p2_pair(&vertices, &faces, Some(&folded)) else {
+        panic!("a folded element was assembled")
+    };
+    assert!(e.to_string().contains("inverted"), "{e}");
+}
+
+/// Gmsh's node order of the 10-node tetrahedron, written out by hand from its documentation (not by the writer
+/// above): nodes 5–10 on edges 1–2, 2–3, 3–1, 4–1, 4–3, 4–2 (one-based). Node 9 is moved off edge 4–3 and node 10
+/// off edge 4–2: each must land on its own edge.
+#[test]
+fn gmsh_tet10_node_order_by_hand() {
+    use kac_core::{load_bytes, Format, ReadOptions, ValidateOptions};
+    let text = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n10\n\
+                1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n\
+                5 0.5 0 0\n6 0.5 0.5 0\n7 0 0.5 0\n8 0 0 0.5\n9 0.05 0.5 0.5\n10 0.5 0.05 0.5\n\
+                $EndNodes\n$Elements\n1\n1 11 2 0 1 1 2 3 4 5 6 7 8 9 10\n$EndElements\n";
+    let v = load_bytes(text.as_bytes(), Format::Gmsh, &ReadOptions::default(), &ValidateOptions::default()).unwrap();
+    let nodes = v.edge_nodes.as_ref().expect("two curved edges");
+    let at = |a: usize, b: usize| {
+        let (x, y) = (v.vertex_map[a], v.vertex_map[b]);
+        nodes.get([x, y])
+    };
+    assert_eq!(at(3, 2), Some([0.05, 0.5, 0.5]), "node 9 on edge 4–3");
+    assert_eq!(at(3, 1), Some([0.5, 0.05, 0.5]), "node 10 on edge 4–2");
+    assert_eq!(at(0, 1), Some([0.5, 0.0, 0.0]), "node 5 on edge 1–2");
+}

@@ -139,7 +139,8 @@ pub struct CloudParams {
     pub k: usize,
     pub neighbourhood: Neighbourhood,
     /// Heat-kernel time t for every pair; default: per point, following the local spacing (about 5h² on a
-    /// uniform sample, h the mean distance to the nearest neighbour; see [`point_cloud`]).
+    /// uniform sample, h the mean distance to the nearest neighbour; see [`point_cloud`]); with `Knn`
+    /// neighbourhoods one time (d_k/3)².
     pub t: Option<f64>,
     /// Kernel support radius; default 3√t (6√t for the chapter's normalization).
     pub radius: Option<f64>,
@@ -561,7 +562,7 @@ fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptio
             edges.len()
         ),
         Some(n) => format!(
-            "the input's middle nodes on {} of {} edges (curved, isoparametric elements), the straight edges' midpoints \
+            "the input's middle nodes on {} of {} edges (isoparametric elements), the straight edges' midpoints \
              elsewhere",
             n.len(),
             edges.len()

@@ -178,9 +178,8 @@ fn element<const D: usize>(
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let m = x.len();
     let (mut k, mut ms) = (vec![0.0; m * m], vec![0.0; m * m]);
-    for (xi, w) in rule {
-        let (n, g) = shape::<D>(xi, edges);
-        // J: 3 × D, columns ∂x/∂ξ_d.
+    // J: 3 × D, columns ∂x/∂ξ_d.
+    let jacobian = |g: &[[f64; D]]| {
         let mut j = [[0.0; D]; 3];
         for a in 0..m {
             for c in 0..3 {
@@ -189,6 +188,35 @@ fn element<const D: usize>(
                 }
             }
         }
+        j
+    };
+    // The curved map must keep the straight element's orientation everywhere (the metric's determinant cannot
+    // see a fold): (J₀ × J₁)·n on triangles, det J on tets, against the corners' own, at the quadrature points
+    // and at the corners.
+    let column = |j: &[[f64; D]; 3], d: usize| [j[0][d], j[1][d], j[2][d]];
+    let orientation = |j: &[[f64; D]; 3]| -> Point {
+        match D {
+            2 => vec3::cross(column(j, 0), column(j, 1)),
+            _ => [vec3::dot(column(j, 0), vec3::cross(column(j, 1), column(j, 2))), 0.0, 0.0],
+        }
+    };
+    let straight = {
+        let d: Vec<Point> = (1..=D).map(|c| vec3::sub(x[c], x[0])).collect();
+        match D {
+            2 => vec3::cross(d[0], d[1]),
+            _ => [vec3::dot(d[0], vec3::cross(d[1], d[2])), 0.0, 0.0],
+        }
+    };
+    let corners = (0..=D).map(|c| std::array::from_fn::<f64, D, _>(|d| if c == d + 1 { 1.0 } else { 0.0 }));
+    let curved = edges.iter().enumerate().any(|(e, &[a, b])| x[D + 1 + e] != vec3::scale(vec3::add(x[a], x[b]), 0.5));
+    for xi in rule.iter().map(|r| r.0).chain(corners).filter(|_| curved) {
+        if vec3::dot(orientation(&jacobian(&shape::<D>(&xi, edges).1)), straight) <= 0.0 {
+            return None;
+        }
+    }
+    for (xi, w) in rule {
+        let (n, g) = shape::<D>(xi, edges);
+        let j = jacobian(&g);
         let metric: [[f64; D]; D] =
             std::array::from_fn(|p| std::array::from_fn(|q| (0..3).map(|c| j[c][p] * j[c][q]).sum()));
         let (ginv, det) = inverse::<D>(&metric)?;

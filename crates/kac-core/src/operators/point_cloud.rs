@@ -231,7 +231,9 @@ pub fn belkin_niyogi_pair(
     // (a given t or radius far above the spacing).
     let radius_of = |ti: f64| given_r.unwrap_or(3.0 * ti.sqrt());
     let expected: f64 = (0..n)
-        .map(|i| 0.5 * nb.k as f64 * (radius_of(times[i]) / distance_to(i, nb.k - 1).max(f64::MIN_POSITIVE)).powi(2))
+        .map(|i| {
+            0.5 * nb.k as f64 * (radius_of(times[i]) / distance_to(i, nb.k - 1).max(dk).max(f64::MIN_POSITIVE)).powi(2)
+        })
         .sum();
     if params.neighbourhood == Neighbourhood::Radius && expected > super::manifold::MAX_PAIRS {
         return Err(OperatorError::InvalidParameter {
