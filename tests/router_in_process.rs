@@ -828,6 +828,20 @@ async fn extrapolated_spectra_carry_their_error_and_order() {
     let sphere = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(1));
     let (status, s) = call(&app, run(sphere, json!({ "analysis": "spectrum", "k": 4, "extrapolate": true }))).await;
     assert_eq!((status, s["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("not-applicable")), "{s}");
+    // `grading` and `refinements` mean something only with `extrapolate`, and `extrapolate` not with a band:
+    // refused at submission rather than ignored.
+    for req in [
+        json!({ "analysis": "spectrum", "k": 1, "grading": false }),
+        json!({ "analysis": "spectrum", "k": 1, "refinements": 3 }),
+        json!({ "analysis": "spectrum", "band": [0.0, 50.0], "extrapolate": true }),
+    ] {
+        let (status, s) = call(&app, run(l_shape_off(4), req.clone())).await;
+        assert_eq!(
+            (status, s["code"].as_str()),
+            (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-parameter")),
+            "{req} {s}"
+        );
+    }
 }
 
 /// Issue 20's target: the first 25 Dirichlet eigenvalues of both Gordon–Webb–Wolpert drums, P2 extrapolated on

@@ -6,7 +6,7 @@ use kac_core::operators::manifold::CloudNormalization;
 use kac_core::operators::p2::Midpoints;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
-pub const ALGORITHM_VERSION: u32 = 5;
+pub const ALGORITHM_VERSION: u32 = 6;
 
 /// Which operator to build (see `kac_core::operators`): one type for the service's `operator` object and the
 /// CLI's operator flags (`--operator`, `--mass`, `--boundary`, `--dirichlet-vertices`, `--neighbours`, `--time`,
@@ -59,11 +59,13 @@ pub struct OperatorSpec {
     #[serde(skip_serializing_if = "is_one")]
     #[arg(long, default_value_t = 1)]
     pub order: u8,
-    /// With order 2 on a triangle mesh whose file gives no edge nodes: `straight` edges (default; flat elements,
-    /// the polyhedron's spectrum) or edges curved by the vertex `normals` (a smooth surface's estimate; not for
-    /// meshes with sharp creases, whose averaged normals would round them).
-    #[serde(skip_serializing_if = "is_straight")]
-    #[arg(long, default_value = "straight", value_parser = parse_midpoints)]
+    /// Where order 2 puts its edge nodes: `input` (default: a second-order file's middle nodes where it gives them,
+    /// curving the elements, else the straight edges' midpoints), `straight` (always the straight edges: flat
+    /// elements, the polyhedron's spectrum, whatever the file gives) or, on a triangle mesh whose file gives no
+    /// edge nodes, edges curved by the vertex `normals` (a smooth surface's estimate; not for meshes with sharp
+    /// creases, whose averaged normals would round them). Only `normals` is refused with order 1.
+    #[serde(skip_serializing_if = "is_input")]
+    #[arg(long, default_value = "input", value_parser = parse_midpoints)]
     pub midpoints: Midpoints,
     /// Point clouds in R³: project the points onto a moving-least-squares surface before building the operator
     /// where their neighbourhoods show noise (default true; the CLI's `--no-denoise` turns it off). The scale,
@@ -81,15 +83,16 @@ fn is_symmetric(n: &CloudNormalization) -> bool {
     *n == CloudNormalization::Symmetric
 }
 
-fn is_straight(m: &Midpoints) -> bool {
-    *m == Midpoints::Straight
+fn is_input(m: &Midpoints) -> bool {
+    *m == Midpoints::Input
 }
 
 fn parse_midpoints(s: &str) -> Result<Midpoints, String> {
     match s {
+        "input" => Ok(Midpoints::Input),
         "straight" => Ok(Midpoints::Straight),
         "normals" => Ok(Midpoints::Normals),
-        _ => Err(format!("unknown midpoints '{s}'; one of: straight, normals")),
+        _ => Err(format!("unknown midpoints '{s}'; one of: input, straight, normals")),
     }
 }
 
@@ -135,7 +138,7 @@ impl Default for OperatorSpec {
             intrinsic_dimension: None,
             normalization: CloudNormalization::Symmetric,
             order: 1,
-            midpoints: Midpoints::Straight,
+            midpoints: Midpoints::Input,
             denoise: true,
         }
     }
@@ -296,17 +299,20 @@ pub enum Analysis {
         /// (two terms where the boundary's measure is known).
         #[serde(default, skip_serializing_if = "std::ops::Not::not")]
         counting: bool,
-        /// Continuum eigenvalues with error bars: solve again on `refinements` uniform refinements of the mesh
-        /// and extrapolate (Richardson, at the observed order), for flat triangle meshes and tet meshes.
+        /// Continuum eigenvalues with error bars: solve again on `refinements` refinements of the mesh (each
+        /// triangle into four, each tet into eight; graded toward the corners that limit the order unless
+        /// `grading` is false) and extrapolate (Richardson, at the observed order), for flat triangle meshes and
+        /// tet meshes. Not with `band`.
         #[serde(default, skip_serializing_if = "std::ops::Not::not")]
         extrapolate: bool,
-        /// Uniform refinements for `extrapolate`: 1 (two levels, the nominal order) to 3 (default 2: three levels,
-        /// the order observed).
+        /// Refinements for `extrapolate` (only with it): 1 (two levels, the nominal order) to 3 (default 2: three
+        /// levels, the order observed).
         #[serde(default = "refinements_default", skip_serializing_if = "is_two")]
         refinements: usize,
-        /// With `extrapolate` on a flat triangle mesh: grade every level toward the domain's re-entrant corners
-        /// (radially, element size ∝ r^{1−α/p} for a corner of exponent α = π/ω), which restores the nominal order
-        /// there (default true; false: uniform levels).
+        /// With `extrapolate` on a flat triangle mesh (only with it): grade every level toward the domain's corners
+        /// that limit the order (re-entrant ones; with order 2 also those above 90°, whose r^{π/ω} singularity caps
+        /// P2), radially, element size ∝ r^{1−α/p} for a corner of exponent α = π/ω, which restores the nominal
+        /// order there (default true; false: uniform levels).
         #[serde(default = "yes", skip_serializing_if = "is_true")]
         grading: bool,
         #[serde(default)]
@@ -581,6 +587,29 @@ impl Analysis {
             Analysis::Smooth { .. } => "smooth",
             Analysis::Interpolate { .. } => "interpolate",
         }
+    }
+
+    /// Options that only mean something together: `refinements` and `grading` with `extrapolate`, which takes
+    /// the k smallest pairs (not a `band`) on 1 to 3 refinements. Checked at submission and again before a run,
+    /// so that no option is silently ignored.
+    pub fn check_options(&self) -> Result<(), AnalysisError> {
+        if let Analysis::Spectrum { band, extrapolate, refinements, grading, .. } = self {
+            if *extrapolate {
+                if band.is_some() {
+                    return Err(AnalysisError::invalid_parameter("extrapolate takes the k smallest pairs, not a band"));
+                }
+                if !(1..=3).contains(refinements) {
+                    return Err(AnalysisError::invalid_parameter(format!(
+                        "refinements = {refinements}: give 1, 2 or 3"
+                    )));
+                }
+            } else if *refinements != refinements_default() || !*grading {
+                return Err(AnalysisError::invalid_parameter(
+                    "`refinements` and `grading` set how `extrapolate` refines; give them with `extrapolate: true`",
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The operator an analysis builds, where it takes one.

@@ -166,6 +166,7 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
     let reused = std::cell::Cell::new(false);
     let out = match analysis {
         Analysis::Spectrum { k, band, eigenvectors, counting, extrapolate, refinements, grading, operator, solver } => {
+            analysis.check_options()?;
             let (e, k) = match band {
                 Some(band) => {
                     let e = Arc::new(band_pairs(v, operator, solver, *band, hooks)?);
@@ -180,9 +181,6 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                 out.summary["counting"] = operator::counting_json(v, &e, values, operator);
             }
             if *extrapolate {
-                if band.is_some() {
-                    return Err(AnalysisError::invalid_parameter("extrapolate takes the k smallest pairs, not a band"));
-                }
                 hooks.control.phase("extrapolating", 0, 0)?;
                 out.summary["extrapolation"] =
                     extrapolate::extrapolation(v, operator, solver, k, *refinements, *grading, hooks)?;

@@ -36,14 +36,15 @@ pub struct SpectrumCmd {
     /// Add the counting function N(λ) at each eigenvalue beside Weyl's law (`counting`).
     #[arg(long)]
     pub counting: bool,
-    /// Continuum eigenvalues with error bars by Richardson extrapolation over uniform refinements (flat triangle
-    /// meshes and tet meshes; `extrapolate`).
+    /// Continuum eigenvalues with error bars by Richardson extrapolation over refinements, graded toward the
+    /// corners that limit the order (flat triangle meshes and tet meshes; `extrapolate`).
     #[arg(long)]
     pub extrapolate: bool,
-    /// Uniform refinements for --extrapolate (1 to 3).
+    /// Refinements for --extrapolate (1 to 3; only with it).
     #[arg(long, default_value_t = crate::analysis::refinements_default())]
     pub refinements: usize,
-    /// With --extrapolate: uniform levels, without grading toward re-entrant corners (`grading: false`).
+    /// With --extrapolate: uniform levels, without grading toward the corners that limit the order (`grading:
+    /// false`; only with --extrapolate).
     #[arg(long)]
     pub no_grading: bool,
     /// Check by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the found ones was missed, and

@@ -8,6 +8,7 @@ use super::AppState;
 use crate::analysis::Analysis;
 
 pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
+    a.check_options().map_err(ApiError::Analysis)?;
     // Every analysis says whether it asks for eigenpairs, and how many (no default arm: a new one must say).
     let asked = match a {
         Analysis::Spectrum { k, .. }

@@ -162,6 +162,37 @@ fn a_clump_of_strays_is_dropped() {
     assert_eq!(o.pair.components().1, 1);
 }
 
+/// A scan in lines: the unit sphere sampled along 60 circles of latitude, points ten times closer along a line
+/// than the lines are apart, so that each point's 16 nearest neighbours all lie on its own line and every line is
+/// a piece of the neighbour graph. The lines near the equator hold more than 1 % of the points, those near the
+/// poles less; together the small ones hold more than 2 % of the cloud, so they are the sampling, not strays, and
+/// none is dropped as a clump (before that limit every line near a pole was dropped).
+#[test]
+fn scan_lines_are_not_clumps() {
+    let lines = 60;
+    let along = PI / lines as f64 / 10.0;
+    let mut points = vec![];
+    for j in 0..lines {
+        let theta = PI * (j as f64 + 0.5) / lines as f64;
+        let count = ((2.0 * PI * theta.sin()) / along).round().max(1.0) as usize;
+        for i in 0..count {
+            let phi = 2.0 * PI * i as f64 / count as f64;
+            points.push([theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]);
+        }
+    }
+    let found = kac_core::operators::denoise::outliers(&points).unwrap();
+    let dropped = found.flags.iter().filter(|&&f| f).count();
+    eprintln!(
+        "{} points in {lines} lines: {dropped} dropped ({} isolated), {} kept in small pieces",
+        points.len(),
+        found.isolated,
+        found.clumps_kept
+    );
+    assert!(found.clumps_kept > points.len() / 50, "the small lines hold more than 2 %: {}", found.clumps_kept);
+    assert_eq!((found.clumps, found.clump_points), (0, 0));
+    assert!(dropped < points.len() / 1000, "{dropped} of {} dropped", points.len());
+}
+
 /// Density varying tenfold from pole to pole (accepted with probability (1 + 9(z + 1)/2)/10): the local areas
 /// weigh the measure out (ΣM within 3 % of 4π), the kernel reaches every point's 4th neighbour and keeps the cloud
 /// in one piece (with one global (2h)² the sparse pole fell apart into four components: four zero eigenvalues),

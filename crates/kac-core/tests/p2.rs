@@ -176,7 +176,7 @@ fn second_order_msh(vertices: &[[f64; 3]], elements: &[Vec<u32>], mid: &dyn Fn([
 /// The same disk as above, now read from second-order Gmsh files whose boundary edges' middle nodes lie on the
 /// circle: P2 converges at order ≈ 4 (the reader carries the nodes to the operator); the same corners with
 /// straight middle nodes are the polygon (order 2, the same operator as the OFF file of the corners, and another
-/// shape id than the curved file), and P1 ignores the nodes. A 10-node tet file with straight middle nodes in Gmsh's edge order is read without a warning.
+/// shape id than the curved file; `midpoints: straight` gives it from the curved file too), and P1 ignores the nodes. A 10-node tet file with straight middle nodes in Gmsh's edge order is read without a warning.
 #[test]
 fn second_order_gmsh_files_curve_the_elements() {
     use kac_core::{load_bytes, Format, ReadOptions, ValidateOptions};
@@ -231,6 +231,17 @@ fn second_order_gmsh_files_curve_the_elements() {
         assert!(rel(&a, &b, 0) < 1e-12, "{a:?} {b:?}");
         assert_eq!(dirichlet(&v, 1), dirichlet(&s, 1), "P1 ignores the middle nodes");
         assert_ne!(v.id, s.id, "curved edges are part of the shape");
+        // `midpoints: straight` sets the file's middle nodes aside: the polygon's operator again.
+        let o = OperatorOptions {
+            order: 2,
+            boundary: Boundary::Dirichlet,
+            edge_nodes: v.edge_nodes.clone(),
+            midpoints: p2::Midpoints::Straight,
+            ..Default::default()
+        };
+        let asked = operators::build(&v.shape, &o).unwrap();
+        assert!(asked.parameters["midpoints"].as_str().unwrap().contains("not used"), "{:?}", asked.parameters);
+        assert!(rel(&smallest(&asked.pair, 3), &b, 0) < 1e-12, "straight as asked");
         flat.push(rel(&dirichlet(&s, 2), &exact, 0));
     }
     let (oc, of) = (orders(&curved), orders(&flat));

@@ -47,6 +47,8 @@ pub struct Denoised {
     pub normals_used: bool,
     /// The points the fits were made at (every point projects onto its nearest one's fit).
     pub anchors: usize,
+    /// Points farther than half a fit's radius from every anchor, fitted on their own.
+    pub own_fits: usize,
 }
 
 /// Eigen-decomposition of a symmetric 3×3 matrix by Jacobi rotations: eigenvalues ascending with unit vectors.
@@ -195,31 +197,40 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
     let every = (best / 64).max(1);
     let anchor =
         |i: usize| every == 1 || (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40 & (every as u64 - 1) == 0;
-    let anchors: Vec<u32> = (0..n as u32).filter(|&i| anchor(i as usize)).collect();
-    let fits: Vec<Fit> = anchors
-        .par_iter()
-        .map(|&i| {
-            let i = i as usize;
-            let found = tree.nearest_n::<kiddo::SquaredEuclidean>(&points[i], per + 1);
-            let near: Vec<u32> = found.iter().map(|f| f.item as u32).filter(|&j| j as usize != i).take(per).collect();
-            fit(points, normals, i, &near)
-        })
-        .collect();
+    let mut anchors: Vec<u32> = (0..n as u32).filter(|&i| anchor(i as usize)).collect();
+    if anchors.is_empty() {
+        anchors = (0..n as u32).collect();
+    }
+    let every = if anchors.len() == n { 1 } else { every };
+    let fit_at = |i: usize| {
+        let found = tree.nearest_n::<kiddo::SquaredEuclidean>(&points[i], per + 1);
+        let near: Vec<u32> = found.iter().map(|f| f.item as u32).filter(|&j| j as usize != i).take(per).collect();
+        fit(points, normals, i, &near)
+    };
+    let fits: Vec<Fit> = anchors.par_iter().map(|&i| fit_at(i as usize)).collect();
     let mut anchor_tree: kiddo::KdTree<f64, 3> = kiddo::KdTree::with_capacity(anchors.len());
     for (a, &i) in anchors.iter().enumerate() {
         anchor_tree.add(&points[i as usize], a as u64);
     }
-    let projected: Vec<Point> = (0..n)
+    // A point whose nearest anchor stands farther than half that fit's radius (its weights' width: a thin part or
+    // a small piece no anchor fell in) would be projected onto a surface extrapolated beyond its data: it gets a
+    // fit of its own.
+    let (projected, own_fits): (Vec<Point>, Vec<bool>) = (0..n)
         .into_par_iter()
         .map(|i| {
-            let a = if every == 1 {
-                i
+            if every == 1 {
+                return (fits[i].project(points[i]), false);
+            }
+            let nearest = anchor_tree.nearest_one::<kiddo::SquaredEuclidean>(&points[i]);
+            let f = &fits[nearest.item as usize];
+            if nearest.distance.sqrt() > 0.5 * f.r {
+                (fit_at(i).project(points[i]), true)
             } else {
-                anchor_tree.nearest_one::<kiddo::SquaredEuclidean>(&points[i]).item as usize
-            };
-            fits[a].project(points[i])
+                (f.project(points[i]), false)
+            }
         })
-        .collect();
+        .unzip();
+    let own_fits = own_fits.iter().filter(|&&x| x).count();
     let mut moved: Vec<f64> = projected.iter().zip(points).map(|(f, p)| vec3::norm(vec3::sub(*f, *p))).collect();
     let mut noise: Vec<f64> = fits.iter().map(|f| f.rms).collect();
     noise.sort_by(f64::total_cmp);
@@ -232,6 +243,7 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
         moved_max: moved.last().copied().unwrap_or(0.0),
         normals_used: normals.is_some(),
         anchors: anchors.len(),
+        own_fits,
     };
     Ok((projected, report))
 }
@@ -324,8 +336,13 @@ pub struct Outliers {
     /// Clumps dropped: pieces of the neighbour graph below `min_piece` points, and the points in them.
     pub clumps: usize,
     pub clump_points: usize,
+    /// Points in small pieces that were kept because together they hold more than `MAX_CLUMP_SHARE` of the cloud.
+    pub clumps_kept: usize,
     pub min_piece: usize,
 }
+
+/// The largest share of a cloud that may be dropped as clumps: above it the small pieces are the sampling itself.
+pub const MAX_CLUMP_SHARE: f64 = 0.02;
 
 /// Finds the points off the surface: first those far from their neighbours (the distance rule), then clumps of
 /// stray points close together, which that rule cannot see: the pieces of the graph joining each point to its 16
@@ -362,10 +379,17 @@ pub fn outliers(points: &[Point]) -> Result<Outliers, OperatorError> {
     }
     let min_piece = (n / 100).max(16);
     let small: Vec<bool> = size.iter().map(|&s| s > 0 && s < min_piece).collect();
-    // Never everything: where no piece is large enough (a cloud of scattered pieces), nothing is a clump.
-    let (mut clumps, mut clump_points) = (small.iter().filter(|&&x| x).count(), 0);
+    let in_small: usize = size.iter().zip(&small).filter(|(_, &x)| x).map(|(&s, _)| s).sum();
+    // Never everything, nor much: where no piece is large enough (a cloud of scattered pieces), or where the
+    // small pieces together hold more than `MAX_CLUMP_SHARE` of the points (a scan whose lines lie farther apart
+    // than 16 neighbours reach along them: every line a piece of its own), they are the sampling, not strays, and
+    // nothing is dropped as a clump (`clumps_kept` says how many points were spared).
+    let (mut clumps, mut clump_points, mut clumps_kept) = (small.iter().filter(|&&x| x).count(), 0, 0);
     if size.iter().zip(&small).all(|(&s, &x)| s == 0 || x) {
         clumps = 0;
+    } else if in_small as f64 > MAX_CLUMP_SHARE * n as f64 {
+        clumps = 0;
+        clumps_kept = in_small;
     } else {
         for (i, &l) in labels.iter().enumerate() {
             if !flags[i] && small[l as usize] {
@@ -374,7 +398,7 @@ pub fn outliers(points: &[Point]) -> Result<Outliers, OperatorError> {
             }
         }
     }
-    Ok(Outliers { flags, threshold, isolated, clumps, clump_points, min_piece })
+    Ok(Outliers { flags, threshold, isolated, clumps, clump_points, clumps_kept, min_piece })
 }
 
 /// Solves a 6 × 6 symmetric system by Gaussian elimination with partial pivoting (None when singular).

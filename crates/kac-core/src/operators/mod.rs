@@ -191,8 +191,9 @@ pub struct OperatorOptions {
     /// The input's middle nodes of curved edges (shape numbering), for quadratic elements (`None`: straight).
     #[serde(skip)]
     pub edge_nodes: Option<Arc<crate::geometry::EdgeNodes>>,
-    /// Quadratic elements on a triangle mesh whose input gives no edge nodes: straight edges (default) or edges
-    /// curved by the vertex normals ([`p2::midpoints_from_normals`]).
+    /// Where quadratic elements put their edge nodes: the input's (`edge_nodes`) where it gives them, else on the
+    /// straight edges (default); always straight; or, on a triangle mesh whose input gives none, on edges curved by
+    /// the vertex normals ([`p2::midpoints_from_normals`]).
     pub midpoints: p2::Midpoints,
 }
 
@@ -207,7 +208,7 @@ impl Default for OperatorOptions {
             order: 1,
             polygons: None,
             edge_nodes: None,
-            midpoints: p2::Midpoints::Straight,
+            midpoints: p2::Midpoints::Input,
         }
     }
 }
@@ -345,7 +346,7 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
     let mut kept_points: Option<Vec<u32>> = None;
     if options.order == 2 {
         return build_p2(shape, op, mass, options);
-    } else if options.midpoints != p2::Midpoints::Straight {
+    } else if options.midpoints == p2::Midpoints::Normals {
         return Err(OperatorError::InvalidParameter {
             name: "midpoints",
             message: "edge midpoints place the nodes of quadratic elements: give order 2".into(),
@@ -435,11 +436,14 @@ pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, Opera
                                 "isolated": found.isolated,
                                 "clumps": found.clumps,
                                 "clump_points": found.clump_points,
+                                "clumps_kept": found.clumps_kept,
                                 "rule": format!(
                                     "mean distance to the 16 nearest neighbours above 5 × its median over the cloud \
                                      (isolated); then pieces of the 16-nearest-neighbour graph within that distance \
-                                     with fewer than {} points (clumps)",
-                                    found.min_piece
+                                     with fewer than {} points (clumps), unless such pieces hold more than {} % of \
+                                     the points together (then they are the sampling, and kept: clumps_kept)",
+                                    found.min_piece,
+                                    denoise::MAX_CLUMP_SHARE * 100.0
                                 ),
                             }),
                         );
@@ -512,12 +516,17 @@ fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptio
             message: format!("quadratic elements take the consistent mass, not '{}'", mass.name()),
         });
     }
-    // The input's curved edges where it gave their middle nodes (second-order elements), else straight ones or,
-    // when asked, edges curved by the vertex normals.
+    // The input's curved edges where it gave their middle nodes (second-order elements) unless straight ones are
+    // asked for, else straight ones or, when asked, edges curved by the vertex normals.
     let straight = |v: &[Point], [a, b]: [u32; 2]| vec3::scale(vec3::add(v[a as usize], v[b as usize]), 0.5);
-    let from_normals = match (options.midpoints, shape, &options.edge_nodes) {
+    let file_nodes = match options.midpoints {
+        p2::Midpoints::Straight => None,
+        p2::Midpoints::Input | p2::Midpoints::Normals => options.edge_nodes.as_deref(),
+    };
+    let from_normals = match (options.midpoints, shape, file_nodes) {
         (p2::Midpoints::Normals, Shape::TriangleMesh(m), None) => Some(p2::midpoints_from_normals(m)),
-        (p2::Midpoints::Normals, Shape::TriangleMesh(_), Some(_)) | (p2::Midpoints::Straight, _, _) => None,
+        (p2::Midpoints::Normals, Shape::TriangleMesh(_), Some(_))
+        | (p2::Midpoints::Straight | p2::Midpoints::Input, _, _) => None,
         (p2::Midpoints::Normals, _, _) => {
             return Err(OperatorError::InvalidParameter {
                 name: "midpoints",
@@ -529,7 +538,7 @@ fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptio
             })
         }
     };
-    let nodes = options.edge_nodes.as_deref().or(from_normals.as_ref());
+    let nodes = file_nodes.or(from_normals.as_ref());
     let (pair, edges) = match (op, shape) {
         (OperatorKind::Cotan, Shape::TriangleMesh(m)) => {
             let at = |e: [u32; 2]| nodes.and_then(|n| n.get(e)).unwrap_or_else(|| straight(&m.vertices, e));
@@ -567,7 +576,13 @@ fn build_p2(shape: &Shape, op: OperatorKind, mass: Mass, options: &OperatorOptio
             n.len(),
             edges.len()
         ),
-        None => "on the straight edges (flat elements: the input mesh's geometry)".into(),
+        None => match options.edge_nodes.as_deref().filter(|_| options.midpoints == p2::Midpoints::Straight) {
+            Some(n) => format!(
+                "on the straight edges as asked (flat elements), the input's middle nodes on {} edges not used",
+                n.len()
+            ),
+            None => "on the straight edges (flat elements: the input mesh's geometry)".into(),
+        },
     };
     parameters.insert("midpoints".into(), midpoints.into());
     Ok(Operator {

@@ -431,8 +431,11 @@ mod tests {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Midpoints {
-    /// On the straight edges: flat elements, the polyhedron's spectrum (default).
+    /// The input's middle nodes where its file gives them (second-order Gmsh elements: curved, isoparametric), the
+    /// straight edges' midpoints elsewhere (default).
     #[default]
+    Input,
+    /// On the straight edges, whatever the file gives: flat elements, the polyhedron's spectrum.
     Straight,
     /// On the curve through the edge's ends whose tangents there are perpendicular to the vertex normals
     /// (angle-weighted): for a smooth surface sampled by the vertices, a second-order estimate of the surface.

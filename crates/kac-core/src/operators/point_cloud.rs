@@ -227,12 +227,14 @@ pub fn belkin_niyogi_pair(
             (t, "local: t_i = max(c·Ā_i, d₄²/9), c = 5h²/mean A; pairs within 3√t_ij, t_ij = (t_i + t_j)/2")
         }
     };
-    // The pairs the kernel joins, estimated per point as k (r / d_k)² — refused above the limit before the search
-    // (a given t or radius far above the spacing).
+    // The pairs the kernel joins, estimated per point as k (r / d_k,i)² with its own k-th-neighbour distance (a
+    // dense cluster holds more pairs than the mean spacing says) — refused above the limit before the search (a
+    // given t or radius far above the spacing).
     let radius_of = |ti: f64| given_r.unwrap_or(3.0 * ti.sqrt());
     let expected: f64 = (0..n)
         .map(|i| {
-            0.5 * nb.k as f64 * (radius_of(times[i]) / distance_to(i, nb.k - 1).max(dk).max(f64::MIN_POSITIVE)).powi(2)
+            let local = distance_to(i, nb.k - 1).max(1e-3 * dk).max(f64::MIN_POSITIVE);
+            0.5 * nb.k as f64 * (radius_of(times[i]) / local).powi(2)
         })
         .sum();
     if params.neighbourhood == Neighbourhood::Radius && expected > super::manifold::MAX_PAIRS {

@@ -4,7 +4,9 @@
 //! problems; near re-entrant corners the eigenfunctions are singular and the observed order falls (on an
 //! L-shaped domain to 4/3 for the first eigenvalue), which is why it is reported. The error estimate is the
 //! larger of the gap between the extrapolations at the observed and the nominal order and a tenth of the
-//! correction itself: where the asymptotic regime holds these are small, where it does not they say so.
+//! correction itself: where the asymptotic regime holds these are small, where it does not they say so. Where no
+//! order can be observed (two levels, or differences that do not shrink monotonically) it is at least the whole
+//! correction, and with three or more levels at least the last level's change.
 
 use serde::Serialize;
 
@@ -49,7 +51,15 @@ pub fn richardson(levels: &[Vec<f64>], nominal: f64) -> Vec<Extrapolated> {
                 .filter(|p| p.is_finite());
             let order_used = observed.map_or(nominal, |p| p.clamp(0.5, 2.0 * nominal));
             let value = at(order_used);
-            let error_estimate = (value - at(nominal)).abs().max(0.1 * (value - fine).abs());
+            // Where no order could be observed (two levels, or differences that do not shrink monotonically:
+            // the levels are not yet in the asymptotic regime) nothing says the nominal order holds: the estimate
+            // is then at least the whole correction, and with three or more levels the last change too.
+            let unobserved = match (observed, l) {
+                (Some(_), _) => 0.0,
+                (None, 2) => (value - fine).abs(),
+                (None, _) => (value - fine).abs().max((fine - mid).abs()),
+            };
+            let error_estimate = (value - at(nominal)).abs().max(0.1 * (value - fine).abs()).max(unobserved);
             Extrapolated { value, error_estimate, observed_order: observed, order_used }
         })
         .collect()
@@ -69,5 +79,15 @@ mod tests {
         // A singular-corner order (4/3) is observed and used.
         assert!((e[1].value - 5.0).abs() < 1e-12 && (e[1].order_used - 4.0 / 3.0).abs() < 1e-12, "{:?}", e[1]);
         assert!(e[1].error_estimate > 0.01, "far from the nominal order: the estimate says so");
+    }
+
+    #[test]
+    fn without_an_observed_order_the_estimate_covers_the_last_change() {
+        // Differences that change sign (1 → 1.5 → 1.4): no order is observed; the estimate is at least the last
+        // change, 0.1. With two levels it is at least the whole correction.
+        let e = richardson(&[vec![1.0], vec![1.5], vec![1.4]], 2.0);
+        assert!(e[0].observed_order.is_none() && e[0].error_estimate >= 0.1 - 1e-15, "{:?}", e[0]);
+        let e = richardson(&[vec![1.0], vec![1.3]], 2.0);
+        assert!((e[0].error_estimate - 0.1).abs() < 1e-12, "{:?}", e[0]);
     }
 }
