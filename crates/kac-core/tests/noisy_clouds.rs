@@ -162,6 +162,27 @@ fn a_clump_of_strays_is_dropped() {
     assert_eq!(o.pair.components().1, 1);
 }
 
+/// The shape id does not depend on the points' order, so neither may denoising: the same noisy cloud reversed is
+/// projected onto the same surface (the samples, subsamples and anchors are chosen by hashing positions).
+#[test]
+fn denoising_does_not_depend_on_the_points_order() {
+    let n = 20_000;
+    let g = gaussians(n, 7);
+    let noisy: Vec<[f64; 3]> = generate::random_sphere_points(n, 8)
+        .iter()
+        .zip(&g)
+        .map(|(p, e)| p.map(|c| c * (1.0 + 0.02 * e)))
+        .collect();
+    let reversed: Vec<[f64; 3]> = noisy.iter().rev().copied().collect();
+    let (a, ra) = kac_core::operators::denoise::denoise(&noisy, None).unwrap();
+    let (b, rb) = kac_core::operators::denoise::denoise(&reversed, None).unwrap();
+    assert_eq!((ra.k, ra.anchors), (rb.k, rb.anchors));
+    assert!(ra.k > 16 && ra.anchors < n, "the anchors are a subsample here: {} of {n}", ra.anchors);
+    let worst = a.iter().zip(b.iter().rev()).map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f64::max));
+    let worst = worst.fold(0.0, f64::max);
+    assert!(worst < 1e-12, "projections differ by {worst}");
+}
+
 /// A scan in lines: the unit sphere sampled along 60 circles of latitude, points ten times closer along a line
 /// than the lines are apart, so that each point's 16 nearest neighbours all lie on its own line and every line is
 /// a piece of the neighbour graph. The lines near the equator hold more than 1 % of the points, those near the

@@ -143,19 +143,35 @@ fn variation(points: &[Point], tree: &kiddo::KdTree<f64, 3>, k: usize, sample: &
     v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
+/// A well-mixed 64-bit hash of a point's coordinates (SplitMix64's finalizer over their bits).
+fn position_hash(p: &Point) -> u64 {
+    let mut h = 0x9e37_79b9_7f4a_7c15u64;
+    for c in p {
+        h ^= (c + 0.0).to_bits();
+        h = (h ^ (h >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        h = (h ^ (h >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        h ^= h >> 31;
+    }
+    h
+}
+
 /// Projects every point onto its local moving-least-squares quadratic (see the module documentation).
 pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point>, Denoised), OperatorError> {
     let n = points.len();
+    // Every choice of points below (the sample, the subsamples, the anchors) hashes the point's position, not its
+    // index, so that the same cloud in another order (one shape id) is denoised the same way.
+    let key: Vec<u64> = points.par_iter().map(position_hash).collect();
     // A fixed, spread sample of points to choose the scale on (every point for small clouds).
-    let step = (n / 2000).max(1);
-    let sample: Vec<usize> = (0..n).step_by(step).collect();
+    let step = (n / 2000).max(1) as u64;
+    let sample: Vec<usize> = (0..n).filter(|&i| step == 1 || key[i] % step == 0).collect();
+    let sample = if sample.is_empty() { (0..n).collect() } else { sample };
     let mut scales = vec![];
     let mut k = 16usize;
     // Above 256 neighbours a neighbourhood's shape is read from one point in k/256 of it (a hashed subsample,
     // so that no order of the input, such as a scanner's lines, aliases with it): the same radius, 256 points.
     let subsample = |stride: usize| {
         let keep =
-            |i: usize| stride == 1 || (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40 & (stride as u64 - 1) == 0;
+            |i: usize| stride == 1 || key[i] >> 40 & (stride as u64 - 1) == 0;
         let chosen: Vec<u32> = (0..n as u32).filter(|&i| keep(i as usize)).collect();
         let mut tree: kiddo::KdTree<f64, 3> = kiddo::KdTree::with_capacity(chosen.len().max(1));
         for &i in &chosen {
@@ -196,7 +212,7 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
     // Below 128 neighbours every point is its own anchor.
     let every = (best / 64).max(1);
     let anchor =
-        |i: usize| every == 1 || (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40 & (every as u64 - 1) == 0;
+        |i: usize| every == 1 || key[i] >> 40 & (every as u64 - 1) == 0;
     let mut anchors: Vec<u32> = (0..n as u32).filter(|&i| anchor(i as usize)).collect();
     if anchors.is_empty() {
         anchors = (0..n as u32).collect();
