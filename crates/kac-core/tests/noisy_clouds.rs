@@ -168,11 +168,8 @@ fn a_clump_of_strays_is_dropped() {
 fn denoising_does_not_depend_on_the_points_order() {
     let n = 20_000;
     let g = gaussians(n, 7);
-    let noisy: Vec<[f64; 3]> = generate::random_sphere_points(n, 8)
-        .iter()
-        .zip(&g)
-        .map(|(p, e)| p.map(|c| c * (1.0 + 0.02 * e)))
-        .collect();
+    let noisy: Vec<[f64; 3]> =
+        generate::random_sphere_points(n, 8).iter().zip(&g).map(|(p, e)| p.map(|c| c * (1.0 + 0.02 * e))).collect();
     let reversed: Vec<[f64; 3]> = noisy.iter().rev().copied().collect();
     let (a, ra) = kac_core::operators::denoise::denoise(&noisy, None).unwrap();
     let (b, rb) = kac_core::operators::denoise::denoise(&reversed, None).unwrap();

@@ -163,15 +163,14 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
     let key: Vec<u64> = points.par_iter().map(position_hash).collect();
     // A fixed, spread sample of points to choose the scale on (every point for small clouds).
     let step = (n / 2000).max(1) as u64;
-    let sample: Vec<usize> = (0..n).filter(|&i| step == 1 || key[i] % step == 0).collect();
+    let sample: Vec<usize> = (0..n).filter(|&i| key[i].is_multiple_of(step)).collect();
     let sample = if sample.is_empty() { (0..n).collect() } else { sample };
     let mut scales = vec![];
     let mut k = 16usize;
     // Above 256 neighbours a neighbourhood's shape is read from one point in k/256 of it (a hashed subsample,
     // so that no order of the input, such as a scanner's lines, aliases with it): the same radius, 256 points.
     let subsample = |stride: usize| {
-        let keep =
-            |i: usize| stride == 1 || key[i] >> 40 & (stride as u64 - 1) == 0;
+        let keep = |i: usize| stride == 1 || key[i] >> 40 & (stride as u64 - 1) == 0;
         let chosen: Vec<u32> = (0..n as u32).filter(|&i| keep(i as usize)).collect();
         let mut tree: kiddo::KdTree<f64, 3> = kiddo::KdTree::with_capacity(chosen.len().max(1));
         for &i in &chosen {
@@ -211,8 +210,7 @@ pub fn denoise(points: &[Point], normals: Option<&[Point]>) -> Result<(Vec<Point
     // nearest anchor, which holds over the whole neighbourhood (its radius is √(k/64) anchor spacings or more).
     // Below 128 neighbours every point is its own anchor.
     let every = (best / 64).max(1);
-    let anchor =
-        |i: usize| every == 1 || key[i] >> 40 & (every as u64 - 1) == 0;
+    let anchor = |i: usize| every == 1 || key[i] >> 40 & (every as u64 - 1) == 0;
     let mut anchors: Vec<u32> = (0..n as u32).filter(|&i| anchor(i as usize)).collect();
     if anchors.is_empty() {
         anchors = (0..n as u32).collect();
