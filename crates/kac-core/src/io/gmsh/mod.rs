@@ -111,15 +111,19 @@ impl Builder {
         if nodes.len() > arity {
             self.higher_order += 1;
         }
-        let mut idx = [0u32; 4];
-        for (k, &tag) in nodes.iter().take(arity).enumerate() {
-            idx[k] = *self.tags.get(&(tag as u64)).filter(|_| tag >= 0).ok_or_else(|| ShapeError::IndexOutOfRange {
+        // A node tag's vertex, or the element's error naming it.
+        let vertex = |tags: &HashMap<u64, u32>, count: usize, tag: i64| {
+            tags.get(&(tag as u64)).copied().filter(|_| tag >= 0).ok_or_else(|| ShapeError::IndexOutOfRange {
                 element,
                 index,
                 value: tag,
-                vertex_count: self.raw.vertices.len(),
+                vertex_count: count,
                 location: loc(),
-            })?;
+            })
+        };
+        let mut idx = [0u32; 4];
+        for (k, &tag) in nodes.iter().take(arity).enumerate() {
+            idx[k] = vertex(&self.tags, self.raw.vertices.len(), tag)?;
         }
         // Second-order elements: the middle node of each edge (Gmsh's node ordering: the corners, then one node
         // per edge in this order).
@@ -132,14 +136,7 @@ impl Builder {
         };
         for (k, &[a, b]) in edges.iter().enumerate() {
             if let Some(&tag) = nodes.get(arity + k) {
-                let node =
-                    *self.tags.get(&(tag as u64)).filter(|_| tag >= 0).ok_or_else(|| ShapeError::IndexOutOfRange {
-                        element,
-                        index,
-                        value: tag,
-                        vertex_count: self.raw.vertices.len(),
-                        location: loc(),
-                    })?;
+                let node = vertex(&self.tags, self.raw.vertices.len(), tag)?;
                 self.raw.edge_nodes.push(([idx[a], idx[b]], self.raw.vertices[node as usize]));
             }
         }
