@@ -149,6 +149,7 @@ pub(crate) fn extrapolation(
         "method": "Richardson extrapolation at the order observed on the last three levels (mesh sizes h, h/2, h/4), \
                    clamped to [0.5, 2 × nominal]; the nominal order with two levels or where the differences do not \
                    shrink monotonically. error_estimate: the larger of the gap to the extrapolation at the nominal \
-                   order and a tenth of the correction",
+                   order and a tenth of the correction; where no order was observed, at least the whole correction \
+                   and the last level's change",
     }))
 }
