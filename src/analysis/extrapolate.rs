@@ -67,7 +67,7 @@ pub(crate) fn extrapolation(
     }
     // The corners to grade toward (flat triangle meshes), in the validated numbering; reported in the input's.
     let (corners, mut grading_report) = match (&v.shape, grading) {
-        (Shape::TriangleMesh(m), true) => match grading::reentrant_corners(m, u32::from(spec.order)) {
+        (Shape::TriangleMesh(m), true) => match grading::order_limiting_corners(m, u32::from(spec.order)) {
             Ok(c) if c.is_empty() => (c, json!({ "graded": false, "reason": "no corner limits the order" })),
             Ok(c) => {
                 let input_vertex = |shape_vertex: u32| v.vertex_map.iter().position(|&x| x == shape_vertex);

@@ -15,7 +15,8 @@
 
 use super::{topology::EdgeTopology, vec3, Point, TriangleMesh};
 
-/// A re-entrant corner of a flat triangle mesh's boundary and the grading toward it.
+/// A boundary corner of a flat triangle mesh that limits the order (re-entrant, or above 90° for P2), and the
+/// grading toward it.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Corner {
     /// The corner's vertex (the mesh's numbering).
@@ -30,7 +31,7 @@ pub struct Corner {
     pub beta: f64,
 }
 
-/// Above this many re-entrant corners the mesh is not graded (the distance search is corners × boundary edges,
+/// Above this many such corners the mesh is not graded (the distance search is corners × boundary edges,
 /// and a boundary that jagged is better remeshed).
 pub const MAX_CORNERS: usize = 256;
 
@@ -40,7 +41,7 @@ pub const MAX_CORNERS: usize = 256;
 /// the grading exponent β = p/α, each corner's ball 0.9 of what its straight sides
 /// and the rest of the boundary allow (and at most 0.45 of the distance to another corner, so balls are disjoint). Corners on a vertex where the boundary passes more than once are
 /// skipped. `Err` names why nothing is graded (too many corners).
-pub fn reentrant_corners(m: &TriangleMesh, degree: u32) -> Result<Vec<Corner>, String> {
+pub fn order_limiting_corners(m: &TriangleMesh, degree: u32) -> Result<Vec<Corner>, String> {
     let topo = EdgeTopology::new(&m.faces);
     let v = &m.vertices;
     // Boundary half-edges (a → b in their face's orientation), and each vertex's outgoing and incoming ones.
@@ -88,7 +89,10 @@ pub fn reentrant_corners(m: &TriangleMesh, degree: u32) -> Result<Vec<Corner>, S
         })
         .collect();
     if candidates.len() > MAX_CORNERS {
-        return Err(format!("{} re-entrant boundary corners (more than {MAX_CORNERS}): not graded", candidates.len()));
+        return Err(format!(
+            "{} boundary corners limit the order (more than {MAX_CORNERS}): not graded",
+            candidates.len()
+        ));
     }
     let dir = |e: u32| {
         let [a, b] = boundary[e as usize];
@@ -224,7 +228,7 @@ mod tests {
             })
             .collect();
         let m = TriangleMesh { vertices: merged, faces: faces.iter().map(|f| f.map(|i| remap[i as usize])).collect() };
-        let corners = reentrant_corners(&m, 2).unwrap();
+        let corners = order_limiting_corners(&m, 2).unwrap();
         assert_eq!(corners.len(), 1, "{corners:?}");
         let c = &corners[0];
         assert_eq!(m.vertices[c.vertex as usize], [1.0, 1.0, 0.0]);
@@ -256,23 +260,23 @@ mod tests {
 
     #[test]
     fn convex_domains_have_no_corners_to_grade() {
-        assert!(reentrant_corners(&generate::unit_square(6), 2).unwrap().is_empty());
-        assert!(reentrant_corners(&generate::unit_disk(8), 1).unwrap().is_empty());
+        assert!(order_limiting_corners(&generate::unit_square(6), 2).unwrap().is_empty());
+        assert!(order_limiting_corners(&generate::unit_disk(8), 1).unwrap().is_empty());
         // The nearly straight corners of a polygon standing for a circle (172.5°, α = 1.04) are left alone.
-        assert!(reentrant_corners(&generate::unit_disk(8), 2).unwrap().is_empty());
+        assert!(order_limiting_corners(&generate::unit_disk(8), 2).unwrap().is_empty());
     }
 
     #[test]
     fn the_gww_drums_have_two_corners_of_270_degrees_and_two_of_135() {
         for which in [1, 2] {
             // P1: the two re-entrant corners only (β = 1/α = 1.5).
-            let corners = reentrant_corners(&generate::gww_drum(which, 2), 1).unwrap();
+            let corners = order_limiting_corners(&generate::gww_drum(which, 2), 1).unwrap();
             let angles: Vec<f64> = corners.iter().map(|c| c.angle_degrees).collect();
             assert_eq!(angles.len(), 2, "drum {which}: {angles:?}");
             assert!(angles.iter().all(|a| (a - 270.0).abs() < 1e-9), "{angles:?}");
             assert!(corners.iter().all(|c| c.radius > 0.3 && (c.beta - 1.5).abs() < 1e-12), "{corners:?}");
             // P2: the 135° corners too (α = 4/3 < 2, β = 1.5); the 90° and 45° ones do not limit it.
-            let corners = reentrant_corners(&generate::gww_drum(which, 2), 2).unwrap();
+            let corners = order_limiting_corners(&generate::gww_drum(which, 2), 2).unwrap();
             let mut angles: Vec<f64> = corners.iter().map(|c| c.angle_degrees.round()).collect();
             angles.sort_by(f64::total_cmp);
             assert_eq!(angles, [135.0, 135.0, 270.0, 270.0], "drum {which}");

@@ -14,7 +14,7 @@ fn midpoints(vertices: &[Point], edges: &[[u32; 2]]) -> Vec<Point> {
 
 /// The triangle mesh with each face split into four.
 pub fn refine_triangles(m: &TriangleMesh) -> TriangleMesh {
-    let edges = crate::operators::p2::triangle_edges(&m.faces);
+    let edges = super::topology::triangle_edges(&m.faces);
     let nv = m.vertices.len() as u32;
     let mid = |a: u32, b: u32| nv + edges.binary_search(&[a.min(b), a.max(b)]).unwrap_or(0) as u32;
     let faces = m
@@ -30,7 +30,7 @@ pub fn refine_triangles(m: &TriangleMesh) -> TriangleMesh {
 
 /// The tet mesh with each tetrahedron split into eight, orientation kept.
 pub fn refine_tets(m: &TetMesh) -> TetMesh {
-    let edges = crate::operators::p2::tet_edges(&m.tets);
+    let edges = super::topology::tet_edges(&m.tets);
     let vertices = midpoints(&m.vertices, &edges);
     let nv = m.vertices.len() as u32;
     let mid = |a: u32, b: u32| nv + edges.binary_search(&[a.min(b), a.max(b)]).unwrap_or(0) as u32;

@@ -268,6 +268,29 @@ pub fn surface_facts(mesh: &TriangleMesh, topo: &EdgeTopology) -> SurfaceFacts {
     }
 }
 
+/// The edges of a triangle mesh, sorted (smaller vertex first; quadratic elements number their edge unknowns so).
+pub fn triangle_edges(faces: &[[u32; 3]]) -> Vec<[u32; 2]> {
+    let mut e: Vec<[u32; 2]> = faces
+        .iter()
+        .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
+        .map(|[a, b]| [a.min(b), a.max(b)])
+        .collect();
+    e.sort_unstable();
+    e.dedup();
+    e
+}
+
+/// The edges of a tetrahedral mesh, sorted (smaller vertex first; quadratic elements number their edge unknowns so).
+pub fn tet_edges(tets: &[[u32; 4]]) -> Vec<[u32; 2]> {
+    let mut e: Vec<[u32; 2]> = tets
+        .iter()
+        .flat_map(|t| [[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]].map(|[a, b]| [t[a].min(t[b]), t[a].max(t[b])]))
+        .collect();
+    e.sort_unstable();
+    e.dedup();
+    e
+}
+
 #[inline]
 pub fn tri_area2(v: &[Point], f: &[u32; 3]) -> Point {
     vec3::area2(v[f[0] as usize], v[f[1] as usize], v[f[2] as usize])

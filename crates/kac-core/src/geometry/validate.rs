@@ -420,8 +420,8 @@ fn edge_nodes(
         return None;
     }
     let (vertices, edges) = match shape {
-        Shape::TriangleMesh(m) => (&m.vertices, crate::operators::p2::triangle_edges(&m.faces)),
-        Shape::TetMesh(m) => (&m.vertices, crate::operators::p2::tet_edges(&m.tets)),
+        Shape::TriangleMesh(m) => (&m.vertices, super::topology::triangle_edges(&m.faces)),
+        Shape::TetMesh(m) => (&m.vertices, super::topology::tet_edges(&m.tets)),
         _ => return None,
     };
     let mapped = raw.edge_nodes.iter().filter_map(|&([a, b], p)| {

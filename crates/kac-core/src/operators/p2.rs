@@ -21,26 +21,7 @@ use crate::geometry::Point;
 use rayon::prelude::*;
 use std::sync::Arc;
 
-/// The edges of a triangle mesh, sorted (smaller vertex first): the P2 edge unknowns, in this order.
-pub fn triangle_edges(faces: &[[u32; 3]]) -> Vec<[u32; 2]> {
-    let mut e: Vec<[u32; 2]> = faces
-        .iter()
-        .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
-        .map(|[a, b]| [a.min(b), a.max(b)])
-        .collect();
-    e.sort_unstable();
-    e.dedup();
-    e
-}
-
-/// The edges of a tetrahedral mesh, sorted: the P2 edge unknowns, in this order.
-pub fn tet_edges(tets: &[[u32; 4]]) -> Vec<[u32; 2]> {
-    let mut e: Vec<[u32; 2]> =
-        tets.iter().flat_map(|t| TET_EDGES.map(|[a, b]| [t[a].min(t[b]), t[a].max(t[b])])).collect();
-    e.sort_unstable();
-    e.dedup();
-    e
-}
+pub use crate::geometry::topology::{tet_edges, triangle_edges};
 
 /// Local edges of a tetrahedron (corner pairs), in the order of its local edge unknowns 4..9.
 const TET_EDGES: [[usize; 2]; 6] = [[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]];
