@@ -11,6 +11,7 @@ use clap::Parser;
 use kac::analysis::VertexArray;
 use kac::service::config::Config;
 use kac::service::error::ApiError;
+use kac::service::ids::{JobId, ShapeId};
 use kac::service::jobs::{JobProgress, JobView, Status};
 use kac::service::store::{self, Backend, Enqueued, Lease, ShapeRecord, StoredResult, StoredShape};
 use serde_json::json;
@@ -61,6 +62,19 @@ fn job(id: &str) -> JobView {
     }
 }
 
+/// A test's job name as a job id (its bytes in hex, padded to 32 digits): stores take typed ids only.
+fn h(name: &str) -> String {
+    format!("{:0<32}", name.bytes().map(|b| format!("{b:02x}")).collect::<String>())
+}
+
+fn jid_of(hex: &str) -> JobId {
+    JobId::parse(hex).expect("a job id")
+}
+
+fn jid(name: &str) -> JobId {
+    JobId::parse(&h(name)).expect("a job id")
+}
+
 fn problem() -> kac::service::error::Problem {
     ApiError::Canceled.problem().1
 }
@@ -71,13 +85,14 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     // Shapes: stored once per id, read back (parsed again by a fresh store), listed, removed.
     let (s, off) = shape(2);
     let id = s.id.clone();
+    let sid = ShapeId::parse(&id).expect("a shape id");
     let (new, stored) = b.shapes.insert(s, &off).unwrap();
     assert!(new);
     let (again, existing) = b.shapes.insert(shape(2).0, &off).unwrap();
     assert!(!again, "a second insert of the same id stores nothing");
     assert_eq!(existing.id, stored.id);
     let other = reopen();
-    let read = other.shapes.get(&id).unwrap().expect("read back by a fresh store");
+    let read = other.shapes.get(&sid).unwrap().expect("read back by a fresh store");
     assert_eq!(read.validated.shape.vertex_count(), 162);
     let (page, total) = other.shapes.list(0, 10).unwrap();
     assert_eq!((page.len(), total, page[0].id.as_str()), (1, 1, id.as_str()));
@@ -100,14 +115,15 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
         Arc::new(StoredResult::new(id, summary, vec![a]))
     };
     let body = |r: &StoredResult| r.chunks().flat_map(|c| c.to_vec()).collect::<Vec<u8>>();
-    for (id, rows) in [("abc1", 3), ("abc3", 300_000)] {
+    for (id, rows) in [(h("abc1"), 3), (h("abc3"), 300_000)] {
+        let id = id.as_str();
         let first = result(id, rows, 0.0);
         let first_body = body(&first);
         let stored = b.results.put(first.clone()).unwrap();
         assert_eq!(stored.etag, first.etag);
         let again = b.results.put(result(id, rows, 1.0)).unwrap();
         assert_eq!(again.etag, first.etag, "the first write stays");
-        let back = reopen().results.get(id).unwrap().expect("read back");
+        let back = reopen().results.get(&jid_of(id)).unwrap().expect("read back");
         assert_eq!(back.etag, first.etag);
         let (x, y) = (&back.arrays[0].data, &first.arrays[0].data);
         assert!(x.iter().zip(y).all(|(a, b)| a.to_bits() == b.to_bits()) && x.len() == y.len());
@@ -117,12 +133,12 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
         assert_eq!(parsed["arrays"]["eigenvectors"]["values"].as_array().unwrap().len(), rows);
         assert_eq!(first.small_body().is_some(), first_body.len() <= kac::service::store::SMALL_BODY);
     }
-    assert!(reopen().results.get("abc2").unwrap().is_none());
+    assert!(reopen().results.get(&jid("abc2")).unwrap().is_none());
 
     // Removal takes the shape's fingerprints with it.
-    assert!(b.shapes.remove(&id).unwrap());
-    assert!(!b.shapes.remove(&id).unwrap());
-    assert!(reopen().shapes.get(&id).unwrap().is_none());
+    assert!(b.shapes.remove(&sid).unwrap());
+    assert!(!b.shapes.remove(&sid).unwrap());
+    assert!(reopen().shapes.get(&sid).unwrap().is_none());
     assert!(reopen().fingerprints.load_fingerprints().unwrap().is_empty());
     let (changes, end) = reopen().fingerprints.fingerprint_changes(log).unwrap();
     assert_eq!(
@@ -139,57 +155,57 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     // The queue: one job per id, within capacity.
     let q = &b.queue;
     let mut changes = q.changes();
-    assert!(matches!(q.enqueue(job("j1"), 2).unwrap(), Enqueued::New(_)));
-    assert!(matches!(q.enqueue(job("j1"), 2).unwrap(), Enqueued::Existing(v) if v.status == Status::Enqueued));
-    assert!(matches!(q.enqueue(job("j2"), 2).unwrap(), Enqueued::New(_)));
-    assert!(matches!(q.enqueue(job("j3"), 2).unwrap(), Enqueued::Full));
+    assert!(matches!(q.enqueue(job(&h("j1")), 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job(&h("j1")), 2).unwrap(), Enqueued::Existing(v) if v.status == Status::Enqueued));
+    assert!(matches!(q.enqueue(job(&h("j2")), 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job(&h("j3")), 2).unwrap(), Enqueued::Full));
     assert_eq!(q.depth().unwrap(), (2, 0));
     // Claims in submission order, each job to one claim.
     let lease = Duration::from_secs(30);
     let c1 = q.claim("r1:1", lease).unwrap().unwrap();
-    assert_eq!((c1.id.as_str(), c1.status, c1.started_at.is_some()), ("j1", Status::Processing, true));
+    assert_eq!((c1.id.clone(), c1.status, c1.started_at.is_some()), (h("j1"), Status::Processing, true));
     let c2 = reopen().queue.claim("r2:1", lease).unwrap().unwrap();
-    assert_eq!(c2.id, "j2", "another replica gets the next job, not the claimed one");
+    assert_eq!(c2.id, h("j2"), "another replica gets the next job, not the claimed one");
     assert!(q.claim("r1:2", lease).unwrap().is_none());
     // Heartbeats carry progress and see a cancel asked for anywhere.
     let p = JobProgress { phase: "iterating".into(), converged: 2, wanted: 3 };
-    assert_eq!(q.heartbeat("j1", "r1:1", &p, lease).unwrap(), Lease::Held { cancel: false });
-    assert_eq!(reopen().queue.get("j1").unwrap().unwrap().progress.converged, 2);
-    assert_eq!(q.heartbeat("j1", "r9:9", &p, lease).unwrap(), Lease::Lost, "not this claim's job");
-    let v = reopen().queue.cancel("j2", &problem()).unwrap().unwrap();
+    assert_eq!(q.heartbeat(&h("j1"), "r1:1", &p, lease).unwrap(), Lease::Held { cancel: false });
+    assert_eq!(reopen().queue.get(&jid("j1")).unwrap().unwrap().progress.converged, 2);
+    assert_eq!(q.heartbeat(&h("j1"), "r9:9", &p, lease).unwrap(), Lease::Lost, "not this claim's job");
+    let v = reopen().queue.cancel(&jid("j2"), &problem()).unwrap().unwrap();
     assert_eq!(v.status, Status::Processing, "a running job is asked to stop");
-    assert_eq!(q.heartbeat("j2", "r2:1", &p, lease).unwrap(), Lease::Held { cancel: true });
+    assert_eq!(q.heartbeat(&h("j2"), "r2:1", &p, lease).unwrap(), Lease::Held { cancel: true });
     // A finish is fenced by its claim.
     let mut done = c1.clone();
     done.status = Status::Succeeded;
-    done.result = Some("/v1/results/j1".into());
-    assert!(!q.finish("j1", "r2:1", &done).unwrap(), "another claim cannot finish it");
-    assert!(q.finish("j1", "r1:1", &done).unwrap());
-    assert!(!q.finish("j1", "r1:1", &done).unwrap(), "finished once");
-    assert_eq!(reopen().queue.get("j1").unwrap().unwrap().status, Status::Succeeded);
-    assert!(matches!(q.enqueue(job("j1"), 9).unwrap(), Enqueued::Existing(v) if v.status == Status::Succeeded));
+    done.result = Some(format!("/v1/results/{}", h("j1")));
+    assert!(!q.finish(&h("j1"), "r2:1", &done).unwrap(), "another claim cannot finish it");
+    assert!(q.finish(&h("j1"), "r1:1", &done).unwrap());
+    assert!(!q.finish(&h("j1"), "r1:1", &done).unwrap(), "finished once");
+    assert_eq!(reopen().queue.get(&jid("j1")).unwrap().unwrap().status, Status::Succeeded);
+    assert!(matches!(q.enqueue(job(&h("j1")), 9).unwrap(), Enqueued::Existing(v) if v.status == Status::Succeeded));
     // An enqueued job is canceled at once, and may be enqueued again.
-    assert!(matches!(q.enqueue(job("j4"), 9).unwrap(), Enqueued::New(_)));
-    let v = q.cancel("j4", &problem()).unwrap().unwrap();
+    assert!(matches!(q.enqueue(job(&h("j4")), 9).unwrap(), Enqueued::New(_)));
+    let v = q.cancel(&jid("j4"), &problem()).unwrap().unwrap();
     assert_eq!((v.status, v.error.as_ref().map(|p| p.code.as_str())), (Status::Canceled, Some("canceled")));
-    assert!(q.cancel("nope", &problem()).unwrap().is_none());
-    assert!(matches!(q.enqueue(job("j4"), 9).unwrap(), Enqueued::New(v) if v.status == Status::Enqueued));
+    assert!(q.cancel(&jid("nope"), &problem()).unwrap().is_none());
+    assert!(matches!(q.enqueue(job(&h("j4")), 9).unwrap(), Enqueued::New(v) if v.status == Status::Enqueued));
     // An expired claim goes back in the queue; its holder has lost it.
     let c4 = q.claim("r1:3", Duration::from_millis(200)).unwrap().unwrap();
-    assert_eq!(c4.id, "j4");
+    assert_eq!(c4.id, h("j4"));
     std::thread::sleep(Duration::from_millis(1200));
-    assert_eq!(reopen().queue.requeue_expired().unwrap(), vec!["j4".to_string()]);
-    assert_eq!(q.heartbeat("j4", "r1:3", &p, lease).unwrap(), Lease::Lost);
-    assert!(!q.finish("j4", "r1:3", &done).unwrap());
-    assert_eq!(q.claim("r2:2", lease).unwrap().unwrap().id, "j4", "claimed again");
+    assert_eq!(reopen().queue.requeue_expired().unwrap(), vec![h("j4")]);
+    assert_eq!(q.heartbeat(&h("j4"), "r1:3", &p, lease).unwrap(), Lease::Lost);
+    assert!(!q.finish(&h("j4"), "r1:3", &done).unwrap());
+    assert_eq!(q.claim("r2:2", lease).unwrap().unwrap().id, h("j4"), "claimed again");
     // A cancel asked for while a job runs is kept if its claim ends without a finish: released, it ends canceled.
-    assert!(matches!(q.enqueue(job("j5"), 9).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job(&h("j5")), 9).unwrap(), Enqueued::New(_)));
     let c5 = q.claim("r1:4", Duration::from_millis(200)).unwrap().unwrap();
-    assert_eq!(c5.id, "j5");
-    assert_eq!(reopen().queue.cancel("j5", &problem()).unwrap().unwrap().status, Status::Processing);
+    assert_eq!(c5.id, h("j5"));
+    assert_eq!(reopen().queue.cancel(&jid("j5"), &problem()).unwrap().unwrap().status, Status::Processing);
     std::thread::sleep(Duration::from_millis(1200));
-    assert_eq!(q.requeue_expired().unwrap(), vec!["j5".to_string()]);
-    let v = reopen().queue.get("j5").unwrap().unwrap();
+    assert_eq!(q.requeue_expired().unwrap(), vec![h("j5")]);
+    let v = reopen().queue.get(&jid("j5")).unwrap().unwrap();
     assert_eq!((v.status, v.error.map(|p| p.code)), (Status::Canceled, Some("canceled".to_string())));
     assert!(q.claim("r1:5", lease).unwrap().is_none(), "a canceled job is not claimed again");
     // Counts and the list.
@@ -209,7 +225,7 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
             Err(_) => std::thread::sleep(Duration::from_millis(20)),
         }
     }
-    assert!(["j1", "j2", "j4"].iter().all(|id| seen.contains(*id)), "announced: {seen:?}");
+    assert!(["j1", "j2", "j4"].iter().all(|id| seen.contains(&h(id))), "announced: {seen:?}");
 }
 
 #[test]

@@ -18,53 +18,61 @@ pub struct Config {
     pub store: Option<String>,
     /// Seconds a job's claim lasts without a heartbeat (renewed every third of it while the job runs): how long a
     /// job of a replica that died waits before another replica runs it.
-    #[arg(long, env = "KAC_LEASE_S", default_value_t = 30.0)]
+    #[arg(long, env = "KAC_LEASE_S", default_value_t = 30.0, value_parser = lease_seconds)]
     pub lease_s: f64,
     /// Connections to PostgreSQL per replica (the pool's size; one more listens for notifications).
-    #[arg(long, env = "KAC_PG_POOL_SIZE", default_value_t = 8)]
+    #[arg(long, env = "KAC_PG_POOL_SIZE", default_value_t = 8, value_parser = at_least_one)]
     pub pg_pool_size: usize,
     /// Worker threads running jobs (0: one per core).
     #[arg(long, env = "KAC_WORKERS", default_value_t = 0)]
     pub workers: usize,
     /// Jobs queued or running at most; beyond it submissions get 503 with Retry-After.
-    #[arg(long, env = "KAC_QUEUE_CAPACITY", default_value_t = 64)]
+    #[arg(long, env = "KAC_QUEUE_CAPACITY", default_value_t = 64, value_parser = at_least_one)]
     pub queue_capacity: usize,
     /// Largest request body in bytes (uploads).
-    #[arg(long, env = "KAC_MAX_BODY_BYTES", default_value_t = 256 * 1024 * 1024)]
+    #[arg(long, env = "KAC_MAX_BODY_BYTES", default_value_t = 256 * 1024 * 1024, value_parser = at_least_one)]
     pub max_body_bytes: usize,
     /// Largest shape, in vertices.
-    #[arg(long, env = "KAC_MAX_VERTICES", default_value_t = 2_000_000)]
+    #[arg(long, env = "KAC_MAX_VERTICES", default_value_t = 2_000_000, value_parser = at_least_one)]
     pub max_vertices: usize,
     /// Largest number of eigenpairs an analysis may ask for.
-    #[arg(long, env = "KAC_MAX_K", default_value_t = 1000)]
+    #[arg(long, env = "KAC_MAX_K", default_value_t = 1000, value_parser = at_least_one)]
     pub max_k: usize,
     /// Largest count of any list or grid a descriptor takes (times, energies, τ samples, frequencies, sources,
     /// implicit steps, interpolation values); beyond it, 413 `too-many-samples` before anything is allocated.
-    #[arg(long, env = "KAC_MAX_SAMPLES", default_value_t = 10_000)]
+    #[arg(long, env = "KAC_MAX_SAMPLES", default_value_t = 10_000, value_parser = at_least_one)]
     pub max_samples: usize,
     /// Largest number of values (vertices × columns) of any per-vertex array an analysis holds or returns,
     /// eigenvectors included (k × vertices); beyond it, 413 `output-too-large` at submission.
-    #[arg(long, env = "KAC_MAX_OUTPUT_VALUES", default_value_t = 200_000_000)]
+    #[arg(long, env = "KAC_MAX_OUTPUT_VALUES", default_value_t = 200_000_000, value_parser = at_least_one)]
     pub max_output_values: usize,
     /// Seconds a client has to send a request's whole header (also the longest idle time of a kept-alive
     /// connection between requests); then the connection is closed.
-    #[arg(long, env = "KAC_HEADER_READ_TIMEOUT_S", default_value_t = 10.0)]
+    #[arg(long, env = "KAC_HEADER_READ_TIMEOUT_S", default_value_t = 10.0, value_parser = seconds)]
     pub header_read_timeout_s: f64,
     /// Longest pause, in seconds, while a request body is being sent; then 408 `body-timeout`.
-    #[arg(long, env = "KAC_BODY_READ_TIMEOUT_S", default_value_t = 30.0)]
+    #[arg(long, env = "KAC_BODY_READ_TIMEOUT_S", default_value_t = 30.0, value_parser = seconds)]
     pub body_read_timeout_s: f64,
+    /// Bytes all request bodies in flight may hold together (each reserves its Content-Length, or
+    /// --max-body-bytes when it sends none); a body beyond it gets 503 `memory-busy` with Retry-After.
+    #[arg(long, env = "KAC_MAX_BODY_MEMORY_BYTES", default_value_t = 1024 * 1024 * 1024, value_parser = at_least_one)]
+    pub max_body_memory_bytes: usize,
+    /// Slowest a request body may arrive, in bytes per second, once --body-read-timeout-s has passed since it
+    /// began (0: no floor); a slower body gets 408 `body-timeout` and its connection is freed.
+    #[arg(long, env = "KAC_MIN_BODY_RATE_BYTES_PER_S", default_value_t = 1024)]
+    pub min_body_rate_bytes_per_s: u64,
     /// Connections served at once; one more is answered 503 `too-many-connections` and closed.
-    #[arg(long, env = "KAC_MAX_CONNECTIONS", default_value_t = 1024)]
+    #[arg(long, env = "KAC_MAX_CONNECTIONS", default_value_t = 1024, value_parser = at_least_one)]
     pub max_connections: usize,
     /// Failed API-key attempts (missing or wrong key) one client address may make per minute; beyond it, 429
     /// `rate-limited` for that address until the minute is over (0: no throttling).
     #[arg(long, env = "KAC_AUTH_FAILURES_PER_MINUTE", default_value_t = 10)]
     pub auth_failures_per_minute: u32,
     /// Seconds a job may run before it is stopped and failed.
-    #[arg(long, env = "KAC_JOB_TIMEOUT_S", default_value_t = 600)]
+    #[arg(long, env = "KAC_JOB_TIMEOUT_S", default_value_t = 600, value_parser = clap::value_parser!(u64).range(1..=MAX_SECONDS as u64))]
     pub job_timeout_s: u64,
     /// Longest `wait` a synchronous request may ask for, in seconds.
-    #[arg(long, env = "KAC_MAX_WAIT_S", default_value_t = 60)]
+    #[arg(long, env = "KAC_MAX_WAIT_S", default_value_t = 60, value_parser = clap::value_parser!(u64).range(0..=MAX_SECONDS as u64))]
     pub max_wait_s: u64,
     /// Bytes of eigenpairs kept in memory for reuse across analyses.
     #[arg(long, env = "KAC_CACHE_BYTES", default_value_t = 1024 * 1024 * 1024)]
@@ -73,14 +81,14 @@ pub struct Config {
     #[arg(long, env = "KAC_STORE_CACHE_BYTES", default_value_t = 512 * 1024 * 1024)]
     pub store_cache_bytes: usize,
     /// Threads each eigensolve uses (jobs run side by side on the workers).
-    #[arg(long, env = "KAC_SOLVER_THREADS", default_value_t = 1)]
+    #[arg(long, env = "KAC_SOLVER_THREADS", default_value_t = 1, value_parser = at_least_one)]
     pub solver_threads: usize,
     /// On SIGTERM, seconds to let running jobs finish before exiting (the rest are re-queued at the next start).
-    #[arg(long, env = "KAC_SHUTDOWN_GRACE_S", default_value_t = 10)]
+    #[arg(long, env = "KAC_SHUTDOWN_GRACE_S", default_value_t = 10, value_parser = clap::value_parser!(u64).range(0..=MAX_SECONDS as u64))]
     pub shutdown_grace_s: u64,
     /// API keys (comma-separated); when any is set, every /v1 request needs `Authorization: Bearer KEY`.
     /// Off by default.
-    #[arg(long, env = "KAC_API_KEYS", value_delimiter = ',', hide_env_values = true)]
+    #[arg(long, env = "KAC_API_KEYS", value_delimiter = ',', hide_env_values = true, value_parser = api_key)]
     pub api_keys: Vec<String>,
     /// A file with one API key per line (added to --api-keys).
     #[arg(long, env = "KAC_API_KEYS_FILE")]
@@ -100,20 +108,104 @@ pub struct Config {
     pub test_job_delay_ms: u64,
 }
 
+/// The longest duration any setting may name: a day (a larger one is a mistake, and `Duration` from seconds
+/// panics past about 5.8·10¹¹ years).
+pub const MAX_SECONDS: f64 = 86_400.0;
+
+/// A duration in seconds: finite, positive, at most a day. `inf`, `NaN`, 0 and negatives stop the server at start.
+pub fn seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number of seconds"))?;
+    if !v.is_finite() || v <= 0.0 {
+        return Err(format!("{s} seconds: give a finite number above 0"));
+    }
+    if v < 0.001 {
+        return Err(format!("{s} seconds: at least 0.001 (one millisecond)"));
+    }
+    if v > MAX_SECONDS {
+        return Err(format!("{s} seconds: at most {MAX_SECONDS} (a day)"));
+    }
+    Ok(v)
+}
+
+/// A lease: as [`seconds`], and at least 0.3 s (heartbeats come every third of it).
+pub fn lease_seconds(s: &str) -> Result<f64, String> {
+    let v = seconds(s)?;
+    if v < 0.3 {
+        return Err(format!("{s} seconds: a lease lasts at least 0.3 s (it is renewed every third of it)"));
+    }
+    Ok(v)
+}
+
+/// A count or a size that must allow something: an integer of at least 1.
+pub fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(0) => Err("0 would refuse everything: give at least 1".into()),
+        Ok(v) => Ok(v),
+        Err(_) => Err(format!("'{s}' is not a whole number of at least 1")),
+    }
+}
+
+/// An API key: 1 to 1,024 visible ASCII characters (what an `Authorization: Bearer` header can carry), no spaces.
+pub fn api_key(s: &str) -> Result<String, String> {
+    let k = s.trim();
+    if k.is_empty() {
+        return Err("an empty API key: give keys of visible ASCII characters, or no --api-keys at all".into());
+    }
+    if k.len() > 1024 {
+        return Err(format!("an API key of {} characters: at most 1024", k.len()));
+    }
+    if let Some(c) = k.chars().find(|c| !c.is_ascii_graphic()) {
+        return Err(format!(
+            "an API key holds {c:?}: keys are visible ASCII characters without spaces (a bearer token)"
+        ));
+    }
+    Ok(k.to_string())
+}
+
 impl Config {
-    /// Every configured key (flag, environment, file), blank lines dropped.
-    pub fn api_keys(&self) -> Vec<String> {
-        let mut keys: Vec<String> = self.api_keys.iter().map(|k| k.trim().to_string()).collect();
+    /// Every configured key (flag, environment, file). Fails closed: a keys file that is missing, unreadable, or
+    /// holds no valid key, or any line of it that is not a valid key, is an error that stops the server at start
+    /// (never a server open to everyone).
+    pub fn api_keys(&self) -> Result<Vec<String>, String> {
+        let mut keys: Vec<String> = self.api_keys.iter().map(|k| api_key(k)).collect::<Result<_, _>>()?;
         if let Some(path) = &self.api_keys_file {
-            if let Ok(text) = std::fs::read_to_string(path) {
-                keys.extend(
-                    text.lines().map(|l| l.trim().to_string()).filter(|l| !l.is_empty() && !l.starts_with('#')),
-                );
-            } else {
-                tracing::error!(path = %path.display(), "cannot read the API keys file");
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| format!("--api-keys-file {}: cannot be read ({e})", path.display()))?;
+            let before = keys.len();
+            for (n, line) in text.lines().enumerate() {
+                let line = line.trim();
+                if line.is_empty() || line.starts_with('#') {
+                    continue;
+                }
+                keys.push(api_key(line).map_err(|e| format!("--api-keys-file {} line {}: {e}", path.display(), n + 1))?);
+            }
+            if keys.len() == before {
+                return Err(format!(
+                    "--api-keys-file {}: holds no key (only blank lines and comments); the server does not start open",
+                    path.display()
+                ));
             }
         }
-        keys.retain(|k| !k.is_empty());
-        keys
+        Ok(keys)
+    }
+
+    /// Checks what no single flag's parser can: run at start, before anything is opened.
+    pub fn check(&self) -> Result<(), String> {
+        self.api_keys()?;
+        if self.rate_limit_per_minute > 0 && self.api_keys()?.is_empty() {
+            return Err("--rate-limit-per-minute counts requests per API key: configure keys too".into());
+        }
+        if let Some(store) = &self.store {
+            if !(store.starts_with("sqlite:") || store.starts_with("postgres://") || store.starts_with("postgresql://")) {
+                return Err(format!("--store {store}: give sqlite:DIR or postgres://…"));
+            }
+        }
+        if self.max_body_memory_bytes < self.max_body_bytes {
+            return Err(format!(
+                "--max-body-memory-bytes {} is below --max-body-bytes {}: the largest body allowed could never be read",
+                self.max_body_memory_bytes, self.max_body_bytes
+            ));
+        }
+        Ok(())
     }
 }

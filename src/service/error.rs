@@ -96,6 +96,15 @@ pub enum ApiError {
     BodyTimeout {
         seconds: f64,
     },
+    /// A request body that came slower than --min-body-rate-bytes-per-s (408 `body-timeout`).
+    BodyTooSlow {
+        detail: String,
+    },
+    /// Request bodies in flight hold --max-body-memory-bytes (503 `memory-busy`, Retry-After).
+    MemoryBusy {
+        budget: usize,
+        retry_after_s: u64,
+    },
     Internal {
         detail: String,
     },
@@ -192,7 +201,8 @@ impl ApiError {
                 extra.insert("suggestion".into(), u.suggestion.clone().into());
                 extra.insert("belongs_in".into(), u.belongs_in.clone().into());
                 extra.insert("accepted".into(), u.allowed.clone().into());
-                (StatusCode::UNPROCESSABLE_ENTITY, "invalid-request", "Unknown field", u.detail())
+                let title = if u.not_a_name.is_some() { "Invalid value" } else { "Unknown field" };
+                (StatusCode::UNPROCESSABLE_ENTITY, "invalid-request", title, u.detail())
             }
             ApiError::UnsupportedMediaType { detail } => {
                 (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported-media-type", "Unsupported media type", detail.clone())
@@ -205,6 +215,22 @@ impl ApiError {
                     "queue-full",
                     "The job queue is full",
                     format!("{capacity} jobs are queued or running; retry later"),
+                )
+            }
+            ApiError::BodyTooSlow { detail } => {
+                (StatusCode::REQUEST_TIMEOUT, "body-timeout", "The request body came too slowly", detail.clone())
+            }
+            ApiError::MemoryBusy { budget, retry_after_s } => {
+                extra.insert("budget_bytes".into(), (*budget).into());
+                extra.insert("retry_after_s".into(), (*retry_after_s).into());
+                (
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "memory-busy",
+                    "Request bodies in flight hold their memory budget",
+                    format!(
+                        "request bodies being received hold the budget of {budget} bytes (--max-body-memory-bytes); \
+                         retry after Retry-After seconds"
+                    ),
                 )
             }
             ApiError::KTooLarge { detail } => {
@@ -284,6 +310,7 @@ impl IntoResponse for ApiError {
         let (status, p) = self.problem();
         let mut r = problem_response(status, &p);
         if let ApiError::QueueFull { retry_after_s, .. }
+        | ApiError::MemoryBusy { retry_after_s, .. }
         | ApiError::RateLimited { retry_after_s, .. }
         | ApiError::AuthThrottled { retry_after_s, .. } = self
         {
@@ -334,6 +361,10 @@ pub const CODES: &[(&str, &str)] = &[
     ),
     ("unsupported-media-type", "The Content-Type cannot be used here."),
     ("queue-full", "The job queue is at capacity; retry after Retry-After seconds."),
+    (
+        "memory-busy",
+        "Request bodies being received hold --max-body-memory-bytes together; retry after Retry-After seconds.",
+    ),
     ("k-too-large", "k exceeds the configured limit (--max-k)."),
     ("body-timeout", "The request body paused for longer than --body-read-timeout-s."),
     (
@@ -436,6 +467,7 @@ mod tests {
             suggestion: None,
             belongs_in: None,
             allowed: vec![],
+            not_a_name: None,
         };
         let mut all: Vec<ApiError> = shape.into_iter().map(ApiError::Shape).collect();
         all.extend(analysis.into_iter().map(ApiError::Analysis));
@@ -449,6 +481,8 @@ mod tests {
             ApiError::UnknownField(unknown),
             ApiError::UnsupportedMediaType { detail: "m".into() },
             ApiError::QueueFull { capacity: 1, retry_after_s: 1 },
+            ApiError::MemoryBusy { budget: 1, retry_after_s: 1 },
+            ApiError::BodyTooSlow { detail: "m".into() },
             ApiError::KTooLarge { detail: "m".into() },
             ApiError::TooManySamples { detail: "m".into() },
             ApiError::OutputTooLarge { detail: "m".into() },
@@ -488,6 +522,8 @@ mod tests {
                 | ApiError::JobPanicked { .. }
                 | ApiError::AuthThrottled { .. }
                 | ApiError::BodyTimeout { .. }
+                | ApiError::BodyTooSlow { .. }
+                | ApiError::MemoryBusy { .. }
                 | ApiError::Internal { .. } => {}
             }
         }

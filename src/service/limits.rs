@@ -32,6 +32,14 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         | Analysis::Smooth { .. }
         | Analysis::Interpolate { .. } => None,
     };
+    // Solver settings no solve could honour (a tolerance below double precision, a shift at 0 or ±1e308, a block
+    // or subspace out of range) are refused here, naming the setting, rather than holding a worker until its
+    // timeout or reaching an assertion of a dependency.
+    if let Some(s) = a.solver() {
+        s.eigen_options(asked.map_or(1, |(_, k)| k.max(1)), 0)
+            .check()
+            .map_err(|e| ApiError::Analysis(crate::analysis::AnalysisError::Eigen(e)))?;
+    }
     let Some((what, k)) = asked else { return Ok(()) };
     if k == 0 {
         // Refused at submission: the same answer on every path (a job, /v1/analyze, a cached spectrum).
@@ -45,6 +53,25 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         });
     }
     Ok(())
+}
+
+/// The eigenpairs an analysis asks the sparse solver for, where it asks for any.
+fn eigenpairs(a: &Analysis) -> Option<usize> {
+    match a {
+        Analysis::Spectrum { k, .. }
+        | Analysis::Hks { k, .. }
+        | Analysis::SiHks { k, .. }
+        | Analysis::Wks { k, .. }
+        | Analysis::Gps { k, .. }
+        | Analysis::Heat { k, .. }
+        | Analysis::HeatCurvature { k, .. }
+        | Analysis::Wave { k, .. }
+        | Analysis::Schrodinger { k, .. } => Some(*k),
+        Analysis::Diffuse { k, method, .. } => (*method == crate::analysis::HeatMethod::Spectral).then_some(*k),
+        Analysis::ShapeDna { options, .. } => Some(options.k),
+        Analysis::Embed { dimensions, .. } => Some(dimensions + 1),
+        _ => None,
+    }
 }
 
 /// The unknowns an analysis' operator will have, at most: the vertices, or with quadratic elements the vertices
@@ -122,10 +149,18 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
             detail: format!("{name} = {n} is above the limit of {max} (--max-samples, KAC_MAX_SAMPLES)"),
         });
     }
-    // The sparse solver's Krylov basis: at least k + 2·block columns, `subspace` when larger.
-    let columns = match a.solver() {
-        Some(s) => columns.max(s.subspace.unwrap_or(0)).max(s.block.unwrap_or(0).saturating_mul(2)),
-        None => columns,
+    // The sparse solver's Krylov basis, as the solver will size it (its default included: about 3k columns for
+    // small k, 2k for large), and the block vectors beside it.
+    let columns = match (a.solver(), eigenpairs(a)) {
+        // Counted where the sparse path will run (the dense path's n² values are checked by the runner).
+        (Some(s), Some(k)) if !kac_core::spectrum::use_dense(s.eigen_options(k, 0).method, vertices, vertices, k) => {
+            let o = s.eigen_options(k, 0);
+            let basis = kac_core::spectrum::lanczos::plan(vertices.max(k + 2), 0, &o).map_or(0, |(b, _, m)| m + 2 * b);
+            columns.max(basis)
+        }
+        (Some(_), Some(_)) => columns,
+        (Some(s), None) => columns.max(s.subspace.unwrap_or(0)).max(s.block.unwrap_or(0).saturating_mul(2)),
+        (None, _) => columns,
     };
     let values = vertices.saturating_mul(columns);
     let max = state.config.max_output_values;

@@ -2,9 +2,11 @@
 //! addressed by content hash; analyses run as jobs on a rayon pool behind a bounded queue; results are immutable
 //! JSON (and `.npy` / coloured PLY per array) with strong ETags; every error is RFC 9457 problem+json.
 
+pub mod bodies;
 pub mod compare;
 pub mod config;
 pub mod error;
+pub mod ids;
 pub mod jobs;
 pub mod limits;
 pub mod listener;
@@ -31,6 +33,8 @@ pub struct Inner {
     pub jobs: Arc<jobs::Jobs>,
     pub metrics: ops::Metrics,
     pub access: ops::Access,
+    /// The memory request bodies in flight hold together.
+    pub bodies: bodies::BodyBudget,
     pub draining: AtomicBool,
     /// Jobs enqueued when this process started (those a dead process held included).
     pub recovered: usize,
@@ -42,6 +46,9 @@ impl Inner {
     /// Opens the store, puts back in the queue what a dead process held, and starts this replica's dispatcher
     /// (claims jobs while a worker is free) and supervisor (heartbeats, cancels, timeouts).
     pub fn new(config: Config) -> std::io::Result<AppState> {
+        // Fail closed: a configuration that does not check stops the start, before any store is opened.
+        config.check().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
+        let keys = config.api_keys().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
         let workers = if config.workers == 0 {
             std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
         } else {
@@ -60,7 +67,8 @@ impl Inner {
             cache: Arc::new(EigenCache::new(config.cache_bytes)),
             jobs,
             metrics: ops::Metrics::default(),
-            access: ops::Access::new(&config.api_keys(), config.rate_limit_per_minute, config.auth_failures_per_minute),
+            bodies: bodies::BodyBudget::new(config.max_body_memory_bytes),
+            access: ops::Access::new(&keys, config.rate_limit_per_minute, config.auth_failures_per_minute),
             draining: AtomicBool::new(false),
             recovered,
             config,
@@ -76,6 +84,8 @@ impl Inner {
 /// Starts the server and runs until SIGINT or SIGTERM; prints `{"listening": "ADDR"}` on stdout first.
 pub fn serve(config: Config) -> Result<(), String> {
     init_logging();
+    // Checked before the port is bound: a server that would run open or with a broken limit never listens.
+    config.check().map_err(|e| format!("the configuration is refused: {e}"))?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -85,7 +95,10 @@ pub fn serve(config: Config) -> Result<(), String> {
             .await
             .map_err(|e| format!("cannot listen on {}: {e}", config.addr))?;
         let addr = listener.local_addr().map_err(|e| e.to_string())?;
-        let state = Inner::new(config).map_err(|e| format!("cannot open the store: {e}"))?;
+        let state = Inner::new(config).map_err(|e| match e.kind() {
+            std::io::ErrorKind::InvalidInput => format!("the configuration is refused: {e}"),
+            _ => format!("cannot open the store: {e}"),
+        })?;
         let recovered = state.recovered;
         let app = routes::router(state.clone());
         println!("{}", serde_json::json!({ "listening": addr.to_string(), "recovered_jobs": recovered }));

@@ -198,7 +198,11 @@ impl utoipa::Modify for CommonResponses {
                         "a field or query parameter this request does not take (invalid-request, with a suggestion)",
                     ),
                     ("500", "internal error"),
-                    ("503", "too many connections (too-many-connections), with Retry-After"),
+                    (
+                        "503",
+                        "too many connections (too-many-connections) or request bodies in flight (memory-busy), \
+                         with Retry-After",
+                    ),
                 ];
                 if v1 {
                     add.push(("401", "an API key is required (unauthorized)"));
@@ -208,7 +212,7 @@ impl utoipa::Modify for CommonResponses {
                 if has_body {
                     add.push(("413", "body or limit exceeded"));
                     add.push(("415", "unsupported media type or format"));
-                    add.push(("408", "the request body paused too long (body-timeout)"));
+                    add.push(("408", "the request body paused too long or came too slowly (body-timeout)"));
                 }
                 for (code, desc) in add {
                     op.responses.responses.entry(code.to_string()).or_insert_with(|| problem(desc).into());

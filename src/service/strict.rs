@@ -26,10 +26,21 @@ pub struct Unknown {
     pub belongs_in: Option<String>,
     /// Every name declared at that place.
     pub allowed: Vec<String>,
+    /// Set when the field is declared but its value is not a name it takes: the tag of a tagged union sent as
+    /// something other than one of its names (`"analysis": 5`, which a deserializer would read as a variant index).
+    pub not_a_name: Option<String>,
 }
 
 impl Unknown {
     pub fn detail(&self) -> String {
+        if let Some(v) = &self.not_a_name {
+            return format!(
+                "`{}` at {} is {v}: give one of its names as a string (accepted: {})",
+                self.name,
+                self.pointer,
+                self.allowed.join(", ")
+            );
+        }
         let what = if self.pointer.starts_with('?') { "query parameter" } else { "field" };
         let mut d = format!("unknown {what} `{}` at {}", self.name, self.pointer);
         if let Some(parent) = &self.belongs_in {
@@ -172,7 +183,35 @@ fn closest(name: &str, allowed: &[String]) -> Option<String> {
         .map(|(_, a)| a.clone())
 }
 
+/// The tag property of a tagged union (a `oneOf` whose object branches each carry a one-value `enum`) and its
+/// names.
+fn tag_union<'a>(doc: &'a Value, schema: &'a Value) -> Option<(&'a str, Vec<&'a str>)> {
+    let s = resolve(doc, schema);
+    if let Some(all) = s.get("allOf").and_then(Value::as_array) {
+        return all.iter().find_map(|m| tag_union(doc, m));
+    }
+    let branches = s.get("oneOf")?.as_array()?;
+    let tags: Vec<(&str, &str)> = branches.iter().filter_map(|b| tag_of(doc, b)).collect();
+    if tags.len() < 2 || tags.len() != branches.len() || tags.iter().any(|(p, _)| *p != tags[0].0) {
+        return None;
+    }
+    Some((tags[0].0, tags.iter().map(|(_, v)| *v).collect()))
+}
+
 fn check_object(doc: &Value, schema: &Value, value: &Map<String, Value>, pointer: &str) -> Result<(), Unknown> {
+    // A tag that is not a string would be read as a variant's index and pick a branch no name was given for.
+    if let Some((prop, names)) = tag_union(doc, schema) {
+        if let Some(v) = value.get(prop).filter(|v| !v.is_string()) {
+            return Err(Unknown {
+                pointer: format!("{pointer}/{}", escape(prop)),
+                name: prop.to_string(),
+                suggestion: None,
+                belongs_in: None,
+                allowed: names.iter().map(|n| n.to_string()).collect(),
+                not_a_name: Some(v.to_string()),
+            });
+        }
+    }
     let mut parts = Vec::new();
     if !object_parts(doc, schema, value, &mut parts) {
         return Ok(());
@@ -202,6 +241,7 @@ fn check_object(doc: &Value, schema: &Value, value: &Map<String, Value>, pointer
                     suggestion: closest(key, &allowed),
                     belongs_in,
                     allowed,
+                    not_a_name: None,
                 });
             }
         }
@@ -257,6 +297,7 @@ pub fn check_query(path: &str, method: &str, query: &str) -> Result<(), Unknown>
                 suggestion: closest(&name, &allowed),
                 belongs_in: None,
                 allowed: allowed.clone(),
+                not_a_name: None,
             });
         }
     }
@@ -277,6 +318,19 @@ mod tests {
         .unwrap_err();
         assert_eq!(e.pointer, "/options/normalisation");
         assert_eq!(e.suggestion.as_deref(), Some("normalization"));
+    }
+
+    #[test]
+    fn a_tag_that_is_not_a_name_is_refused_not_read_as_an_index() {
+        for tag in [json!(5), json!(6), json!(null), json!(true), json!(["gps"]), json!({"x": 1})] {
+            let e = check_body(
+                &json!({"shape_id": "x", "analysis": tag, "options": {"normalisation": "area"}}),
+                "JobRequest",
+            )
+            .unwrap_err();
+            assert_eq!((e.pointer.as_str(), e.not_a_name.is_some()), ("/analysis", true), "{tag}");
+            assert!(e.allowed.iter().any(|a| a == "gps") && e.detail().contains("as a string"), "{}", e.detail());
+        }
     }
 
     #[test]

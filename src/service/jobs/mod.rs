@@ -4,6 +4,7 @@
 //! that job only.
 
 use super::error::{ApiError, Problem};
+use super::ids::{JobId, ShapeId};
 use super::store::{Enqueued, JobQueue, Lease, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis, Hooks};
@@ -139,7 +140,7 @@ pub fn job_id(shape_id: &str, canonical: &serde_json::Value) -> String {
     h.update(serde_json::to_vec(canonical).unwrap_or_default());
     h.update([0]);
     h.update(analysis::ALGORITHM_VERSION.to_le_bytes());
-    h.finalize().iter().take(16).map(|b| format!("{b:02x}")).collect()
+    JobId::from_digest(&h.finalize()).hex()
 }
 
 /// The jobs of this replica: the queue they share with every replica, the pool this replica runs them on, and
@@ -191,8 +192,8 @@ impl Jobs {
         self.running.lock().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
     }
     /// A job's view: live if it runs here, else as the queue has it.
-    pub fn view(&self, id: &str) -> Result<Option<JobView>, ApiError> {
-        if let Some(j) = self.local(id) {
+    pub fn view(&self, id: &JobId) -> Result<Option<JobView>, ApiError> {
+        if let Some(j) = self.local(&id.hex()) {
             return Ok(Some(j.snapshot()));
         }
         self.queue.get(id).map_err(store_error)
@@ -212,8 +213,8 @@ impl Jobs {
         Ok(all)
     }
     /// Follows a job's changes.
-    pub fn watch(self: &Arc<Self>, id: &str) -> Watch {
-        Watch { jobs: self.clone(), id: id.to_string(), changes: self.queue.changes(), local: None }
+    pub fn watch(self: &Arc<Self>, id: &JobId) -> Watch {
+        Watch { jobs: self.clone(), id: *id, changes: self.queue.changes(), local: None }
     }
     fn notify(&self) {
         let (flag, cv) = &self.wake;
@@ -243,7 +244,7 @@ pub fn store_error(e: std::io::Error) -> ApiError {
 /// heartbeat of the replica that runs it, or any transition), with a poll every second besides.
 pub struct Watch {
     jobs: Arc<Jobs>,
-    id: String,
+    id: JobId,
     changes: broadcast::Receiver<String>,
     local: Option<watch::Receiver<JobView>>,
 }
@@ -252,7 +253,7 @@ impl Watch {
     /// The job's view now (None: no such job).
     pub fn current(&mut self) -> Result<Option<JobView>, ApiError> {
         if self.local.is_none() {
-            self.local = self.jobs.local(&self.id).map(|j| j.view.subscribe());
+            self.local = self.jobs.local(&self.id.hex()).map(|j| j.view.subscribe());
         }
         match &mut self.local {
             Some(rx) if rx.has_changed().is_ok() => Ok(Some(rx.borrow_and_update().clone())),
@@ -265,7 +266,7 @@ impl Watch {
     /// Returns once the job may have changed.
     pub async fn changed(&mut self) {
         let poll = tokio::time::sleep(Duration::from_secs(1));
-        let id = self.id.clone();
+        let id = self.id.hex();
         let changes = &mut self.changes;
         let announced = async {
             loop {
@@ -373,9 +374,9 @@ fn enqueue(
 
 /// Cancels a job: an enqueued one at once, a running one at its next stop-flag check (here at once; on another
 /// replica when its heartbeat sees the request, at once on the announcement). None: no such job.
-pub fn cancel(state: &AppState, id: &str) -> Result<Option<JobView>, ApiError> {
+pub fn cancel(state: &AppState, id: &JobId) -> Result<Option<JobView>, ApiError> {
     let view = state.jobs.queue.cancel(id, &canceled()).map_err(store_error)?;
-    if let Some(j) = state.jobs.local(id) {
+    if let Some(j) = state.jobs.local(&id.hex()) {
         j.stop.store(true, Ordering::SeqCst);
         return Ok(Some(j.snapshot()));
     }
@@ -398,10 +399,14 @@ enum NoWork {
 
 /// The work a claimed job names: its request parsed and its shapes read back from the store.
 fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
-    let shape = |id: &str, gone: &'static str| match state.shapes.get(id) {
-        Ok(Some(s)) => Ok(s),
-        Ok(None) => Err(NoWork::Gone(gone)),
-        Err(e) => Err(NoWork::Store(e)),
+    // Ids the service wrote itself; one that does not parse names no stored shape.
+    let shape = |id: &str, gone: &'static str| match ShapeId::parse(id).map(|id| state.shapes.get(&id)) {
+        None => Err(NoWork::Gone(gone)),
+        Some(got) => match got {
+            Ok(Some(s)) => Ok(s),
+            Ok(None) => Err(NoWork::Gone(gone)),
+            Err(e) => Err(NoWork::Store(e)),
+        },
     };
     if view.analysis == "compare" {
         let req = serde_json::from_value::<super::compare::CompareRequest>(view.request.clone())

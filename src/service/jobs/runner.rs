@@ -60,6 +60,10 @@ pub fn supervise(state: AppState) {
         beats.retain(|id, _| running.iter().any(|j| j.snapshot().id == *id));
         for job in running {
             let view = job.snapshot();
+            // A job whose outcome is written has no claim left to renew (it is leaving the running set).
+            if view.status.terminal() {
+                continue;
+            }
             if job.started.elapsed() >= timeout && !job.stop.load(Ordering::SeqCst) {
                 // A job already told to stop (canceled) stays canceled: the timer only stops a job nobody stopped.
                 job.timed_out.store(true, Ordering::SeqCst);
@@ -87,6 +91,8 @@ pub fn supervise(state: AppState) {
                     }
                     beats.insert(view.id.clone(), (std::time::Instant::now(), view.progress.clone()));
                 }
+                // The job finished between the snapshot and the beat: its claim ended with its outcome.
+                Ok(Lease::Lost) if job.snapshot().status.terminal() => {}
                 Ok(Lease::Lost) => {
                     tracing::warn!(job = %view.id, "the job's claim was lost: stopping it without a result");
                     job.lost.store(true, Ordering::SeqCst);
@@ -194,7 +200,7 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
                 .cloned()
                 .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                 .unwrap_or_else(|| "unknown panic".into());
-            let (_, p) = ApiError::JobPanicked { detail: msg }.problem();
+            let (_, p) = ApiError::JobPanicked { detail: without_paths(&msg) }.problem();
             finish(state, job, Status::Failed, Some(p), None);
             Some(Status::Failed)
         }
@@ -253,6 +259,24 @@ fn stopped(state: &AppState, job: &Job) -> Option<Status> {
     }
 }
 
+/// A panic message as a client may see it: source paths of the machine that built the server (`/home/…/x.rs:12`,
+/// a dependency's path in the registry) cut to the file's name, so no build-host path leaves the process (the
+/// whole message is logged).
+pub(crate) fn without_paths(msg: &str) -> String {
+    let token = |t: &str| {
+        if t.contains(".rs") && (t.contains('/') || t.contains('\\')) {
+            let name = t.rsplit(['/', '\\']).next().unwrap_or(t);
+            name.to_string()
+        } else {
+            t.to_string()
+        }
+    };
+    msg.lines()
+        .map(|l| l.split(' ').map(token).collect::<Vec<_>>().join(" "))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 pub(super) fn canceled() -> Problem {
     ApiError::Canceled.problem().1
 }
@@ -281,4 +305,17 @@ pub fn result_of(out: analysis::Output, id: &str) -> StoredResult {
         }
     }
     StoredResult::new(id, summary, out.arrays)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn panic_messages_lose_build_host_paths() {
+        let m = "assertion failed at /root/.cargo/registry/src/index.crates.io-1/faer-0.24.0/src/mat/matref.rs:123:5\n\
+                 left: 3 (/home/ci/kac/crates/kac-core/src/spectrum/lanczos.rs:40)";
+        let s = super::without_paths(m);
+        assert!(!s.contains("/root") && !s.contains("/home") && !s.contains(".cargo"), "{s}");
+        assert!(s.contains("matref.rs:123:5") && s.contains("lanczos.rs:40)"), "{s}");
+        assert_eq!(super::without_paths("k = 3 is above 2"), "k = 3 is above 2");
+    }
 }

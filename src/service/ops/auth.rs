@@ -102,6 +102,15 @@ fn public(path: &str) -> bool {
         || path.starts_with("/viewer/")
 }
 
+/// The token of an `Authorization: Bearer TOKEN` header; the scheme is case-insensitive (RFC 9110 §11.1), and
+/// any amount of spaces may separate it from the token.
+pub(crate) fn bearer_token(header: &str) -> Option<&str> {
+    let header = header.trim();
+    let (scheme, token) = header.split_once([' ', '\t'])?;
+    let token = token.trim();
+    (scheme.eq_ignore_ascii_case("bearer") && !token.is_empty()).then_some(token)
+}
+
 pub async fn authorize(State(state): State<AppState>, req: Request, next: Next) -> Response {
     let access = &state.access;
     if !access.enabled() || public(req.uri().path()) {
@@ -111,8 +120,7 @@ pub async fn authorize(State(state): State<AppState>, req: Request, next: Next) 
         .headers()
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer ").or_else(|| v.strip_prefix("bearer ")))
-        .map(str::trim);
+        .and_then(bearer_token);
     let Some(token) = token else {
         let mut r = ApiError::Unauthorized.into_response();
         r.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer realm=\"kac\""));
@@ -141,4 +149,19 @@ pub async fn authorize(State(state): State<AppState>, req: Request, next: Next) 
         r.headers_mut().insert(header::CACHE_CONTROL, HeaderValue::from_static("private, max-age=31536000, immutable"));
     }
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::bearer_token;
+
+    #[test]
+    fn the_bearer_scheme_is_case_insensitive_and_the_token_exact() {
+        for h in ["Bearer k", "bearer k", "BEARER k", "bEaReR  k ", "Bearer\tk"] {
+            assert_eq!(bearer_token(h), Some("k"), "{h}");
+        }
+        for h in ["Basic k", "Bearer", "Bearer ", "Bearerk", "k", ""] {
+            assert_eq!(bearer_token(h), None, "{h}");
+        }
+    }
 }

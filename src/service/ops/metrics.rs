@@ -41,6 +41,8 @@ pub struct Metrics {
     /// Connections open now, and refused at --max-connections.
     pub connections_open: AtomicU64,
     pub connections_refused: AtomicU64,
+    /// Request bodies refused (503 `memory-busy`) because the bodies in flight held their memory budget.
+    pub bodies_refused: AtomicU64,
     /// Requests refused because their address failed too many API-key checks.
     pub auth_throttled: AtomicU64,
 }
@@ -154,6 +156,11 @@ pub fn render(state: &AppState) -> String {
             "kac_connections_refused_total",
             "Connections answered 503 at --max-connections.",
             m.connections_refused.load(Ordering::Relaxed),
+        ),
+        (
+            "kac_bodies_refused_total",
+            "Request bodies answered 503 memory-busy at --max-body-memory-bytes.",
+            m.bodies_refused.load(Ordering::Relaxed),
         ),
         (
             "kac_auth_throttled_total",

@@ -111,11 +111,7 @@ pub(crate) async fn create_job(State(st): State<AppState>, request: Request) -> 
     } else {
         strict_body(&st, Json::<Value>::from_request(request, &st).await, "JobRequest")?
     };
-    let shape = st
-        .shapes
-        .get(&req.shape_id)
-        .map_err(store_error)?
-        .ok_or(ApiError::NotFound { what: "shape", id: req.shape_id.clone() })?;
+    let shape = stored_shape(&st, &req.shape_id)?;
     let (job, created) = jobs::submit(&st, shape, req.analysis)?;
     Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job))
 }
@@ -189,8 +185,8 @@ pub(crate) async fn list_jobs(State(st): State<AppState>, Query(f): Query<JobFil
 /// A job: status, progress, timestamps, error (problem detail) and result link.
 #[utoipa::path(get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path)),
     responses((status = 200, body = JobView), (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn get_job(State(st): State<AppState>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
-    st.jobs.view(&id)?.map(|j| Json(job_json(&j))).ok_or(ApiError::NotFound { what: "job", id })
+pub(crate) async fn get_job(State(st): State<AppState>, JobPath(id): JobPath) -> Result<Json<Value>, ApiError> {
+    st.jobs.view(&id)?.map(|j| Json(job_json(&j))).ok_or(ApiError::NotFound { what: "job", id: id.hex() })
 }
 
 /// Cancel a job (POST `/v1/jobs/{id}/cancel` or DELETE `/v1/jobs/{id}`): an enqueued job never starts, a running
@@ -199,12 +195,12 @@ pub(crate) async fn get_job(State(st): State<AppState>, Path(id): Path<String>) 
     responses((status = 202, description = "cancellation requested", body = JobView),
               (status = 200, description = "already finished", body = JobView),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let view = st.jobs.view(&id)?.ok_or_else(|| ApiError::NotFound { what: "job", id: id.clone() })?;
+pub(crate) async fn cancel_job(State(st): State<AppState>, JobPath(id): JobPath) -> Result<Response, ApiError> {
+    let view = st.jobs.view(&id)?.ok_or_else(|| ApiError::NotFound { what: "job", id: id.hex() })?;
     if view.status.terminal() {
         return Ok(job_response(StatusCode::OK, &view));
     }
-    let view = jobs::cancel(&st, &id)?.ok_or(ApiError::NotFound { what: "job", id })?;
+    let view = jobs::cancel(&st, &id)?.ok_or(ApiError::NotFound { what: "job", id: id.hex() })?;
     Ok(job_response(StatusCode::ACCEPTED, &view))
 }
 
@@ -213,7 +209,7 @@ pub(crate) async fn cancel_job(State(st): State<AppState>, Path(id): Path<String
     responses((status = 202, description = "cancellation requested", body = JobView),
               (status = 200, description = "already finished", body = JobView),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn delete_job(state: State<AppState>, id: Path<String>) -> Result<Response, ApiError> {
+pub(crate) async fn delete_job(state: State<AppState>, id: JobPath) -> Result<Response, ApiError> {
     cancel_job(state, id).await
 }
 
@@ -221,9 +217,9 @@ pub(crate) async fn delete_job(state: State<AppState>, id: Path<String>) -> Resu
 #[utoipa::path(get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path)),
     responses((status = 200, description = "text/event-stream of job objects", content_type = "text/event-stream"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn job_events(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+pub(crate) async fn job_events(State(st): State<AppState>, JobPath(id): JobPath) -> Result<Response, ApiError> {
     let mut watch = st.jobs.watch(&id);
-    let first = watch.current()?.ok_or(ApiError::NotFound { what: "job", id })?;
+    let first = watch.current()?.ok_or(ApiError::NotFound { what: "job", id: id.hex() })?;
     // One event per change of the job's view, wherever it runs, until it ends.
     let stream = futures_util::stream::unfold(
         (watch, Some(first), None::<Value>, false),
@@ -305,7 +301,7 @@ pub(crate) async fn analyze(
 /// Waits until the job ends or `wait` seconds (default 10, at most --max-wait-s) pass; its view then.
 pub(crate) async fn wait_for(st: &AppState, job: &JobView, wait: Option<f64>) -> Result<JobView, ApiError> {
     let wait = wait.unwrap_or(10.0).clamp(0.0, st.config.max_wait_s as f64);
-    let mut watch = st.jobs.watch(&job.id);
+    let mut watch = st.jobs.watch(&id_of(job)?);
     let mut last = job.clone();
     let _ = tokio::time::timeout(std::time::Duration::from_secs_f64(wait), async {
         loop {
@@ -338,7 +334,7 @@ pub(crate) async fn answer_within(
         Status::Succeeded => {
             let r = st
                 .results
-                .get(&view.id)
+                .get(&id_of(&view)?)
                 .map_err(store_error)?
                 .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
             Ok(with_location(result_response(&r, headers, true), &format!("/v1/results/{}", view.id)))

@@ -18,6 +18,7 @@ pub(crate) use viewer::*;
 
 use super::compare::CompareRequest;
 use super::error::{problem_response, ApiError, CODES};
+use super::ids::{JobPath, ResultPath, ShapePath};
 use super::jobs::{self, store_error, JobView, Status};
 use super::search::SearchRequest;
 use super::store::{ShapeRecord, StoredResult, StoredShape};
@@ -64,6 +65,7 @@ pub fn router(state: AppState) -> Router {
         .route("/", get(viewer_index))
         .route("/viewer/{file}", get(viewer_file))
         .fallback(not_found)
+        .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::bodies::guard))
         .route_layer(axum::middleware::from_fn(strict_query))
         .route_layer(axum::middleware::from_fn(identity_encoding_only))
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), super::ops::authorize))
@@ -118,6 +120,19 @@ pub(crate) async fn openapi_json() -> Response {
     ([(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
+/// A stored shape by an id a client sent (a body field): parsed first, so text that is not an id never reaches
+/// the store; 404 when it is not an id or names no stored shape.
+pub(crate) fn stored_shape(st: &AppState, id: &str) -> Result<Arc<StoredShape>, ApiError> {
+    let parsed = super::ids::shape_id(id)?;
+    st.shapes.get(&parsed).map_err(store_error)?.ok_or_else(|| ApiError::NotFound { what: "shape", id: id.into() })
+}
+
+/// The id of a job view the service made (its ids are hashes it wrote): typed for the stores.
+pub(crate) fn id_of(view: &JobView) -> Result<super::ids::JobId, ApiError> {
+    super::ids::JobId::parse(&view.id)
+        .ok_or_else(|| ApiError::Internal { detail: format!("a stored job has the malformed id {:?}", view.id) })
+}
+
 pub(crate) async fn not_found(uri: Uri) -> ApiError {
     ApiError::RouteNotFound { path: uri.path().to_string() }
 }
@@ -135,7 +150,9 @@ pub(crate) fn timed_out(e: &(dyn std::error::Error + 'static)) -> bool {
 }
 
 pub(crate) fn body_error(state: &AppState, e: BytesRejection) -> ApiError {
-    if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+    if let Some(detail) = super::bodies::too_slow(&e) {
+        ApiError::BodyTooSlow { detail }
+    } else if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
         ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
     } else if timed_out(&e) {
         ApiError::BodyTimeout { seconds: state.config.body_read_timeout_s }

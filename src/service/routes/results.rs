@@ -17,11 +17,20 @@ pub(crate) fn immutable(mut r: Response, etag: &str) -> Response {
     r
 }
 
+/// `If-None-Match` by the weak comparison RFC 9110 §13.1.2 prescribes: `W/"x"` matches `"x"`; every header line
+/// and every member of a list counts; `*` matches any stored representation.
 pub(crate) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+    let opaque = |t: &str| {
+        let t = t.trim();
+        t.strip_prefix("W/").unwrap_or(t).to_string()
+    };
+    let mine = opaque(etag);
     headers
-        .get(header::IF_NONE_MATCH)
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"))
+        .get_all(header::IF_NONE_MATCH)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .any(|t| t.trim() == "*" || opaque(t) == mine)
 }
 
 /// A result's body: the summary alone (`values=false`), the whole body kept in memory when small, else the
@@ -50,11 +59,11 @@ pub(crate) fn result_response(r: &Arc<StoredResult>, headers: &HeaderMap, values
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_result(
     State(st): State<AppState>,
-    Path(id): Path<String>,
+    ResultPath(id, _): ResultPath,
     Query(q): Query<ResultQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let r = st.results.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "result", id })?;
+    let r = st.results.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "result", id: id.hex() })?;
     Ok(result_response(&r, &headers, q.values.unwrap_or(true)))
 }
 
@@ -75,11 +84,12 @@ pub struct ArrayQuery {
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_array(
     State(st): State<AppState>,
-    Path((id, file)): Path<(String, String)>,
+    ResultPath(id, file): ResultPath,
     Query(q): Query<ArrayQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let r = st.results.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "result", id: id.clone() })?;
+    let file = file.unwrap_or_default();
+    let r = st.results.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "result", id: id.hex() })?;
     let (name, ext) = file.rsplit_once('.').ok_or(ApiError::NotFound { what: "array", id: file.clone() })?;
     let a = r.arrays.iter().find(|a| a.name == name).ok_or(ApiError::NotFound { what: "array", id: file.clone() })?;
     let col = q.column.unwrap_or(0);
@@ -116,12 +126,7 @@ pub(crate) async fn get_array(
             if col >= a.cols {
                 return Err(ApiError::invalid_request(format!("column {col} does not exist ({} columns)", a.cols)));
             }
-            let shape_id = r.summary["shape_id"].as_str().unwrap_or("").to_string();
-            let shape = st
-                .shapes
-                .get(&shape_id)
-                .map_err(store_error)?
-                .ok_or(ApiError::NotFound { what: "shape", id: shape_id })?;
+            let shape = stored_shape(&st, r.summary["shape_id"].as_str().unwrap_or(""))?;
             (axum::body::Body::from(coloured_ply(&shape, a, col)), "application/x-ply")
         }
         _ => return Err(ApiError::NotFound { what: "array format", id: file }),
@@ -137,4 +142,27 @@ pub(crate) fn coloured_ply(shape: &StoredShape, a: &analysis::VertexArray, col: 
     let v = &shape.validated;
     let colours = kac_core::io::write::colour_ramp(&v.from_input_rows(&a.data, a.cols, col));
     kac_core::io::write::ply(&v.shape, true, Some(&colours))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn if_none_match_compares_weakly_over_every_member() {
+        let etag = "\"abc\"";
+        let h = |values: &[&str]| {
+            let mut m = HeaderMap::new();
+            for v in values {
+                m.append(header::IF_NONE_MATCH, HeaderValue::from_str(v).unwrap());
+            }
+            not_modified(&m, etag)
+        };
+        for yes in [&["\"abc\""][..], &["W/\"abc\""], &["\"x\", W/\"abc\""], &["\"x\"", "\"abc\""], &["*"]] {
+            assert!(h(yes), "{yes:?}");
+        }
+        for no in [&[][..], &["\"abcd\""], &["W/\"ab\""], &["abc"]] {
+            assert!(!h(no), "{no:?}");
+        }
+    }
 }

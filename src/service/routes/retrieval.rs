@@ -37,19 +37,16 @@ pub(crate) async fn compare(
         }
         Some(ids) => ids
             .iter()
-            .map(|id| {
-                st.shapes
-                    .get(id)
-                    .map_err(store_error)?
-                    .ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() })
-            })
+            .map(|id| stored_shape(&st, id))
             .collect::<Result<_, _>>()?,
         None => {
             let (records, _) = st.shapes.list(0, max).map_err(store_error)?;
             let mut shapes = vec![];
             for r in &records {
                 // A shape removed since the listing is left out.
-                shapes.extend(st.shapes.get(&r.id).map_err(store_error)?);
+                if let Some(id) = crate::service::ids::ShapeId::parse(&r.id) {
+                    shapes.extend(st.shapes.get(&id).map_err(store_error)?);
+                }
             }
             shapes
         }
@@ -57,6 +54,9 @@ pub(crate) async fn compare(
     let (job, _) = jobs::submit_compare(&st, req, shapes)?;
     answer_within(&st, &job, q.wait, &headers).await
 }
+
+/// The largest magnitude of a query fingerprint's values: a thousand squared differences of it stay finite.
+pub(crate) const MAX_FINGERPRINT_VALUE: f64 = 1e100;
 
 #[derive(Deserialize, utoipa::IntoParams)]
 pub struct SearchQuery {
@@ -107,16 +107,20 @@ pub(crate) async fn search(
             if let Some(i) = f.iter().position(|x| !x.is_finite()) {
                 return Err(ApiError::invalid_request(format!("fingerprint value {i} is not a finite number")));
             }
+            // Distances are sums of squares of differences: values this large would overflow them to infinity.
+            if let Some(i) = f.iter().position(|x| x.abs() > MAX_FINGERPRINT_VALUE) {
+                return Err(ApiError::invalid_request(format!(
+                    "fingerprint value {i} = {:e} is outside ±{MAX_FINGERPRINT_VALUE:e} (a shape-DNA value is a \
+                     normalized eigenvalue; distances to it would overflow)",
+                    f[i]
+                )));
+            }
             f.clone()
         }
         (Some(id), None) => match st.index.get(&family, id) {
             Some(f) => f,
             None => {
-                let shape = st
-                    .shapes
-                    .get(id)
-                    .map_err(store_error)?
-                    .ok_or_else(|| ApiError::NotFound { what: "shape", id: id.clone() })?;
+                let shape = stored_shape(&st, id)?;
                 let dna = Analysis::ShapeDna {
                     options: req.options(),
                     operator: req.operator.clone(),
@@ -131,7 +135,7 @@ pub(crate) async fn search(
                         // not be kept): its stored result holds the values.
                         let r = st
                             .results
-                            .get(&view.id)
+                            .get(&id_of(&view)?)
                             .map_err(store_error)?
                             .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
                         let values: Vec<f64> = serde_json::from_value(r.summary["shape_dna"]["values"].clone())

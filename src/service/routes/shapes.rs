@@ -80,6 +80,9 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
                 Err(e) if timed_out(&e) => {
                     return Err(ApiError::BodyTimeout { seconds: st.config.body_read_timeout_s })
                 }
+                Err(e) if super::super::bodies::too_slow(&e).is_some() => {
+                    return Err(ApiError::BodyTooSlow { detail: super::super::bodies::too_slow(&e).unwrap_or_default() })
+                }
                 Err(e) => return Err(ApiError::invalid_request(format!("multipart: {}", e.body_text()))),
             };
             let name = field.name().unwrap_or("").to_string();
@@ -90,6 +93,8 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
                     ApiError::BodyTooLarge { limit: st.config.max_body_bytes }
                 } else if timed_out(&e) {
                     ApiError::BodyTimeout { seconds: st.config.body_read_timeout_s }
+                } else if let Some(detail) = super::super::bodies::too_slow(&e) {
+                    ApiError::BodyTooSlow { detail }
                 } else {
                     ApiError::invalid_request(format!("multipart: {}", e.body_text()))
                 }
@@ -221,24 +226,24 @@ pub(crate) async fn list_shapes(State(st): State<AppState>, Query(p): Query<Page
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_shape(
     State(st): State<AppState>,
-    Path(id): Path<String>,
+    ShapePath(id): ShapePath,
 ) -> Result<Json<ShapeResource>, ApiError> {
     st.shapes
         .get(&id)
         .map_err(store_error)?
         .map(|s| Json(shape_resource(&s)))
-        .ok_or(ApiError::NotFound { what: "shape", id })
+        .ok_or(ApiError::NotFound { what: "shape", id: id.hex() })
 }
 
 /// Delete a stored shape (its finished results stay available by id).
 #[utoipa::path(delete, path = "/v1/shapes/{id}", tag = "shapes", params(("id" = String, Path)),
     responses((status = 204, description = "deleted"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn delete_shape(State(st): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+pub(crate) async fn delete_shape(State(st): State<AppState>, ShapePath(id): ShapePath) -> Result<StatusCode, ApiError> {
     if st.shapes.remove(&id).map_err(store_error)? {
-        st.index.remove_shape(&id);
+        st.index.remove_shape(&id.hex());
         Ok(StatusCode::NO_CONTENT)
     } else {
-        Err(ApiError::NotFound { what: "shape", id })
+        Err(ApiError::NotFound { what: "shape", id: id.hex() })
     }
 }

@@ -52,8 +52,8 @@ pub(crate) async fn viewer_file(Path(name): Path<String>) -> Response {
     responses((status = 200, description = "the geometry (binary, see the description)", content_type = "application/octet-stream"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 422, description = "a graph without vertex positions", body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn get_geometry(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let shape = st.shapes.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "shape", id })?;
+pub(crate) async fn get_geometry(State(st): State<AppState>, ShapePath(id): ShapePath) -> Result<Response, ApiError> {
+    let shape = st.shapes.get(&id).map_err(store_error)?.ok_or(ApiError::NotFound { what: "shape", id: id.hex() })?;
     // Building the binary is work proportional to the shape (a tet mesh's boundary is found by sorting its
     // faces): off the runtime's threads.
     let out = tokio::task::spawn_blocking(move || geometry(&shape))

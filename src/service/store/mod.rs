@@ -3,6 +3,7 @@
 //! files in the data directory (written atomically: temporary file, fsync, rename), and a byte-bounded cache of
 //! eigenpairs.
 
+use super::ids::{ResultId, ShapeId};
 use super::jobs::JobView;
 use crate::analysis::{Eigen, SpectrumCache, VertexArray};
 use kac_core::Validated;
@@ -120,11 +121,11 @@ pub trait ShapeStore: Send + Sync {
     /// Stores the shape (and its original bytes) unless one with its id exists; true if it was new.
     fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)>;
     /// The shape, parsed (None: not stored; an error: the store cannot be read now).
-    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredShape>>>;
+    fn get(&self, id: &ShapeId) -> std::io::Result<Option<Arc<StoredShape>>>;
     /// Records in id order from `offset`, at most `limit`, and the total.
     fn list(&self, offset: usize, limit: usize) -> std::io::Result<(Vec<ShapeRecord>, usize)>;
     /// Removes the shape and its fingerprints (false: it was not stored).
-    fn remove(&self, id: &str) -> std::io::Result<bool>;
+    fn remove(&self, id: &ShapeId) -> std::io::Result<bool>;
     /// Whether the storage answers (for readiness).
     fn healthy(&self) -> bool;
     /// A connection pool's size, idle connections and waiting callers, where the store has one.
@@ -183,7 +184,7 @@ pub trait ResultStore: Send + Sync {
     /// Stores a result unless one is stored under its id; the stored one.
     fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>>;
     /// The result (None: not stored; an error: the store cannot be read now).
-    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>>;
+    fn get(&self, id: &ResultId) -> std::io::Result<Option<Arc<StoredResult>>>;
 }
 
 /// Eigenpairs by (shape, operator, solver) key, bounded by bytes (least recently used first). An entry with k

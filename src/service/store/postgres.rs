@@ -11,6 +11,7 @@
 
 use super::*;
 use crate::service::error::Problem;
+use crate::service::ids::JobId;
 use crate::service::jobs::{now, JobProgress, Status};
 use deadpool_postgres::{Manager, ManagerConfig, Pool, RecyclingMethod};
 use std::future::Future;
@@ -299,12 +300,13 @@ impl ShapeStore for Postgres {
             self.parsed.lock().unwrap_or_else(|e| e.into_inner()).put(&s.id, s.clone(), shape_size(&s));
             return Ok((true, s));
         }
-        match ShapeStore::get(self, &shape.id)? {
+        match ShapeStore::get(self, &shape.validated.id)? {
             Some(s) => Ok((false, s)),
             None => Err(std::io::Error::other("the stored shape was removed while it was stored again")),
         }
     }
-    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredShape>>> {
+    fn get(&self, id: &ShapeId) -> std::io::Result<Option<Arc<StoredShape>>> {
+        let id = &*id.hex();
         let cached = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id);
         if let Some(s) = cached {
             // Another replica may have removed it: the record is checked (one indexed query), the parse is not redone.
@@ -354,7 +356,8 @@ impl ShapeStore for Postgres {
             Ok((rows.iter().map(record_of).collect(), total as usize))
         })
     }
-    fn remove(&self, id: &str) -> std::io::Result<bool> {
+    fn remove(&self, id: &ShapeId) -> std::io::Result<bool> {
+        let id = &*id.hex();
         let key = id.to_string();
         let removed = self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
@@ -528,9 +531,11 @@ impl ResultStore for Postgres {
             );
             return Ok(result);
         }
-        ResultStore::get(self, &result.id)?.ok_or_else(|| std::io::Error::other("the stored result went missing"))
+        let id = JobId::parse(&result.id).ok_or_else(|| std::io::Error::other("a result id that is not a job id"))?;
+        ResultStore::get(self, &id)?.ok_or_else(|| std::io::Error::other("the stored result went missing"))
     }
-    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>> {
+    fn get(&self, id: &ResultId) -> std::io::Result<Option<Arc<StoredResult>>> {
+        let id = &*id.hex();
         if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
             return Ok(Some(r));
         }
@@ -730,7 +735,8 @@ impl JobQueue for Postgres {
             Ok(n > 0)
         })
     }
-    fn cancel(&self, id: &str, problem: &Problem) -> std::io::Result<Option<JobView>> {
+    fn cancel(&self, id: &JobId, problem: &Problem) -> std::io::Result<Option<JobView>> {
+        let id = &*id.hex();
         let (id, problem) = (id.to_string(), problem.clone());
         self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
@@ -797,7 +803,8 @@ impl JobQueue for Postgres {
         self.requeue_expired()?;
         Ok(self.depth()?.0)
     }
-    fn get(&self, id: &str) -> std::io::Result<Option<JobView>> {
+    fn get(&self, id: &JobId) -> std::io::Result<Option<JobView>> {
+        let id = &*id.hex();
         let id = id.to_string();
         self.run(move |pool| async move {
             let c = pool.get().await.map_err(pg)?;

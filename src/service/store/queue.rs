@@ -5,6 +5,7 @@
 //! change is announced to the job's subscribers on every replica.
 
 use super::super::error::Problem;
+use super::super::ids::JobId;
 use super::super::jobs::{JobProgress, JobView};
 use std::io::Result;
 use std::time::Duration;
@@ -44,14 +45,14 @@ pub trait JobQueue: Send + Sync {
     fn finish(&self, id: &str, owner: &str, view: &JobView) -> Result<bool>;
     /// Cancels a job: an enqueued one at once (status `canceled`, `problem` its error), a processing one by a
     /// request that its worker sees at its next heartbeat (its view returned as it is). None: no such job.
-    fn cancel(&self, id: &str, problem: &Problem) -> Result<Option<JobView>>;
+    fn cancel(&self, id: &JobId, problem: &Problem) -> Result<Option<JobView>>;
     /// Puts processing jobs whose lease expired back in the queue; their ids.
     fn requeue_expired(&self) -> Result<Vec<String>>;
     /// At start: puts back in the queue the jobs no live worker can hold (the embedded store belongs to one
     /// process, so every processing job; a shared one waits for their leases to expire). The number of jobs
     /// enqueued afterwards.
     fn recover(&self) -> Result<usize>;
-    fn get(&self, id: &str) -> Result<Option<JobView>>;
+    fn get(&self, id: &JobId) -> Result<Option<JobView>>;
     /// Every job in submission order.
     fn list(&self) -> Result<Vec<JobView>>;
     /// Jobs by status name (statuses with none may be missing).

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::service::error::Problem;
+use crate::service::ids::{file_in, JobId};
 use crate::service::jobs::{now, JobProgress, Status};
 use rusqlite::OptionalExtension;
 use std::io::Write;
@@ -144,7 +145,7 @@ fn row_record(r: &rusqlite::Row<'_>) -> rusqlite::Result<ShapeRecord> {
 
 impl ShapeStore for Database {
     fn insert(&self, shape: StoredShape, original: &[u8]) -> std::io::Result<(bool, Arc<StoredShape>)> {
-        let path = self.shape_dir.join(&shape.id);
+        let path = file_in(&self.shape_dir, &shape.id)?;
         // Twice at most: a shape stored under this id (record and file) is returned as it is; if it cannot be
         // read back (its file lost or unreadable, or removed in between), the second round stores this upload.
         for force in [false, true] {
@@ -170,20 +171,21 @@ impl ShapeStore for Database {
                     return Ok((true, s));
                 }
             }
-            if let Some(existing) = ShapeStore::get(self, &shape.id)? {
+            if let Some(existing) = ShapeStore::get(self, &shape.validated.id)? {
                 return Ok((false, existing));
             }
         }
         unreachable!("the forced round stores the shape or returns its error")
     }
-    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredShape>>> {
+    fn get(&self, id: &ShapeId) -> std::io::Result<Option<Arc<StoredShape>>> {
+        let id = &*id.hex();
         if let Some(s) = self.parsed.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
             return Ok(Some(s));
         }
         let Some(record) = self.record(id)? else { return Ok(None) };
         // A record whose upload was lost (or no longer parses) is not a stored shape: the next upload of the id
         // stores it again.
-        let bytes = match std::fs::read(self.shape_dir.join(id)) {
+        let bytes = match std::fs::read(file_in(&self.shape_dir, id)?) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(e) => return Err(e),
@@ -207,7 +209,8 @@ impl ShapeStore for Database {
         let rows = st.query_map([limit as i64, offset as i64], row_record).map_err(db_err)?;
         Ok((rows.collect::<Result<_, _>>().map_err(db_err)?, total as usize))
     }
-    fn remove(&self, id: &str) -> std::io::Result<bool> {
+    fn remove(&self, id: &ShapeId) -> std::io::Result<bool> {
+        let id = &*id.hex();
         let _id = self.id_lock(id);
         let n = {
             let mut c = self.conn();
@@ -222,7 +225,7 @@ impl ShapeStore for Database {
             n
         };
         self.parsed.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
-        let _ = std::fs::remove_file(self.shape_dir.join(id));
+        let _ = std::fs::remove_file(file_in(&self.shape_dir, id)?);
         Ok(n > 0)
     }
     fn healthy(&self) -> bool {
@@ -393,7 +396,8 @@ impl JobQueue for Database {
         }
         Ok(n > 0)
     }
-    fn cancel(&self, id: &str, problem: &Problem) -> std::io::Result<Option<JobView>> {
+    fn cancel(&self, id: &JobId, problem: &Problem) -> std::io::Result<Option<JobView>> {
+        let id = &*id.hex();
         let mut c = self.conn();
         let tx = c.transaction().map_err(db_err)?;
         let row: Option<String> =
@@ -427,7 +431,8 @@ impl JobQueue for Database {
         self.requeue_where("?1 = ?1", 0)?;
         Ok(self.depth()?.0)
     }
-    fn get(&self, id: &str) -> std::io::Result<Option<JobView>> {
+    fn get(&self, id: &JobId) -> std::io::Result<Option<JobView>> {
+        let id = &*id.hex();
         let text: Option<String> = self
             .conn()
             .query_row("SELECT view FROM jobs WHERE id = ?1", [id], |r| r.get(0))
@@ -562,14 +567,14 @@ pub fn write_once(path: &Path, bytes: &[u8]) -> std::io::Result<bool> {
 /// id never write one file). `{id}.json` is a result written by an earlier version (its whole body).
 impl ResultStore for FileResults {
     fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>> {
-        let meta_path = self.dir.join(format!("{}.result.json", result.id));
-        if !meta_path.exists() && !self.dir.join(format!("{}.json", result.id)).exists() {
+        let meta_path = file_in(&self.dir, &format!("{}.result.json", result.id))?;
+        if !meta_path.exists() && !file_in(&self.dir, &format!("{}.json", result.id))?.exists() {
             // The numbers under a name of this writer's own (two writers of one id never share a file), which the
             // meta names; the meta is created once, last.
             static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
             let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             let name = format!("{}.{}.{}.f64", result.id, std::process::id(), seq);
-            let values_path = self.dir.join(&name);
+            let values_path = file_in(&self.dir, &name)?;
             blocking(|| write_values(&values_path, &result))?;
             let mut meta = result.meta();
             meta["values_file"] = name.into();
@@ -586,27 +591,26 @@ impl ResultStore for FileResults {
             let _ = std::fs::remove_file(&values_path);
         }
         // Written once: the result stored under the id (the same request computed again) stays.
-        self.get(&result.id)?.ok_or_else(|| std::io::Error::other("the stored result went missing"))
+        let id = JobId::parse(&result.id).ok_or_else(|| std::io::Error::other("a result id that is not a job id"))?;
+        self.get(&id)?.ok_or_else(|| std::io::Error::other("the stored result went missing"))
     }
-    fn get(&self, id: &str) -> std::io::Result<Option<Arc<StoredResult>>> {
+    fn get(&self, id: &ResultId) -> std::io::Result<Option<Arc<StoredResult>>> {
+        let id = &*id.hex();
         if let Some(r) = self.results.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
             return Ok(Some(r));
         }
-        if !id.bytes().all(|b| b.is_ascii_hexdigit()) {
-            return Ok(None);
-        }
         let not_found = |e: &std::io::Error| e.kind() == std::io::ErrorKind::NotFound;
-        let r = match std::fs::read(self.dir.join(format!("{id}.result.json"))) {
+        let r = match std::fs::read(file_in(&self.dir, &format!("{id}.result.json"))?) {
             Ok(meta) => {
                 let meta: Value = serde_json::from_slice(&meta).map_err(std::io::Error::other)?;
                 let name = meta["values_file"].as_str().unwrap_or("");
                 if name.contains('/') || !name.starts_with(id) {
                     return Err(std::io::Error::other(format!("the stored result {id} names no numbers file")));
                 }
-                let mut f = std::io::BufReader::with_capacity(1 << 20, std::fs::File::open(self.dir.join(name))?);
+                let mut f = std::io::BufReader::with_capacity(1 << 20, std::fs::File::open(file_in(&self.dir, name)?)?);
                 blocking(|| StoredResult::from_meta(id, &meta, |data| read_values(&mut f, data)))?
             }
-            Err(e) if not_found(&e) => match std::fs::read(self.dir.join(format!("{id}.json"))) {
+            Err(e) if not_found(&e) => match std::fs::read(file_in(&self.dir, &format!("{id}.json"))?) {
                 Ok(body) => blocking(|| StoredResult::parse_legacy(id, &body))
                     .ok_or_else(|| std::io::Error::other(format!("the stored result {id} does not parse")))?,
                 Err(e) if not_found(&e) => return Ok(None),

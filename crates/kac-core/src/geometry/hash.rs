@@ -32,8 +32,9 @@ impl ShapeId {
     pub fn hex(&self) -> String {
         self.0.iter().map(|b| format!("{b:02x}")).collect()
     }
+    /// The id its 64 lowercase hex digits name (the form [`ShapeId::hex`] writes; nothing else parses).
     pub fn parse(s: &str) -> Option<ShapeId> {
-        if s.len() != 64 || !s.bytes().all(|b| b.is_ascii_hexdigit()) {
+        if s.len() != 64 || !s.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f')) {
             return None;
         }
         let mut out = [0u8; 32];

@@ -218,6 +218,9 @@ pub struct RawShape {
     pub reader_welded: usize,
     /// Notes of the reader: content skipped or interpreted, for the report.
     pub notes: Vec<String>,
+    /// Warnings of the reader: what it read may not be what the file meant (an OBJ with no faces, read as a
+    /// point cloud, may be a mesh cut short).
+    pub warnings: Vec<String>,
     /// Middle nodes of edges given by second-order elements (Gmsh 6-node triangles, 10-node tets, 8/9-node
     /// quads, 3-node lines): the edge's two corners (this numbering) and the node's position.
     pub edge_nodes: Vec<([u32; 2], Point)>,

@@ -383,7 +383,7 @@ pub fn validate(raw: RawShape, options: &ValidateOptions) -> Result<Validated> {
         }
     }
     let mut repairs = Repairs(Vec::new());
-    let mut warnings = Vec::new();
+    let mut warnings = raw.warnings.clone();
     let mut polygons = None;
     let (shape, vertex_map, facts) = match kind {
         ShapeKind::TriangleMesh => surface(&raw, options, &mut repairs, &mut warnings, &mut polygons)?,

@@ -171,6 +171,13 @@ impl Format {
         if trimmed.starts_with('{') {
             return Some(if trimmed.contains("\"asset\"") { Format::Gltf } else { Format::Json });
         }
+        // Past the formats with a text header, bytes that are not text (a NUL, or invalid UTF-8 before the cut at
+        // 4096) are a binary STL (the one headerless binary mesh format: its reader names a truncation) or nothing
+        // known; never a text format guessed from noise.
+        let invalid = std::str::from_utf8(head).err().is_some_and(|e| e.error_len().is_some());
+        if head.contains(&0) || invalid {
+            return (bytes.len() >= 84).then_some(Format::Stl);
+        }
         // First meaningful line, past comments.
         let first = trimmed.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#'))?;
         let word = first.split_whitespace().next().unwrap_or("");

@@ -135,6 +135,18 @@ pub fn read(bytes: &[u8], options: &ReadOptions) -> Result<RawShape> {
             });
         }
     }
+    if polygons.is_empty() && segments.is_empty() && !raw.vertices.is_empty() {
+        let mut w = format!("obj: no faces or lines: read as a point cloud of {} vertices", raw.vertices.len());
+        if !bytes.trim_ascii_end().is_empty() && !bytes.ends_with(b"\n") {
+            w.push_str("; the file does not end with a line break (was it cut short?)");
+        }
+        if texcoords + normals > 0 {
+            w.push_str(&format!(
+                "; it has {texcoords} texture coordinates and {normals} normals, which belong to faces (a mesh cut short?)"
+            ));
+        }
+        raw.warnings.push(w);
+    }
     if texcoords + normals > 0 {
         raw.notes.push(format!(
             "obj: {texcoords} texture coordinates and {normals} normals ignored; faces use position indices only"

@@ -193,6 +193,29 @@ pub fn belkin_niyogi_pair(
         }
         None => None,
     };
+    // A kernel narrower than the spacing joins no point to any other: every point its own component and every
+    // eigenvalue 0, which is no spectrum of the surface. Refused, naming the least that reaches a neighbour.
+    if let Some(t) = given_t {
+        let reach = given_r.unwrap_or(3.0 * t.sqrt());
+        if reach < h {
+            return Err(OperatorError::InvalidParameter {
+                name: "t",
+                message: format!(
+                    "t = {t:e} gives a kernel of radius {reach:.3e}, below the mean spacing h = {h:.3e}: no point \
+                     has a neighbour under it; give t ≥ (h/3)² = {:.3e} (the default is about {UNIFORM_TIME}h²)",
+                    (h / 3.0).powi(2)
+                ),
+            });
+        }
+    }
+    if let Some(r) = given_r {
+        if r < h {
+            return Err(OperatorError::InvalidParameter {
+                name: "radius",
+                message: format!("radius {r:.3e} is below the mean spacing h = {h:.3e}: no point has a neighbour"),
+            });
+        }
+    }
     let distance_to = |i: usize, j: usize| vec3::norm(vec3::sub(points[nb.of(i)[j.min(nb.k - 1)] as usize], points[i]));
     // Each point's time t_i (a pair uses t_ij = (t_i + t_j)/2, so the kernel stays symmetric and its quadratic
     // form is the Dirichlet energy to leading order wherever t varies slowly).

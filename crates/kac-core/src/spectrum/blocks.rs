@@ -7,7 +7,7 @@ use super::*;
 /// Whether a problem of `n` unknowns (`free` of them left after deflation, `k` pairs wanted beyond the deflated
 /// ones) is solved densely; `block` is the largest problem the dense path would factor (a component's size
 /// when the components are solved one by one, see [`Blocks`]).
-pub(crate) fn use_dense(method: Method, block: usize, free: usize, k: usize) -> bool {
+pub fn use_dense(method: Method, block: usize, free: usize, k: usize) -> bool {
     match method {
         Method::Dense => true,
         Method::Sparse => false,

@@ -48,6 +48,7 @@ pub use result::*;
 
 use crate::operators::sparse::SparsePair;
 use blocks::*;
+pub use blocks::use_dense;
 pub use completeness::check_completeness;
 use completeness::*;
 use faer::{Mat, MatRef};
@@ -65,9 +66,7 @@ pub fn eigs(
     let t0 = Instant::now();
     let n = pair.n();
     let k = options.k;
-    if !(options.tol > 0.0 && options.tol < 1.0) {
-        return Err(EigenError::InvalidOption { name: "tol", message: format!("{} is not in (0, 1)", options.tol) });
-    }
+    options.check()?;
     control.phase("null-space", 0, k)?;
     let zeros = if options.deflate_null_space { null_space::zero_modes(pair) } else { ZeroModes::default() };
     let z = zeros.len();

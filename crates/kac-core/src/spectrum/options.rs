@@ -46,6 +46,72 @@ pub struct EigenOptions {
     pub deflate_null_space: bool,
 }
 
+/// The smallest residual tolerance a solve takes: a relative residual below about 100 machine epsilons cannot be
+/// reached in double precision, and a solve asked for less would iterate until it is stopped.
+pub const MIN_TOL: f64 = 1e-14;
+/// The largest residual tolerance a solve takes (a looser one would call noise converged).
+pub const MAX_TOL: f64 = 0.1;
+/// The largest block size.
+pub const MAX_BLOCK: usize = 64;
+/// The largest |σ| a solve takes: beyond it, L − σM is σM to every digit for any operator a mesh of reasonable
+/// units gives (and overflows for the largest doubles).
+pub const MAX_ABS_SIGMA: f64 = 1e15;
+
+impl EigenOptions {
+    /// Checks the settings no solve could honour, before anything is computed: a tolerance outside
+    /// [`MIN_TOL`, `MAX_TOL`], a shift that is not finite, zero or beyond ±[`MAX_ABS_SIGMA`], a block outside
+    /// 1..=[`MAX_BLOCK`], a subspace that cannot hold the pairs asked for, or no steps. Each error names the setting.
+    pub fn check(&self) -> Result<(), EigenError> {
+        let bad = |name: &'static str, message: String| Err(EigenError::InvalidOption { name, message });
+        if !self.tol.is_finite() || self.tol < MIN_TOL || self.tol > MAX_TOL {
+            return bad(
+                "tol",
+                format!(
+                    "{:e} is outside [{MIN_TOL:e}, {MAX_TOL}]: a relative residual below about 100 machine epsilons \
+                     cannot be reached in double precision",
+                    self.tol
+                ),
+            );
+        }
+        if let Some(s) = self.sigma {
+            if !s.is_finite() || s.abs() > MAX_ABS_SIGMA {
+                return bad("sigma", format!("{s:e} is not a finite shift within ±{MAX_ABS_SIGMA:e}"));
+            }
+            if s == 0.0 {
+                return bad(
+                    "sigma",
+                    "0 is an eigenvalue of every operator without a Dirichlet condition (its zero modes), where \
+                     L − σM cannot be factored: give a shift below 0 (say −1e-3 · λ_k), or none for the default"
+                        .into(),
+                );
+            }
+        }
+        if let Some(b) = self.block {
+            if !(1..=MAX_BLOCK).contains(&b) {
+                return bad("block", format!("{b} is outside 1..={MAX_BLOCK}"));
+            }
+        }
+        if let Some(m) = self.subspace {
+            let b = self.block.unwrap_or(8);
+            let least = self.k + (b / 2).max(2) + 2 * b;
+            if m < least {
+                return bad(
+                    "subspace",
+                    format!(
+                        "{m} columns cannot hold k = {} pairs with their guard and two blocks of {b}: give at least \
+                         {least}, or none for the default",
+                        self.k
+                    ),
+                );
+            }
+        }
+        if self.max_steps == 0 {
+            return bad("max_steps", "0 steps: give at least 1".into());
+        }
+        Ok(())
+    }
+}
+
 /// The residual tolerance of a solve unless asked otherwise (the one place this default is written: the CLI and
 /// the service take it from here).
 pub const DEFAULT_TOL: f64 = 1e-10;
