@@ -1,0 +1,440 @@
+//! The service tried as a hostile client would (issue 28), over real HTTP to `kac serve` on loopback: no id, path
+//! or body field reaches a file outside the data directory (every route with an id, every method, on both stores);
+//! a configuration that would run open or with a broken limit stops the start; bearer keys with any case of the
+//! scheme; a body too large for `Expect: 100-continue` is refused before it is sent, a body trickled in is cut off
+//! at the rate floor, bodies in flight share a memory budget; settings no solve could honour are refused at
+//! submission; the default Krylov basis counts against the output limit; and the smaller items of the issue.
+
+#[allow(dead_code)]
+#[path = "support/pg.rs"]
+mod pg;
+#[path = "support/server.rs"]
+mod server;
+
+use serde_json::{json, Value};
+use server::{agent, assert_problem, refused_start, reply, Server};
+use std::io::{Read, Write};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+fn off(level: u32) -> Vec<u8> {
+    kac_core::io::write::off(&kac_core::geometry::generate::icosphere(level)).into_bytes()
+}
+
+fn upload(s: &Server, bytes: &[u8], query: &str) -> server::Reply {
+    reply(agent().post(&s.url(&format!("/v1/shapes{query}"))).send_bytes(bytes))
+}
+
+fn wait_done(s: &Server, job: &str) -> Value {
+    let t = Instant::now();
+    loop {
+        let r = reply(agent().get(&s.url(&format!("/v1/jobs/{job}"))).call());
+        if ["succeeded", "failed", "canceled"].contains(&r.body["status"].as_str().unwrap_or("")) {
+            return r.body;
+        }
+        assert!(t.elapsed() < Duration::from_secs(120), "job {job}: {}", r.body);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// A stored shape and a finished job of it: (shape id, job id).
+fn shape_and_result(s: &Server) -> (String, String) {
+    let up = upload(s, &off(2), "?format=off");
+    assert!(up.status == 201 || up.status == 200, "{}", up.body);
+    let shape = up.body["id"].as_str().unwrap().to_string();
+    let job = reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 4})));
+    let id = job.body["id"].as_str().unwrap().to_string();
+    assert_eq!(wait_done(s, &id)["status"], "succeeded");
+    (shape, id)
+}
+
+/// Ids that are not ids: traversal in every spelling, absolute paths, NUL, over-long, non-hex, wrong length,
+/// upper case, and names of the store's own files.
+fn bad_ids() -> Vec<String> {
+    let mut v: Vec<String> = [
+        "..%2Fkac.sqlite3",
+        "..%2F..%2Fcanary.txt",
+        "..%2F..%2F..%2F..%2F..%2F..%2Ftmp",
+        "%2e%2e",
+        "%2e%2e%2fkac.sqlite3",
+        "%2E%2E%2F%2E%2E%2Fcanary.txt",
+        "%2Fetc%2Fpasswd",
+        "abc%00def",
+        "%00",
+        "..%5C..%5Ccanary.txt",
+        "kac.sqlite3",
+        "kac.lock",
+        ".",
+        "%20",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    v.push("a".repeat(300));
+    v.push("g".repeat(64));
+    v.push("A".repeat(64));
+    v.push("0".repeat(63));
+    v.push("0".repeat(65));
+    v.push("0".repeat(31));
+    v.push("0".repeat(33));
+    v.push(format!("{}%2F..", "0".repeat(64)));
+    v
+}
+
+/// A request sent byte for byte as written (a client library would resolve `%2e%2e` and dot segments before
+/// sending): (status, body as JSON).
+fn call(s: &Server, method: &str, path: &str) -> (u16, Value) {
+    let answer = s.raw(
+        format!("{method} {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\nContent-Length: 0\r\n\r\n").as_bytes(),
+        Duration::from_secs(10),
+    );
+    let body = answer.split_once("\r\n\r\n").map_or("", |(_, b)| b);
+    (status_of(&answer), serde_json::from_str(body).unwrap_or(Value::Null))
+}
+
+/// Every route and method that takes an id, with every bad id, answers 404 `not-found` and touches no file; so do
+/// body fields that name shapes; the store's files and a file beside the data directory are still there, and what
+/// was stored still answers.
+fn no_id_reaches_a_file(s: &Server, data: &Path, canary: &Path) {
+    let (shape, job) = shape_and_result(s);
+    let routes: Vec<(&str, String)> = vec![
+        ("GET", "/v1/shapes/{}".into()),
+        ("DELETE", "/v1/shapes/{}".into()),
+        ("GET", "/v1/shapes/{}/geometry".into()),
+        ("GET", "/v1/jobs/{}".into()),
+        ("DELETE", "/v1/jobs/{}".into()),
+        ("POST", "/v1/jobs/{}/cancel".into()),
+        ("GET", "/v1/jobs/{}/events".into()),
+        ("GET", "/v1/results/{}".into()),
+        ("GET", "/v1/results/{}/arrays/eigenvectors.npy".into()),
+        ("GET", format!("/v1/results/{job}/arrays/{{}}")),
+    ];
+    for (method, template) in &routes {
+        for bad in bad_ids() {
+            let path = template.replace("{}", &bad);
+            let (status, body) = call(s, method, &path);
+            assert_eq!((status, &body["code"]), (404, &json!("not-found")), "{method} {path}: {body}");
+        }
+    }
+    // Literal dot segments, sent as they are (a client library would resolve them).
+    for line in ["DELETE /v1/shapes/../kac.sqlite3", "DELETE /v1/shapes/../../canary.txt", "GET /v1/results/../kac.lock"] {
+        let (method, path) = line.split_once(' ').unwrap();
+        let (status, body) = call(s, method, path);
+        assert!((400..500).contains(&status), "{line}: {status} {body}");
+    }
+    // Ids in bodies are parsed before they reach a store.
+    for bad in ["../kac.sqlite3", "..", "/etc/passwd", "0000", "x\u{0}y"] {
+        let post = |path: &str, body: Value| reply(agent().post(&s.url(path)).send_json(body));
+        assert_problem(&post("/v1/jobs", json!({"shape_id": bad, "analysis": "spectrum"})), 404, "not-found");
+        assert_problem(&post("/v1/compare?wait=0", json!({"shape_ids": [shape, bad]})), 404, "not-found");
+        assert_problem(&post("/v1/search?wait=0", json!({"shape_id": bad})), 404, "not-found");
+    }
+    assert!(canary.exists(), "a file beside the data directory was removed");
+    if data.join("kac.sqlite3").exists() || data.join("shapes").exists() {
+        assert!(data.join("kac.sqlite3").exists() && data.join("kac.lock").exists(), "the store's files were removed");
+    }
+    assert_eq!(reply(agent().get(&s.url(&format!("/v1/shapes/{shape}"))).call()).status, 200);
+    assert_eq!(reply(agent().get(&s.url(&format!("/v1/results/{job}"))).call()).status, 200);
+}
+
+#[test]
+fn no_id_reaches_a_file_on_the_embedded_store() {
+    let root = tempfile::tempdir().unwrap();
+    let data = root.path().join("data");
+    let canary = root.path().join("canary.txt");
+    std::fs::write(&canary, "still here").unwrap();
+    let s = Server::start(&data, &[]);
+    no_id_reaches_a_file(&s, &data, &canary);
+    drop(s);
+    // After a restart every shape and result is still there.
+    let s = Server::start(&data, &[]);
+    let list = reply(agent().get(&s.url("/v1/shapes")).call());
+    assert_eq!(list.body["total"], 1, "{}", list.body);
+}
+
+#[test]
+#[ignore = "needs PostgreSQL's server (scripts/test-all.sh installs it and runs this)"]
+fn no_id_reaches_a_file_on_the_shared_store() {
+    let cluster = pg::Cluster::start("security");
+    let url = cluster.database("kac");
+    let root = tempfile::tempdir().unwrap();
+    let data = root.path().join("data");
+    let canary = root.path().join("canary.txt");
+    std::fs::write(&canary, "still here").unwrap();
+    let s = Server::start(&data, &["--store", &url]);
+    no_id_reaches_a_file(&s, &data, &canary);
+}
+
+/// Each configuration that would run open or with a broken limit stops the start, naming the flag, before the
+/// port is opened; none panics.
+#[test]
+fn a_bad_configuration_stops_the_start() {
+    let root = tempfile::tempdir().unwrap();
+    let comments = root.path().join("comments.txt");
+    std::fs::write(&comments, "# keys go here\n\n   \n# none yet\n").unwrap();
+    let empty = root.path().join("empty.txt");
+    std::fs::write(&empty, "").unwrap();
+    let spaced = root.path().join("spaced.txt");
+    std::fs::write(&spaced, "a key with spaces\n").unwrap();
+    let unreadable = root.path().join("a-directory");
+    std::fs::create_dir(&unreadable).unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec!["--api-keys-file".into(), "/nonexistent/keys.txt".into()], "api-keys-file"),
+        (vec!["--api-keys-file".into(), comments.display().to_string()], "holds no key"),
+        (vec!["--api-keys-file".into(), empty.display().to_string()], "holds no key"),
+        (vec!["--api-keys-file".into(), spaced.display().to_string()], "line 1"),
+        (vec!["--api-keys-file".into(), unreadable.display().to_string()], "cannot be read"),
+        (vec!["--api-keys".into(), "ok-key,".into()], "empty API key"),
+        (vec!["--header-read-timeout-s".into(), "inf".into()], "header-read-timeout-s"),
+        (vec!["--header-read-timeout-s".into(), "NaN".into()], "header-read-timeout-s"),
+        (vec!["--header-read-timeout-s".into(), "0".into()], "header-read-timeout-s"),
+        (vec!["--body-read-timeout-s=-1".into()], "body-read-timeout-s"),
+        (vec!["--body-read-timeout-s".into(), "1e300".into()], "body-read-timeout-s"),
+        (vec!["--lease-s".into(), "inf".into()], "lease-s"),
+        (vec!["--lease-s".into(), "NaN".into()], "lease-s"),
+        (vec!["--lease-s".into(), "0.01".into()], "lease-s"),
+        (vec!["--job-timeout-s".into(), "0".into()], "job-timeout-s"),
+        (vec!["--queue-capacity".into(), "0".into()], "queue-capacity"),
+        (vec!["--max-body-bytes".into(), "0".into()], "max-body-bytes"),
+        (vec!["--max-k=-3".into()], "max-k"),
+        (vec!["--max-connections".into(), "0".into()], "max-connections"),
+        (vec!["--max-body-memory-bytes".into(), "1000".into()], "max-body-memory-bytes"),
+        (vec!["--rate-limit-per-minute".into(), "5".into()], "rate-limit-per-minute"),
+        (vec!["--store".into(), "mysql://x".into()], "--store"),
+    ];
+    for (flags, says) in cases {
+        let args: Vec<&str> = flags.iter().map(String::as_str).collect();
+        let (code, out, err) = refused_start(&root.path().join("data"), &args, Duration::from_secs(20));
+        assert!(code.is_some_and(|c| c != 0), "{flags:?} started: {out} {err}");
+        assert!(!out.contains("listening"), "{flags:?} listened: {out}");
+        assert!(err.contains(says), "{flags:?}: stderr does not say {says:?}: {err}");
+        assert!(!err.contains("panicked"), "{flags:?} panicked: {err}");
+    }
+}
+
+/// With keys configured no /v1 route answers without one; the scheme is case-insensitive, the key exact.
+#[test]
+fn keys_are_required_and_the_scheme_is_case_insensitive() {
+    let root = tempfile::tempdir().unwrap();
+    let keys = root.path().join("keys.txt");
+    std::fs::write(&keys, "# the team's key\nkey-one-2026\n").unwrap();
+    let s = Server::start(&root.path().join("data"), &["--api-keys-file", keys.to_str().unwrap()]);
+    let get = |auth: Option<&str>| {
+        let mut r = agent().get(&s.url("/v1/shapes"));
+        if let Some(a) = auth {
+            r = r.set("Authorization", a);
+        }
+        reply(r.call())
+    };
+    assert_problem(&get(None), 401, "unauthorized");
+    for ok in ["Bearer key-one-2026", "bearer key-one-2026", "BEARER key-one-2026", "bEaReR   key-one-2026"] {
+        assert_eq!(get(Some(ok)).status, 200, "{ok}");
+    }
+    for wrong in ["Bearer key-one-202", "Bearer KEY-ONE-2026", "Basic key-one-2026", "key-one-2026"] {
+        let r = get(Some(wrong));
+        assert!(r.status == 403 || r.status == 401, "{wrong}: {}", r.status);
+    }
+}
+
+/// The status line of a raw answer.
+fn status_of(answer: &str) -> u16 {
+    answer.get(9..12).and_then(|c| c.parse().ok()).unwrap_or(0)
+}
+
+/// A body declared larger than --max-body-bytes is refused from its Content-Length, before `100 Continue`.
+#[test]
+fn expect_continue_is_answered_from_the_declared_length() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(&root.path().join("data"), &[]);
+    let answer = s.raw(
+        b"POST /v1/shapes HTTP/1.1\r\nHost: x\r\nContent-Length: 1000000000000\r\nExpect: 100-continue\r\n\r\n",
+        Duration::from_secs(5),
+    );
+    assert_eq!(status_of(&answer), 413, "{answer}");
+    assert!(!answer.contains("100 Continue"), "{answer}");
+    assert!(answer.contains("body-too-large"), "{answer}");
+}
+
+/// A body trickled a byte at a time (each pause shorter than the pause limit) is cut off once it falls below the
+/// rate floor, and its connection freed.
+#[test]
+fn a_trickled_body_is_cut_off_at_the_rate_floor() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(
+        &root.path().join("data"),
+        &["--body-read-timeout-s", "1", "--min-body-rate-bytes-per-s", "100"],
+    );
+    let mut c = std::net::TcpStream::connect(&s.addr).unwrap();
+    c.write_all(b"POST /v1/shapes?format=off HTTP/1.1\r\nHost: x\r\nContent-Length: 10000\r\n\r\n").unwrap();
+    c.set_read_timeout(Some(Duration::from_millis(300))).unwrap();
+    let t = Instant::now();
+    let mut answer = Vec::new();
+    // One byte every 300 ms: 3 bytes a second, each pause below the 1 s pause limit. Bounded to 15 s.
+    while t.elapsed() < Duration::from_secs(15) {
+        if c.write_all(b"O").is_err() {
+            break;
+        }
+        let mut buf = [0u8; 4096];
+        match c.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => {
+                answer.extend_from_slice(&buf[..n]);
+                break;
+            }
+            Err(_) => {}
+        }
+    }
+    let _ = c.set_read_timeout(Some(Duration::from_secs(2)));
+    let _ = c.read_to_end(&mut answer);
+    let answer = String::from_utf8_lossy(&answer);
+    assert_eq!(status_of(&answer), 408, "after {:?}: {answer}", t.elapsed());
+    assert!(answer.contains("too slowly"), "{answer}");
+    assert!(t.elapsed() < Duration::from_secs(6), "cut off after {:?}", t.elapsed());
+}
+
+/// Bodies in flight share --max-body-memory-bytes: one more is answered 503 `memory-busy` with Retry-After before
+/// it is read, and served again once the first is gone.
+#[test]
+fn bodies_in_flight_share_a_memory_budget() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(
+        &root.path().join("data"),
+        &["--max-body-bytes", "100000", "--max-body-memory-bytes", "150000"],
+    );
+    let mut first = std::net::TcpStream::connect(&s.addr).unwrap();
+    first.write_all(b"POST /v1/shapes?format=off HTTP/1.1\r\nHost: x\r\nContent-Length: 100000\r\n\r\nOFF\n").unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let second = s.raw(
+        b"POST /v1/shapes?format=off HTTP/1.1\r\nHost: x\r\nContent-Length: 90000\r\nConnection: close\r\n\r\n",
+        Duration::from_secs(5),
+    );
+    assert_eq!(status_of(&second), 503, "{second}");
+    assert!(second.contains("memory-busy") && second.to_ascii_lowercase().contains("retry-after"), "{second}");
+    drop(first);
+    std::thread::sleep(Duration::from_millis(300));
+    let r = upload(&s, &off(1), "?format=off");
+    assert_eq!(r.status, 201, "{}", r.body);
+}
+
+/// Requests no solve could honour are refused at submission, naming the setting (never a worker held until the
+/// timeout, nor a panic inside a dependency); numbers in the detail stay short.
+#[test]
+fn settings_that_cannot_converge_are_refused_at_submission() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(&root.path().join("data"), &[]);
+    let shape = upload(&s, &off(2), "?format=off").body["id"].as_str().unwrap().to_string();
+    let submit = |body: Value| reply(agent().post(&s.url("/v1/jobs")).send_json(body));
+    for (solver, name) in [
+        (json!({"sigma": 0.0}), "sigma"),
+        (json!({"sigma": -1e308}), "sigma"),
+        (json!({"sigma": 1e300}), "sigma"),
+        (json!({"tol": 1e-300}), "tol"),
+        (json!({"tol": 1e300}), "tol"),
+        (json!({"tol": 0.0}), "tol"),
+        (json!({"subspace": 10}), "subspace"),
+        (json!({"block": 0}), "block"),
+        (json!({"block": 1000}), "block"),
+    ] {
+        let r = submit(json!({"shape_id": shape, "analysis": "spectrum", "k": 10, "solver": solver}));
+        assert_problem(&r, 422, "invalid-option");
+        let detail = r.body["detail"].as_str().unwrap();
+        assert!(detail.contains(name), "{solver}: {detail}");
+        let longest_digits = detail.split(|c: char| !c.is_ascii_digit()).map(str::len).max().unwrap_or(0);
+        assert!(longest_digits < 20, "{solver}: {detail}");
+    }
+    // A numeric tag is not read as a variant's index.
+    for tag in [json!(5), json!(6), json!(null)] {
+        let r = submit(json!({"shape_id": shape, "analysis": tag, "options": {"normalisation": "area"}}));
+        assert_problem(&r, 422, "invalid-request");
+        assert_eq!(r.body["pointer"], "/analysis", "{}", r.body);
+    }
+}
+
+/// The sparse solver's default basis (about 3k columns for k = 60) counts against --max-output-values, not only
+/// the k eigenvectors.
+#[test]
+fn the_default_krylov_basis_counts_against_the_output_limit() {
+    let root = tempfile::tempdir().unwrap();
+    // 10,242 vertices × 60 eigenvectors = 614,520 values, below the limit; the basis of 180 columns is not.
+    let s = Server::start(&root.path().join("data"), &["--max-output-values", "1000000"]);
+    let shape = upload(&s, &off(5), "?format=off").body["id"].as_str().unwrap().to_string();
+    let r = reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 60})));
+    assert_problem(&r, 413, "output-too-large");
+    assert!(r.body["detail"].as_str().unwrap().contains("10242 vertices × 180 columns"), "{}", r.body);
+    let r = reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 20})));
+    assert_eq!(r.status, 202, "{}", r.body);
+}
+
+/// The smaller items: weak `If-None-Match`, a query fingerprint that would overflow distances, a truncated
+/// binary STL named as such, a face-less OBJ stored with a warning, a point-cloud time below the spacing refused,
+/// and no "claim was lost" for jobs that succeeded.
+#[test]
+fn the_smaller_items_of_the_issue() {
+    let root = tempfile::tempdir().unwrap();
+    let log = root.path().join("stderr.log");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_kac"))
+        .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
+        .arg(root.path().join("data"))
+        .args(["--lease-s", "0.6"])
+        .env("RUST_LOG", "warn")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.take().unwrap()), &mut line).unwrap();
+    let addr = serde_json::from_str::<Value>(&line).unwrap()["listening"].as_str().unwrap().to_string();
+    let s = Server { child, base: format!("http://{addr}"), addr };
+
+    // Weak comparison: W/"etag" matches.
+    let (_, job) = shape_and_result(&s);
+    let r = reply(agent().get(&s.url(&format!("/v1/results/{job}"))).call());
+    let etag = r.etag.clone().expect("an ETag");
+    let again = reply(agent().get(&s.url(&format!("/v1/results/{job}"))).set("If-None-Match", &format!("W/{etag}")).call());
+    assert_eq!(again.status, 304);
+
+    // A fingerprint of 1e308 would make every distance infinite (null): refused.
+    let r = reply(agent().post(&s.url("/v1/search")).send_json(json!({"fingerprint": vec![1e308; 49]})));
+    assert_problem(&r, 400, "invalid-request");
+
+    // A binary STL cut short is a truncated STL, not "csv".
+    let mut stl = vec![0u8; 80];
+    stl.extend_from_slice(&10u32.to_le_bytes());
+    for t in 0..3u8 {
+        let mut rec = vec![0u8; 50];
+        rec[12] = t;
+        rec[20] = 0x3f;
+        stl.extend_from_slice(&rec);
+    }
+    assert_problem(&upload(&s, &stl, ""), 422, "truncated-input");
+
+    // An OBJ with no faces, cut mid-file, is stored as a point cloud with a warning that says so.
+    let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvn 0 0 1\nvt 0 0\nv 1 1 1";
+    let r = upload(&s, obj, "?format=obj");
+    assert_eq!(r.status, 201, "{}", r.body);
+    assert!(r.body.to_string().contains("cut short"), "{}", r.body);
+
+    // A point-cloud kernel narrower than the spacing joins nothing: refused, not eigenvalues of 0 called complete.
+    let cloud: String = kac_core::geometry::generate::icosphere(3)
+        .vertices
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
+    let id = upload(&s, cloud.as_bytes(), "?format=xyz").body["id"].as_str().unwrap().to_string();
+    let r = reply(agent().post(&s.url("/v1/jobs")).send_json(
+        json!({"shape_id": id, "analysis": "spectrum", "k": 5, "operator": {"time": 1e-300}}),
+    ));
+    let done = wait_done(&s, r.body["id"].as_str().unwrap());
+    assert_eq!(done["status"], "failed", "{done}");
+    assert_eq!(done["error"]["status"], 422, "{done}");
+    assert!(done["error"]["detail"].as_str().unwrap().contains("spacing"), "{done}");
+
+    // Several short jobs with a short lease: none of them logs a lost claim.
+    for k in 5..9 {
+        let r = reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": id, "analysis": "spectrum", "k": k})));
+        assert_eq!(wait_done(&s, r.body["id"].as_str().unwrap())["status"], "succeeded");
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let logged = std::fs::read_to_string(&log).unwrap();
+    assert!(!logged.contains("claim was lost"), "{logged}");
+}
