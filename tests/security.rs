@@ -42,7 +42,8 @@ fn shape_and_result(s: &Server) -> (String, String) {
     let up = upload(s, &off(2), "?format=off");
     assert!(up.status == 201 || up.status == 200, "{}", up.body);
     let shape = up.body["id"].as_str().unwrap().to_string();
-    let job = reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 4})));
+    let job =
+        reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 4})));
     let id = job.body["id"].as_str().unwrap().to_string();
     assert_eq!(wait_done(s, &id)["status"], "succeeded");
     (shape, id)
@@ -117,7 +118,9 @@ fn no_id_reaches_a_file(s: &Server, data: &Path, canary: &Path) {
         }
     }
     // Literal dot segments, sent as they are (a client library would resolve them).
-    for line in ["DELETE /v1/shapes/../kac.sqlite3", "DELETE /v1/shapes/../../canary.txt", "GET /v1/results/../kac.lock"] {
+    for line in
+        ["DELETE /v1/shapes/../kac.sqlite3", "DELETE /v1/shapes/../../canary.txt", "GET /v1/results/../kac.lock"]
+    {
         let (method, path) = line.split_once(' ').unwrap();
         let (status, body) = call(s, method, path);
         assert!((400..500).contains(&status), "{line}: {status} {body}");
@@ -260,10 +263,8 @@ fn expect_continue_is_answered_from_the_declared_length() {
 #[test]
 fn a_trickled_body_is_cut_off_at_the_rate_floor() {
     let root = tempfile::tempdir().unwrap();
-    let s = Server::start(
-        &root.path().join("data"),
-        &["--body-read-timeout-s", "1", "--min-body-rate-bytes-per-s", "100"],
-    );
+    let s =
+        Server::start(&root.path().join("data"), &["--body-read-timeout-s", "1", "--min-body-rate-bytes-per-s", "100"]);
     let mut c = std::net::TcpStream::connect(&s.addr).unwrap();
     c.write_all(b"POST /v1/shapes?format=off HTTP/1.1\r\nHost: x\r\nContent-Length: 10000\r\n\r\n").unwrap();
     c.set_read_timeout(Some(Duration::from_millis(300))).unwrap();
@@ -297,10 +298,8 @@ fn a_trickled_body_is_cut_off_at_the_rate_floor() {
 #[test]
 fn bodies_in_flight_share_a_memory_budget() {
     let root = tempfile::tempdir().unwrap();
-    let s = Server::start(
-        &root.path().join("data"),
-        &["--max-body-bytes", "100000", "--max-body-memory-bytes", "150000"],
-    );
+    let s =
+        Server::start(&root.path().join("data"), &["--max-body-bytes", "100000", "--max-body-memory-bytes", "150000"]);
     let mut first = std::net::TcpStream::connect(&s.addr).unwrap();
     first.write_all(b"POST /v1/shapes?format=off HTTP/1.1\r\nHost: x\r\nContent-Length: 100000\r\n\r\nOFF\n").unwrap();
     std::thread::sleep(Duration::from_millis(500));
@@ -358,10 +357,12 @@ fn the_default_krylov_basis_counts_against_the_output_limit() {
     // 10,242 vertices × 60 eigenvectors = 614,520 values, below the limit; the basis of 180 columns is not.
     let s = Server::start(&root.path().join("data"), &["--max-output-values", "1000000"]);
     let shape = upload(&s, &off(5), "?format=off").body["id"].as_str().unwrap().to_string();
-    let r = reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 60})));
+    let r =
+        reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 60})));
     assert_problem(&r, 413, "output-too-large");
     assert!(r.body["detail"].as_str().unwrap().contains("10242 vertices × 180 columns"), "{}", r.body);
-    let r = reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 20})));
+    let r =
+        reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 20})));
     assert_eq!(r.status, 202, "{}", r.body);
 }
 
@@ -390,7 +391,8 @@ fn the_smaller_items_of_the_issue() {
     let (_, job) = shape_and_result(&s);
     let r = reply(agent().get(&s.url(&format!("/v1/results/{job}"))).call());
     let etag = r.etag.clone().expect("an ETag");
-    let again = reply(agent().get(&s.url(&format!("/v1/results/{job}"))).set("If-None-Match", &format!("W/{etag}")).call());
+    let again =
+        reply(agent().get(&s.url(&format!("/v1/results/{job}"))).set("If-None-Match", &format!("W/{etag}")).call());
     assert_eq!(again.status, 304);
 
     // A fingerprint of 1e308 would make every distance infinite (null): refused.
@@ -421,9 +423,11 @@ fn the_smaller_items_of_the_issue() {
         .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
         .collect();
     let id = upload(&s, cloud.as_bytes(), "?format=xyz").body["id"].as_str().unwrap().to_string();
-    let r = reply(agent().post(&s.url("/v1/jobs")).send_json(
-        json!({"shape_id": id, "analysis": "spectrum", "k": 5, "operator": {"time": 1e-300}}),
-    ));
+    let r = reply(
+        agent()
+            .post(&s.url("/v1/jobs"))
+            .send_json(json!({"shape_id": id, "analysis": "spectrum", "k": 5, "operator": {"time": 1e-300}})),
+    );
     let done = wait_done(&s, r.body["id"].as_str().unwrap());
     assert_eq!(done["status"], "failed", "{done}");
     assert_eq!(done["error"]["status"], 422, "{done}");
@@ -431,7 +435,8 @@ fn the_smaller_items_of_the_issue() {
 
     // Several short jobs with a short lease: none of them logs a lost claim.
     for k in 5..9 {
-        let r = reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": id, "analysis": "spectrum", "k": k})));
+        let r =
+            reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": id, "analysis": "spectrum", "k": k})));
         assert_eq!(wait_done(&s, r.body["id"].as_str().unwrap())["status"], "succeeded");
     }
     std::thread::sleep(Duration::from_millis(500));

@@ -87,6 +87,12 @@ impl From<operators::OperatorError> for AnalysisError {
 
 impl From<spectrum::EigenError> for AnalysisError {
     fn from(e: spectrum::EigenError) -> Self {
-        AnalysisError::Eigen(e)
+        match e {
+            // A limit the service set: the same answer as every other limit checked once the size is known.
+            spectrum::EigenError::TooLarge { .. } => {
+                AnalysisError::TooLarge(format!("{e} (--max-output-values); ask for a coarser mesh or a lower order"))
+            }
+            e => AnalysisError::Eigen(e),
+        }
     }
 }

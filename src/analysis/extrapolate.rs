@@ -114,7 +114,9 @@ pub(crate) fn extrapolation(
                 _ if level == 0 => coarse.clone(),
                 _ => operators::build(&plain, &options)?,
             };
-            let s = spectrum::eigs(&op.pair, &solver.eigen_options(k, hooks.threads), None, hooks.control)?;
+            let options =
+                EigenOptions { max_factor_values: hooks.limits.max_values, ..solver.eigen_options(k, hooks.threads) };
+            let s = spectrum::eigs(&op.pair, &options, None, hooks.control)?;
             levels.push(json!({
                 "unknowns": op.pair.n(),
                 "eigenvalues": s.values,

@@ -177,7 +177,9 @@ impl Config {
                 if line.is_empty() || line.starts_with('#') {
                     continue;
                 }
-                keys.push(api_key(line).map_err(|e| format!("--api-keys-file {} line {}: {e}", path.display(), n + 1))?);
+                keys.push(
+                    api_key(line).map_err(|e| format!("--api-keys-file {} line {}: {e}", path.display(), n + 1))?,
+                );
             }
             if keys.len() == before {
                 return Err(format!(
@@ -196,7 +198,8 @@ impl Config {
             return Err("--rate-limit-per-minute counts requests per API key: configure keys too".into());
         }
         if let Some(store) = &self.store {
-            if !(store.starts_with("sqlite:") || store.starts_with("postgres://") || store.starts_with("postgresql://")) {
+            if !(store.starts_with("sqlite:") || store.starts_with("postgres://") || store.starts_with("postgresql://"))
+            {
                 return Err(format!("--store {store}: give sqlite:DIR or postgres://…"));
             }
         }

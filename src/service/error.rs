@@ -48,7 +48,7 @@ pub enum ApiError {
         detail: String,
     },
     /// A field or query parameter the OpenAPI document does not declare where it was sent (422).
-    UnknownField(super::strict::Unknown),
+    UnknownField(Box<super::strict::Unknown>),
     UnsupportedMediaType {
         detail: String,
     },
@@ -198,8 +198,8 @@ impl ApiError {
             ApiError::UnknownField(u) => {
                 extra.insert("pointer".into(), u.pointer.clone().into());
                 extra.insert("field".into(), u.name.clone().into());
-                extra.insert("suggestion".into(), u.suggestion.clone().into());
-                extra.insert("belongs_in".into(), u.belongs_in.clone().into());
+                extra.insert("suggestion".into(), u.suggestion.as_deref().into());
+                extra.insert("belongs_in".into(), u.belongs_in.as_deref().into());
                 extra.insert("accepted".into(), u.allowed.clone().into());
                 let title = if u.not_a_name.is_some() { "Invalid value" } else { "Unknown field" };
                 (StatusCode::UNPROCESSABLE_ENTITY, "invalid-request", title, u.detail())
@@ -478,7 +478,7 @@ mod tests {
             ApiError::BodyTooLarge { limit: 1 },
             ApiError::invalid_request("m"),
             ApiError::invalid_json("m"),
-            ApiError::UnknownField(unknown),
+            ApiError::UnknownField(Box::new(unknown)),
             ApiError::UnsupportedMediaType { detail: "m".into() },
             ApiError::QueueFull { capacity: 1, retry_after_s: 1 },
             ApiError::MemoryBusy { budget: 1, retry_after_s: 1 },

@@ -21,14 +21,14 @@ pub struct Unknown {
     pub pointer: String,
     pub name: String,
     /// The closest declared name at that place, when one is close.
-    pub suggestion: Option<String>,
+    pub suggestion: Option<Box<str>>,
     /// The object field (one level down) that declares this name, when one does.
-    pub belongs_in: Option<String>,
+    pub belongs_in: Option<Box<str>>,
     /// Every name declared at that place.
     pub allowed: Vec<String>,
     /// Set when the field is declared but its value is not a name it takes: the tag of a tagged union sent as
     /// something other than one of its names (`"analysis": 5`, which a deserializer would read as a variant index).
-    pub not_a_name: Option<String>,
+    pub not_a_name: Option<Box<str>>,
 }
 
 impl Unknown {
@@ -208,7 +208,7 @@ fn check_object(doc: &Value, schema: &Value, value: &Map<String, Value>, pointer
                 suggestion: None,
                 belongs_in: None,
                 allowed: names.iter().map(|n| n.to_string()).collect(),
-                not_a_name: Some(v.to_string()),
+                not_a_name: Some(v.to_string().into()),
             });
         }
     }
@@ -233,12 +233,15 @@ fn check_object(doc: &Value, schema: &Value, value: &Map<String, Value>, pointer
                 let belongs_in = properties.iter().find_map(|(n, sub)| {
                     let mut inner = Vec::new();
                     object_parts(doc, sub, &Map::new(), &mut inner);
-                    inner.iter().any(|p| p.get("properties").and_then(|x| x.get(key)).is_some()).then(|| (*n).clone())
+                    inner
+                        .iter()
+                        .any(|p| p.get("properties").and_then(|x| x.get(key)).is_some())
+                        .then(|| (*n).as_str().into())
                 });
                 return Err(Unknown {
                     pointer: here,
                     name: key.clone(),
-                    suggestion: closest(key, &allowed),
+                    suggestion: closest(key, &allowed).map(Into::into),
                     belongs_in,
                     allowed,
                     not_a_name: None,
@@ -294,7 +297,7 @@ pub fn check_query(path: &str, method: &str, query: &str) -> Result<(), Unknown>
             return Err(Unknown {
                 pointer: format!("?{name}"),
                 name: name.to_string(),
-                suggestion: closest(&name, &allowed),
+                suggestion: closest(&name, &allowed).map(Into::into),
                 belongs_in: None,
                 allowed: allowed.clone(),
                 not_a_name: None,

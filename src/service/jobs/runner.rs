@@ -271,10 +271,7 @@ pub(crate) fn without_paths(msg: &str) -> String {
             t.to_string()
         }
     };
-    msg.lines()
-        .map(|l| l.split(' ').map(token).collect::<Vec<_>>().join(" "))
-        .collect::<Vec<_>>()
-        .join("\n")
+    msg.lines().map(|l| l.split(' ').map(token).collect::<Vec<_>>().join(" ")).collect::<Vec<_>>().join("\n")
 }
 
 pub(super) fn canceled() -> Problem {

@@ -116,11 +116,7 @@ pub async fn authorize(State(state): State<AppState>, req: Request, next: Next) 
     if !access.enabled() || public(req.uri().path()) {
         return next.run(req).await;
     }
-    let token = req
-        .headers()
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(bearer_token);
+    let token = req.headers().get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).and_then(bearer_token);
     let Some(token) = token else {
         let mut r = ApiError::Unauthorized.into_response();
         r.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer realm=\"kac\""));

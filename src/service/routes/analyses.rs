@@ -289,7 +289,7 @@ pub(crate) async fn analyze(
         .ok_or_else(|| ApiError::invalid_request("give the analysis as a multipart part or ?analysis=JSON"))?;
     let mut value: Value = serde_json::from_str(&text).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
     merge_arrays(&mut value, &up.arrays)?;
-    crate::service::strict::check_body(&value, "Analysis").map_err(ApiError::UnknownField)?;
+    crate::service::strict::check_body(&value, "Analysis").map_err(|u| ApiError::UnknownField(Box::new(u)))?;
     let analysis: Analysis =
         serde_json::from_value(value).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
     up.fields.clear();

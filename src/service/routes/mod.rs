@@ -182,7 +182,7 @@ pub(crate) fn strict_body<T: serde::de::DeserializeOwned>(
     schema: &str,
 ) -> Result<T, ApiError> {
     let Json(v) = body.map_err(|e| json_error(st, e))?;
-    super::strict::check_body(&v, schema).map_err(ApiError::UnknownField)?;
+    super::strict::check_body(&v, schema).map_err(|u| ApiError::UnknownField(Box::new(u)))?;
     serde_json::from_value(v).map_err(|e| ApiError::invalid_json(e.to_string()))
 }
 
@@ -193,7 +193,8 @@ pub(crate) async fn strict_query(
     next: axum::middleware::Next,
 ) -> Result<Response, ApiError> {
     if let (Some(path), Some(query)) = (matched.as_ref(), req.uri().query()) {
-        super::strict::check_query(path.as_str(), req.method().as_str(), query).map_err(ApiError::UnknownField)?;
+        super::strict::check_query(path.as_str(), req.method().as_str(), query)
+            .map_err(|u| ApiError::UnknownField(Box::new(u)))?;
     }
     Ok(next.run(req).await)
 }

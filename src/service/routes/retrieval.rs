@@ -35,10 +35,7 @@ pub(crate) async fn compare(
         Some(ids) if ids.len() > max => {
             return Err(ApiError::invalid_request(format!("{} shapes: at most {max} per comparison", ids.len())))
         }
-        Some(ids) => ids
-            .iter()
-            .map(|id| stored_shape(&st, id))
-            .collect::<Result<_, _>>()?,
+        Some(ids) => ids.iter().map(|id| stored_shape(&st, id)).collect::<Result<_, _>>()?,
         None => {
             let (records, _) = st.shapes.list(0, max).map_err(store_error)?;
             let mut shapes = vec![];

@@ -81,7 +81,9 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
                     return Err(ApiError::BodyTimeout { seconds: st.config.body_read_timeout_s })
                 }
                 Err(e) if super::super::bodies::too_slow(&e).is_some() => {
-                    return Err(ApiError::BodyTooSlow { detail: super::super::bodies::too_slow(&e).unwrap_or_default() })
+                    return Err(ApiError::BodyTooSlow {
+                        detail: super::super::bodies::too_slow(&e).unwrap_or_default(),
+                    })
                 }
                 Err(e) => return Err(ApiError::invalid_request(format!("multipart: {}", e.body_text()))),
             };

@@ -36,12 +36,13 @@ pub(crate) fn inertia_in_gap(
     pair: &SparsePair,
     lo: f64,
     hi: f64,
+    control: &Control<'_>,
 ) -> Result<(f64, usize), EigenError> {
     let mut last = String::new();
     for f in [0.5, 1.0 / 3.0, 2.0 / 3.0] {
         let tau = lo + f * (hi - lo);
         let values = pair.shifted(tau);
-        match factor::Cholesky::factor_ldlt(sym, &values, faer::Par::Seq) {
+        match factor::Cholesky::factor_ldlt_stoppable(sym, &values, faer::Par::Seq, control.stop) {
             Ok((factor, below)) => {
                 let e = lanczos::solve_backward_error(pair, &values, &factor, faer::Par::Seq);
                 if e <= CHECK_BACKWARD_ERROR {
@@ -49,6 +50,7 @@ pub(crate) fn inertia_in_gap(
                 }
                 last = format!("the LDLᵀ factor of L − {tau:e}·M is not backward stable ({e:.1e})");
             }
+            Err(super::numeric::FactorError::Stopped) => return Err(EigenError::Canceled),
             Err(e) => last = format!("LDLᵀ of L − {tau:e}·M failed ({e})"),
         }
     }
@@ -74,7 +76,7 @@ pub fn check_completeness(
             &owned
         }
     };
-    let (tau, below) = inertia_in_gap(sym, pair, values[found - 1], values[found])?;
+    let (tau, below) = inertia_in_gap(sym, pair, values[found - 1], values[found], &Control::default())?;
     Ok(Some(Completeness {
         method: "inertia",
         complete: below == found,
@@ -117,7 +119,7 @@ pub(crate) fn verify_and_repair(
             }
         };
         control.phase("verifying", k, k)?;
-        let (tau, below) = inertia_in_gap(sym, pair, lo, hi)?;
+        let (tau, below) = inertia_in_gap(sym, pair, lo, hi, &control)?;
         control.check()?;
         let c = Completeness {
             method: "inertia",

@@ -6,6 +6,7 @@
 use super::basis_products;
 use super::factor::{Cholesky, Symbolic};
 use super::null_space::Deflation;
+use super::numeric::FactorError;
 use super::{Control, EigenError, EigenOptions, Spectrum, Stats, Timings};
 use crate::operators::sparse::SparsePair;
 use faer::linalg::matmul::matmul;
@@ -308,14 +309,20 @@ fn factor_shift(
     run: &Run<'_>,
     control: &Control<'_>,
 ) -> Result<Shifted, EigenError> {
-    let failed =
-        |sigma: f64, message: String| EigenError::Factorization { message: format!("σ = {sigma:e}: {message}") };
+    // A stop ends the solve; any other failure of a factorization names its shift.
+    let failed = |sigma: f64, e: FactorError| match e {
+        FactorError::Stopped => EigenError::Canceled,
+        FactorError::Failed(message) => EigenError::Factorization { message: format!("σ = {sigma:e}: {message}") },
+    };
+    let stop = control.stop;
     if let Some(sigma) = o.sigma {
         if sigma < 0.0 {
-            let factor = Cholesky::factor(sym, &pair.shifted(sigma), par).map_err(|m| failed(sigma, m))?;
+            let factor =
+                Cholesky::factor_stoppable(sym, &pair.shifted(sigma), par, stop).map_err(|e| failed(sigma, e))?;
             return Ok(Shifted { sigma, factor, below_sigma: None });
         }
-        let (factor, below) = Cholesky::factor_ldlt(sym, &pair.shifted(sigma), par).map_err(|m| failed(sigma, m))?;
+        let (factor, below) =
+            Cholesky::factor_ldlt_stoppable(sym, &pair.shifted(sigma), par, stop).map_err(|e| failed(sigma, e))?;
         return Ok(Shifted { sigma, factor, below_sigma: Some(below) });
     }
     let interior = if run.interior_shift { weyl_shift(pair, o.k + run.deflated_values.len()) } else { None };
@@ -323,7 +330,11 @@ fn factor_shift(
         for _attempt in 0..2 {
             control.check()?;
             let values = pair.shifted(sigma);
-            let Ok((factor, below)) = Cholesky::factor_ldlt(sym, &values, par) else { break };
+            let (factor, below) = match Cholesky::factor_ldlt_stoppable(sym, &values, par, stop) {
+                Ok(f) => f,
+                Err(FactorError::Stopped) => return Err(EigenError::Canceled),
+                Err(FactorError::Failed(_)) => break,
+            };
             let undeflated = below.saturating_sub(run.deflated_below(sigma));
             if undeflated > o.k {
                 sigma *= WEYL_FRACTION * (o.k as f64 / undeflated as f64).powi(2);
@@ -339,8 +350,9 @@ fn factor_shift(
     let mut attempt = 0;
     loop {
         control.check()?;
-        match Cholesky::factor(sym, &pair.shifted(sigma), par) {
+        match Cholesky::factor_stoppable(sym, &pair.shifted(sigma), par, stop) {
             Ok(factor) => return Ok(Shifted { sigma, factor, below_sigma: None }),
+            Err(FactorError::Stopped) => return Err(EigenError::Canceled),
             Err(message) => {
                 attempt += 1;
                 if attempt >= 4 {

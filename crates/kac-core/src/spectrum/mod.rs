@@ -39,6 +39,7 @@ pub mod extrapolate;
 pub mod factor;
 pub mod lanczos;
 pub mod null_space;
+pub mod numeric;
 mod options;
 mod result;
 pub mod weyl_law;
@@ -47,8 +48,8 @@ pub use options::*;
 pub use result::*;
 
 use crate::operators::sparse::SparsePair;
-use blocks::*;
 pub use blocks::use_dense;
+use blocks::*;
 pub use completeness::check_completeness;
 use completeness::*;
 use faer::{Mat, MatRef};
@@ -101,6 +102,9 @@ pub fn eigs(
             }
         };
         let symbolic_s = symbolic_t.elapsed().as_secs_f64();
+        if sym.inner.len_val() > options.max_factor_values {
+            return Err(EigenError::TooLarge { values: sym.inner.len_val(), limit: options.max_factor_values });
+        }
         let deflation = Deflation { sparse: &zeros.vectors, dense: None };
         let zero_values = vec![0.0; z];
         let run = lanczos::Run { deflation: &deflation, deflated_values: &zero_values, interior_shift: true };

@@ -41,6 +41,9 @@ pub struct EigenOptions {
     /// further solves only when eigenvalues were missed. `false` skips the check (the result then says
     /// `completeness: null`).
     pub verify: bool,
+    /// The most values a factor of L − σM may hold, predicted by the symbolic analysis before any numeric
+    /// factorization (default: no limit); a larger one is [`EigenError::TooLarge`].
+    pub max_factor_values: usize,
     /// Put the operator's known zero modes in the result exactly and iterate on their complement (default true;
     /// see [`null_space`]).
     pub deflate_null_space: bool,
@@ -129,6 +132,7 @@ impl Default for EigenOptions {
             threads: 0,
             method: Method::Auto,
             verify: true,
+            max_factor_values: usize::MAX,
             deflate_null_space: true,
         }
     }

@@ -124,6 +124,10 @@ pub enum EigenError {
          after {repairs} repair rounds"
     )]
     Incomplete { shift: f64, below: usize, found: usize, repairs: usize },
+    #[error(
+        "the factor of L − σM would hold {values} values (the symbolic analysis' fill), above the limit of {limit}"
+    )]
+    TooLarge { values: usize, limit: usize },
 }
 
 impl EigenError {
@@ -135,12 +139,13 @@ impl EigenError {
             EigenError::NoConvergence { .. } => "no-convergence",
             EigenError::InvalidOption { .. } => "invalid-option",
             EigenError::Incomplete { .. } => "incomplete-spectrum",
+            EigenError::TooLarge { .. } => "output-too-large",
         }
     }
     /// Whether the request was at fault (it cannot succeed as given) rather than the computation.
     pub fn caller_fault(&self) -> bool {
         match self {
-            EigenError::InvalidK { .. } | EigenError::InvalidOption { .. } => true,
+            EigenError::InvalidK { .. } | EigenError::InvalidOption { .. } | EigenError::TooLarge { .. } => true,
             EigenError::Factorization { .. }
             | EigenError::Canceled
             | EigenError::NoConvergence { .. }
