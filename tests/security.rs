@@ -204,6 +204,8 @@ fn a_bad_configuration_stops_the_start() {
         (vec!["--max-body-memory-bytes".into(), "1000".into()], "max-body-memory-bytes"),
         (vec!["--rate-limit-per-minute".into(), "5".into()], "rate-limit-per-minute"),
         (vec!["--store".into(), "mysql://x".into()], "--store"),
+        (vec!["--cors-origins".into(), "https://app.example.org/path".into()], "cors-origins"),
+        (vec!["--cors-origins".into(), "app.example.org".into()], "cors-origins"),
     ];
     for (flags, says) in cases {
         let args: Vec<&str> = flags.iter().map(String::as_str).collect();

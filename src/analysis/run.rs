@@ -161,6 +161,7 @@ pub fn shape_dna_of(
 
 /// Runs an analysis on a validated shape.
 pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
+    analysis.applicable(&v.shape)?;
     let head = json!({ "shape_id": v.id.hex(), "analysis": analysis.name(), "algorithm_version": ALGORITHM_VERSION });
     // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
     let reused = std::cell::Cell::new(false);
@@ -281,15 +282,16 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
                     let mut arrays = vec![];
                     for &s in &src_op {
                         hooks.control.check()?;
-                        let mut u0 = vec![0.0; op.pair.n()];
-                        u0[s] = 1.0;
+                        // The same quantity as the spectral method: the heat kernel k_t(·, s), the flow of the
+                        // discrete delta at s (u₀ = M⁻¹e_s, so that ⟨u₀, φ⟩_M = φ(s) for every φ).
+                        let u0 = pde::discrete_delta(&op.pair, s)?;
                         let u = pde::heat_implicit(&op.pair, &u0, &times, *steps)?;
-                        let mut a = to_input_rows(v, &op, u.as_ref(), "heat");
+                        let mut a = to_input_rows(v, &op, u.as_ref(), "heat_kernel");
                         a.columns = Some(times.clone());
                         arrays.push(a);
                     }
                     let summary = merge(
-                        json!({ "method": "implicit", "steps": steps, "times": times, "sources": sources, "arrays": "one per source: backward-Euler flow of u₀ = the hat function at the source, a column per time" }),
+                        json!({ "method": "implicit", "steps": steps, "times": times, "sources": sources, "arrays": "one per source: the heat kernel k_t(source, ·) by backward Euler from the discrete delta M⁻¹e_source, a column per time" }),
                         operator_json(&op),
                     );
                     Output { fingerprints: vec![], summary, arrays }

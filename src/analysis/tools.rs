@@ -111,11 +111,23 @@ pub(crate) fn run(
                 }
                 None => None,
             };
-            let f = pde::poisson(&op.pair, &g_op, fixed.as_deref())?;
+            // The condition the problem is solved with, from what was asked: values where given (on top of an
+            // eliminated boundary, if the operator has one), else f = 0 on the operator's Dirichlet boundary, else
+            // Neumann. One name for it: `poisson.boundary` and the top-level `boundary` agree.
+            let condition = match (&fixed, op.dirichlet()) {
+                (Some(list), _) => pde::PoissonBoundary::Values(list),
+                (None, true) => pde::PoissonBoundary::Eliminated,
+                (None, false) => pde::PoissonBoundary::Neumann,
+            };
+            let f = pde::poisson_with(&op.pair, &g_op, condition)?;
             let column = faer::Mat::from_fn(f.values.len(), 1, |i, _| f.values[i]);
+            let solved = f.boundary;
             let summary = json!({ "poisson": f, "equation": "Δf = g, L f = M g (Δ = −∇·∇)" });
             let arrays = vec![to_input_rows(v, &op, column.as_ref(), "solution")];
-            Output { fingerprints: vec![], summary: merge(summary, operator_json(&op)), arrays }
+            let mut summary = merge(summary, operator_json(&op));
+            summary["operator_boundary"] = summary["boundary"].clone();
+            summary["boundary"] = solved.into();
+            Output { fingerprints: vec![], summary, arrays }
         }
         Analysis::Diffuse { times, start, diffusivity, method, k, steps, operator, solver } => {
             if !(*diffusivity > 0.0 && diffusivity.is_finite()) {

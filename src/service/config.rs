@@ -162,6 +162,26 @@ pub fn api_key(s: &str) -> Result<String, String> {
     Ok(k.to_string())
 }
 
+/// A CORS origin: `*`, or `scheme://host[:port]` (http or https, no path, query or fragment), as a browser sends
+/// it in `Origin`. Anything else stops the start (it would otherwise be dropped and match nothing, silently).
+pub fn cors_origin(o: &str) -> Result<(), String> {
+    let o = o.trim().trim_end_matches('/');
+    if o == "*" {
+        return Ok(());
+    }
+    let rest = o.strip_prefix("https://").or_else(|| o.strip_prefix("http://"));
+    let ok = rest.is_some_and(|r| {
+        !r.is_empty()
+            && r.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | ':' | '[' | ']'))
+            && r.rsplit_once(':').is_none_or(|(h, p)| !h.is_empty() && (p.parse::<u16>().is_ok() || h.ends_with(']') || r.starts_with('[')))
+    });
+    if ok {
+        Ok(())
+    } else {
+        Err(format!("--cors-origins {o:?}: give `*` or origins such as https://app.example.org or http://localhost:3000"))
+    }
+}
+
 impl Config {
     /// Every configured key (flag, environment, file). Fails closed: a keys file that is missing, unreadable, or
     /// holds no valid key, or any line of it that is not a valid key, is an error that stops the server at start
@@ -202,6 +222,9 @@ impl Config {
             {
                 return Err(format!("--store {store}: give sqlite:DIR or postgres://…"));
             }
+        }
+        for o in &self.cors_origins {
+            cors_origin(o)?;
         }
         if self.max_body_memory_bytes < self.max_body_bytes {
             return Err(format!(

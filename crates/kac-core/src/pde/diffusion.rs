@@ -2,6 +2,18 @@
 
 use super::*;
 
+/// The discrete delta at unknown `s`: u = M⁻¹e_s, the function whose M-inner product with any φ is φ(s). Its heat
+/// flow is the heat kernel k_t(·, s) (the spectral form Σ e^{−λt} φ(s) φ).
+pub fn discrete_delta(pair: &SparsePair, s: usize) -> Result<Vec<f64>, DescriptorError> {
+    let n = pair.n();
+    if s >= n {
+        return Err(DescriptorError::param("source", format!("{s} is not one of the {n} unknowns")));
+    }
+    let e = Mat::from_fn(n, 1, |i, _| if i == s { 1.0 } else { 0.0 });
+    let u = super::solve_spd(&pair.pattern, &pair.mass, e.as_ref(), None)?;
+    Ok(u.col(0).iter().copied().collect())
+}
+
 /// Heat diffusion ∂u/∂t = −Δu (eq. 9.23), M u̇ = −L u, by backward Euler: for each t, `steps` steps
 /// (M + τL) u_{j+1} = M u_j with τ = t/steps from u₀ (one factorization per distinct τ, one symbolic analysis in
 /// all). Each mode is multiplied by (1 + τλ)^{−steps} → e^{−λt}: it decays, never grows. Unconditionally stable;

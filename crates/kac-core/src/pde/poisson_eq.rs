@@ -7,6 +7,8 @@ use super::*;
 pub struct Poisson {
     #[serde(skip)]
     pub values: Vec<f64>,
+    /// The condition solved with: `neumann`, `dirichlet` (f = 0 on the boundary the operator eliminated), or
+    /// `dirichlet-values` (f fixed at the given vertices).
     pub boundary: &'static str,
     /// Neumann: per component, the M-mean of g removed to make the problem solvable (∫ g = 0 is required);
     /// f is returned with M-mean zero on each component.
@@ -17,7 +19,38 @@ pub struct Poisson {
 /// `dirichlet`, f takes the given values on those vertices; without, the problem is Neumann (compatible only
 /// when g integrates to zero on each component: the mean is removed and reported).
 pub fn poisson(pair: &SparsePair, g: &[f64], dirichlet: Option<&[(usize, f64)]>) -> Result<Poisson, DescriptorError> {
+    match dirichlet {
+        Some(known) => poisson_with(pair, g, PoissonBoundary::Values(known)),
+        None => poisson_with(pair, g, PoissonBoundary::Neumann),
+    }
+}
+
+/// The boundary condition of a Poisson problem.
+#[derive(Debug, Clone, Copy)]
+pub enum PoissonBoundary<'a> {
+    /// ∂f/∂n = 0: solvable when g integrates to zero on each component (the mean is removed and reported).
+    Neumann,
+    /// f = 0 on the boundary that the operator already eliminated (built with a Dirichlet condition): L is
+    /// positive definite and L f = M g is solved as it is, g untouched.
+    Eliminated,
+    /// f fixed at these (operator row, value) pairs.
+    Values(&'a [(usize, f64)]),
+}
+
+/// Poisson's equation Δf = g (L f = M g) under the given condition (see [`poisson`]).
+pub fn poisson_with(pair: &SparsePair, g: &[f64], condition: PoissonBoundary<'_>) -> Result<Poisson, DescriptorError> {
     let n = pair.n();
+    if let PoissonBoundary::Eliminated = condition {
+        check_len("g", g.len(), n)?;
+        let gm = Mat::from_fn(n, 1, |i, _| g[i]);
+        let rhs = mass_times(pair, gm.as_ref());
+        let x = solve_spd(&pair.pattern, &pair.stiffness, rhs.as_ref(), None)?;
+        return Ok(Poisson { values: x.col(0).iter().copied().collect(), boundary: "dirichlet", removed_mean: vec![] });
+    }
+    let dirichlet = match condition {
+        PoissonBoundary::Values(v) => Some(v),
+        _ => None,
+    };
     check_len("g", g.len(), n)?;
     let (labels, count) = components(pair);
     let mut g = g.to_vec();
@@ -26,7 +59,7 @@ pub fn poisson(pair: &SparsePair, g: &[f64], dirichlet: Option<&[(usize, f64)]>)
         Some(known) => {
             let (mask, vals) = mask_of(n, known)?;
             check_anchored(pair, &mask, "Dirichlet vertex")?;
-            (mask, vals, "dirichlet")
+            (mask, vals, "dirichlet-values")
         }
         None => {
             removed = component_means(pair, &labels, count, &g);

@@ -1,0 +1,125 @@
+//! Regressions of issue 29 ("the truth table"), each named after what broke and checked against a closed form
+//! through the analysis layer the CLI and the service share.
+
+use kac::analysis::{self, Analysis, Hooks};
+use kac_core::geometry::{generate, TriangleMesh};
+use serde_json::{json, Value};
+use std::f64::consts::PI;
+
+fn validated(mesh: &TriangleMesh) -> kac_core::Validated {
+    let off = kac_core::io::write::off(mesh).into_bytes();
+    kac_core::load_bytes(&off, kac_core::Format::Off, &Default::default(), &Default::default()).unwrap()
+}
+
+fn run(v: &kac_core::Validated, request: Value) -> analysis::Output {
+    let a: Analysis = serde_json::from_value(request.clone()).unwrap_or_else(|e| panic!("{request}: {e}"));
+    analysis::run(v, &a, Hooks::default()).unwrap_or_else(|e| panic!("{request}: {e}"))
+}
+
+fn array<'a>(out: &'a analysis::Output, name: &str) -> &'a analysis::VertexArray {
+    out.arrays.iter().find(|a| a.name == name).unwrap_or_else(|| panic!("no array {name}"))
+}
+
+/// Poisson with `boundary: dirichlet` and no values is the homogeneous Dirichlet problem: on the unit square,
+/// Δf = 2π² sin πx sin πy has f = sin πx sin πy (no mean removed, as if it were Neumann), and the result says
+/// `dirichlet` once, everywhere.
+#[test]
+fn dirichlet_poisson_without_values_is_not_made_neumann() {
+    let mesh = generate::unit_square(32);
+    let v = validated(&mesh);
+    let exact: Vec<f64> = mesh.vertices.iter().map(|p| (PI * p[0]).sin() * (PI * p[1]).sin()).collect();
+    let g: Vec<f64> = exact.iter().map(|f| 2.0 * PI * PI * f).collect();
+    let out = run(&v, json!({"analysis": "poisson", "g": g, "operator": {"boundary": "dirichlet"}}));
+    let f = array(&out, "solution");
+    let err = (0..exact.len())
+        .filter(|&i| f.data[i].is_finite())
+        .map(|i| (f.data[i] - exact[i]).abs())
+        .fold(0.0f64, f64::max);
+    assert!(err < 0.01, "max error {err} (was 0.75 with the mean removed)");
+    assert_eq!(out.summary["boundary"], "dirichlet", "{}", out.summary);
+    assert_eq!(out.summary["poisson"]["boundary"], "dirichlet", "{}", out.summary);
+    assert_eq!(out.summary["poisson"]["removed_mean"], json!([]), "{}", out.summary);
+    // With explicit values on a Neumann operator: one name for the condition solved with, and the operator's
+    // own boundary beside it.
+    let boundary: Vec<Value> = mesh
+        .vertices
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p[0] == 0.0 || p[0] == 1.0 || p[1] == 0.0 || p[1] == 1.0)
+        .map(|(i, _)| json!([i, 0.0]))
+        .collect();
+    let out = run(&v, json!({"analysis": "poisson", "g": g, "dirichlet_values": boundary}));
+    let f = array(&out, "solution");
+    let err = (0..exact.len()).map(|i| (f.data[i] - exact[i]).abs()).fold(0.0f64, f64::max);
+    assert!(err < 0.01, "max error {err} with explicit zero values");
+    assert_eq!(
+        (&out.summary["boundary"], &out.summary["poisson"]["boundary"], &out.summary["operator_boundary"]),
+        (&json!("dirichlet-values"), &json!("dirichlet-values"), &json!("neumann")),
+        "{}",
+        out.summary
+    );
+}
+
+fn load(bytes: &[u8], format: kac_core::Format) -> kac_core::Validated {
+    kac_core::load_bytes(bytes, format, &Default::default(), &Default::default()).unwrap()
+}
+
+fn refusal(v: &kac_core::Validated, request: Value) -> analysis::AnalysisError {
+    let a: Analysis = serde_json::from_value(request.clone()).unwrap();
+    match analysis::run(v, &a, Hooks::default()) {
+        Ok(out) => panic!("{request} was computed: {}", out.summary),
+        Err(e) => e,
+    }
+}
+
+/// Heat-kernel curvature has no meaning on a graph, and the point-cloud operator biases it (K = 1.71 for the unit
+/// sphere's vertices): both are refused, naming the analysis, the kind and what it applies to.
+#[test]
+fn heat_curvature_off_a_surface_mesh_is_refused() {
+    let sphere = generate::icosphere(3);
+    let xyz: String = sphere.vertices.iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
+    let cloud = load(xyz.as_bytes(), kac_core::Format::Xyz);
+    let graph_json = serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(generate::petersen_graph()))).unwrap();
+    let graph = load(&graph_json, kac_core::Format::Json);
+    for (v, kind) in [(&cloud, "point_cloud"), (&graph, "graph")] {
+        let e = refusal(v, json!({"analysis": "heat-curvature", "k": 8}));
+        assert_eq!(e.code(), "not-applicable", "{e}");
+        let m = e.to_string();
+        assert!(m.contains("heat-curvature") && m.contains(kind) && m.contains("triangle_mesh"), "{m}");
+    }
+    // On the surface itself it is computed, and near 1 on the unit sphere.
+    let out = run(&validated(&sphere), json!({"analysis": "heat-curvature", "k": 100}));
+    let mean = out.summary["heat_curvature"]["mean"].as_f64().unwrap();
+    assert!((mean - 1.0).abs() < 0.1, "{mean}");
+}
+
+/// Heat by either method is the heat kernel k_t(·, source): at the centre of the unit square, at small t,
+/// 1/(4πt) (the plane's kernel; the boundary is far), where the implicit method used to return the flow of the
+/// hat function (3·10⁻⁴ of it); and the two methods agree where both are accurate.
+#[test]
+fn implicit_heat_is_the_heat_kernel_as_the_spectral_one() {
+    let n = 64;
+    let mesh = generate::unit_square(n);
+    let v = validated(&mesh);
+    let centre = mesh.vertices.iter().position(|p| (p[0] - 0.5).abs() < 1e-9 && (p[1] - 0.5).abs() < 1e-9).unwrap();
+    let t = 0.002;
+    let out = run(
+        &v,
+        json!({"analysis": "heat", "method": "implicit", "times": [t], "steps": 200, "sources": [centre]}),
+    );
+    let k = array(&out, "heat_kernel");
+    let at = k.data[centre * k.cols];
+    let plane = 1.0 / (4.0 * PI * t);
+    assert!((at / plane - 1.0).abs() < 0.05, "k_t(c, c) = {at}, 1/(4πt) = {plane}");
+    // Both methods at a time the spectral sum resolves (λ_200 t ≈ 125): the same numbers.
+    let t = 0.05;
+    let implicit = run(
+        &v,
+        json!({"analysis": "heat", "method": "implicit", "times": [t], "steps": 400, "sources": [centre]}),
+    );
+    let spectral = run(&v, json!({"analysis": "heat", "k": 200, "times": [t], "sources": [centre]}));
+    let (a, b) = (array(&implicit, "heat_kernel"), array(&spectral, "heat_kernel"));
+    let scale = b.data.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let diff = a.data.iter().zip(&b.data).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    assert!(diff < 0.02 * scale, "implicit and spectral differ by {diff} of {scale}");
+}
