@@ -123,3 +123,37 @@ fn implicit_heat_is_the_heat_kernel_as_the_spectral_one() {
     let diff = a.data.iter().zip(&b.data).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
     assert!(diff < 0.02 * scale, "implicit and spectral differ by {diff} of {scale}");
 }
+
+/// A cloud in R³ samples a surface unless told otherwise, whatever the chapter's normalization: the unit sphere's
+/// vertices get m = 2 and the sphere's area (the estimate 2.88 used to round to 3: area 7.59); in Rⁿ an estimate
+/// far from an integer is refused rather than rounded (a regular 70 × 70 grid on the flat torus in R⁴ reads 2.73,
+/// which as 3 gave eigenvalues 1.11 and 2.20 for 1 and 2); given, the dimension gives the torus' spectrum.
+#[test]
+fn the_intrinsic_dimension_is_two_in_r3_and_never_a_rounded_doubt() {
+    let sphere = generate::icosphere(4);
+    let xyz: String = sphere.vertices.iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
+    let cloud = load(xyz.as_bytes(), kac_core::Format::Xyz);
+    let out = run(&cloud, json!({"analysis": "spectrum", "k": 4, "operator": {"normalization": "chapter"}}));
+    let p = &out.summary["parameters"];
+    assert_eq!(p["intrinsic_dimension"], 2, "{p}");
+    let area = p["total_area"].as_f64().unwrap();
+    assert!((area / (4.0 * PI) - 1.0).abs() < 0.02, "area {area}");
+    let l = out.summary["eigenvalues"].as_array().unwrap();
+    assert!((l[1].as_f64().unwrap() - 2.0).abs() < 0.05, "{l:?}");
+
+    let n = 70;
+    let grid: String = (0..n * n)
+        .map(|k| {
+            let (x, y) = (2.0 * PI * (k / n) as f64 / n as f64, 2.0 * PI * (k % n) as f64 / n as f64);
+            format!("{} {} {} {}\n", x.cos(), x.sin(), y.cos(), y.sin())
+        })
+        .collect();
+    let torus = load(grid.as_bytes(), kac_core::Format::Xyz);
+    let e = refusal(&torus, json!({"analysis": "spectrum", "k": 10}));
+    assert!(e.to_string().contains("intrinsic_dimension") && e.to_string().contains("2.7"), "{e}");
+    let out = run(&torus, json!({"analysis": "spectrum", "k": 10, "operator": {"intrinsic_dimension": 2}}));
+    let l: Vec<f64> = out.summary["eigenvalues"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    for (got, want) in l[1..9].iter().zip([1.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0, 2.0]) {
+        assert!((got - want).abs() < 0.03 * want, "{l:?}");
+    }
+}

@@ -43,8 +43,9 @@ pub struct OperatorSpec {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[arg(long)]
     pub radius: Option<f64>,
-    /// Point clouds: the intrinsic dimension m of the sampled manifold (default 2 for points in R³; estimated
-    /// from the neighbourhoods (Levina–Bickel) for points in Rⁿ, n ≥ 4).
+    /// Point clouds: the intrinsic dimension m of the sampled manifold (default 2 for points in R³, in either
+    /// normalization; estimated from the neighbourhoods (Levina–Bickel) for points in Rⁿ, n ≥ 4, and refused when
+    /// the estimate is not within 0.2 of an integer).
     #[serde(skip_serializing_if = "Option::is_none")]
     #[arg(long)]
     pub intrinsic_dimension: Option<usize>,
