@@ -157,3 +157,39 @@ fn the_intrinsic_dimension_is_two_in_r3_and_never_a_rounded_doubt() {
         assert!((got - want).abs() < 0.03 * want, "{l:?}");
     }
 }
+
+/// Weyl's estimates mean what they say: on the Dirichlet unit square (k = 200) the area and the perimeter are
+/// heard from the heat trace (the counting function's fit read 0.879 and 0.414 for 1 and 4); on the closed unit
+/// sphere no boundary length and no string length are reported (26.6 and 2.22 were).
+#[test]
+fn weyl_estimates_are_heard_right_and_omitted_where_meaningless() {
+    let square = validated(&generate::unit_square(128));
+    let out = run(
+        &square,
+        json!({"analysis": "shape-dna", "options": {"k": 200}, "operator": {"boundary": "dirichlet"}}),
+    );
+    let w = &out.summary["weyl"];
+    let area = w["measure_estimate"].as_f64().unwrap();
+    let perimeter = w["boundary_length_estimate"].as_f64().unwrap();
+    assert!((area - 1.0).abs() < 0.02, "area {area}: {w}");
+    // The perimeter rests on the second term, which P1's error at λ_200 (2746 here) also feeds: the truth lies
+    // within twice the stated uncertainty, itself under 10 %.
+    let doubt = w["boundary_length_uncertainty"].as_f64().unwrap();
+    assert!((perimeter - 4.0).abs() < 2.0 * doubt && doubt < 0.4, "perimeter {perimeter} ± {doubt}: {w}");
+    assert!(w["measure_uncertainty"].as_f64().unwrap() < 0.05, "{w}");
+    assert!(w["string_length_estimate"].is_null(), "{w}");
+    assert_eq!(out.summary["warnings"], json!([]), "{}", out.summary["warnings"]);
+    // The mesh (32 × 32): λ_200 spans under 3 spacings a wavelength; the estimates say they are biased.
+    let coarse = validated(&generate::unit_square(32));
+    let out = run(
+        &coarse,
+        json!({"analysis": "shape-dna", "options": {"k": 200}, "operator": {"boundary": "dirichlet"}}),
+    );
+    assert_eq!(out.summary["warnings"][0]["code"], "weyl-underresolved", "{}", out.summary);
+    let sphere = validated(&generate::icosphere(4));
+    let out = run(&sphere, json!({"analysis": "shape-dna", "options": {"k": 100}}));
+    let w = &out.summary["weyl"];
+    assert!(w["boundary_length_estimate"].is_null() && w["string_length_estimate"].is_null(), "{w}");
+    let area = w["measure_estimate"].as_f64().unwrap();
+    assert!((area / (4.0 * PI) - 1.0).abs() < 0.02, "area {area}: {w}");
+}

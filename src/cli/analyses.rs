@@ -59,6 +59,11 @@ pub(super) fn emit(mut out: Output, args: &OutArgs) -> Result<(), Failure> {
             obj.insert("arrays".into(), Value::Object(inline));
         }
     }
+    // Warnings (`warnings: [{code, message}]`, the one place a result says its numbers are outside their domain of
+    // validity) are in the JSON and also told on stderr, where a person at a terminal sees them.
+    for w in out.summary["warnings"].as_array().into_iter().flatten() {
+        eprintln!("kac: warning {}: {}", w["code"].as_str().unwrap_or("?"), w["message"].as_str().unwrap_or(""));
+    }
     print_json(&out.summary)
 }
 
@@ -462,7 +467,13 @@ pub fn compare(a: CompareCmd) -> Result<(), Failure> {
                 .map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
             let field = |k: &str| ev.field(k).and_then(|x| x.parse::<f64>().ok());
             let dimension = if field("Volume").is_some() && field("Area").is_none() { 3 } else { 2 };
-            let m = shape_dna::Measures { dimension, area: field("Area"), volume: field("Volume"), length: None };
+            let m = shape_dna::Measures {
+                dimension,
+                area: field("Area"),
+                volume: field("Volume"),
+                length: None,
+                has_boundary: None,
+            };
             let tol = 1e-9 * ev.eigenvalues.iter().fold(0.0f64, |a, b| a.max(b.abs()));
             let dna = shape_dna::shape_dna(&ev.eigenvalues, tol, &m, &a.dna.options())
                 .map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;

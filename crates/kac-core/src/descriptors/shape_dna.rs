@@ -88,6 +88,11 @@ pub struct Measures {
     pub length: Option<f64>,
     pub area: Option<f64>,
     pub volume: Option<f64>,
+    /// Whether the domain has a boundary (a surface mesh's open edges; a solid always): `false` leaves the
+    /// boundary term out of the Weyl estimates, where it has no meaning; unknown (`None`) for clouds, graphs and
+    /// curves.
+    #[serde(default)]
+    pub has_boundary: Option<bool>,
 }
 
 impl Measures {
@@ -430,7 +435,12 @@ impl Measures {
             ShapeKind::PointCloud => mass_total,
             _ => summary.area,
         };
-        Measures { dimension, length: summary.length, area, volume: summary.volume }
+        let has_boundary = match summary.kind {
+            ShapeKind::TriangleMesh => summary.closed.map(|c| !c),
+            ShapeKind::TetMesh => Some(true),
+            _ => None,
+        };
+        Measures { dimension, length: summary.length, area, volume: summary.volume, has_boundary }
     }
 }
 
