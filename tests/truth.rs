@@ -193,3 +193,39 @@ fn weyl_estimates_are_heard_right_and_omitted_where_meaningless() {
     let area = w["measure_estimate"].as_f64().unwrap();
     assert!((area / (4.0 * PI) - 1.0).abs() < 0.02, "area {area}: {w}");
 }
+
+/// The counting function counts a cluster together: K4's Laplacian spectrum 0, 4, 4, 4 gives N = 1, 4, 4, 4 (the
+/// triple came back as 3.9999999999999996, 4, 4 and counted 2, 4, 4); the icosphere's l = 1 triple counts 4 at
+/// each of its values.
+#[test]
+fn counting_counts_a_cluster_together() {
+    let k4 = serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(generate::complete_graph(4)))).unwrap();
+    let out = run(&load(&k4, kac_core::Format::Json), json!({"analysis": "spectrum", "k": 4, "counting": true}));
+    assert_eq!(out.summary["counting"]["count"], json!([1, 4, 4, 4]), "{}", out.summary["counting"]);
+    let sphere = validated(&generate::icosphere(3));
+    let out = run(&sphere, json!({"analysis": "spectrum", "k": 9, "counting": true}));
+    assert_eq!(out.summary["counting"]["count"], json!([1, 4, 4, 4, 9, 9, 9, 9, 9]), "{}", out.summary["counting"]);
+}
+
+/// With `extrapolate`, `eigenvalues` are the extrapolated values (the answer asked for; the coarse mesh's were the
+/// headline, 10³ times farther from the truth), with `error_estimate` beside them and the mesh's own values in
+/// `mesh_eigenvalues`: on the Dirichlet unit square, λ₁ = 2π².
+#[test]
+fn extrapolated_eigenvalues_are_the_headline() {
+    let square = validated(&generate::unit_square(8));
+    let out = run(
+        &square,
+        json!({"analysis": "spectrum", "k": 2, "extrapolate": true, "operator": {"boundary": "dirichlet"}}),
+    );
+    let s = &out.summary;
+    let exact = 2.0 * PI * PI;
+    let headline = s["eigenvalues"][0].as_f64().unwrap();
+    let mesh = s["mesh_eigenvalues"][0].as_f64().unwrap();
+    let estimate = s["error_estimate"][0].as_f64().unwrap();
+    assert_eq!(s["eigenvalues"], s["extrapolation"]["eigenvalues"], "{s}");
+    assert_eq!(s["eigenvalues_source"], "extrapolation");
+    assert!((headline - exact).abs() < 0.01 * (mesh - exact).abs(), "{headline} vs mesh {mesh}");
+    assert!(estimate >= (headline - exact).abs(), "estimate {estimate}");
+    let plain = run(&square, json!({"analysis": "spectrum", "k": 2, "operator": {"boundary": "dirichlet"}}));
+    assert_eq!(plain.summary["eigenvalues_source"], "mesh");
+}

@@ -99,10 +99,24 @@ pub(crate) fn operator_output(
 /// N(λ) at each returned eigenvalue (the number of eigenvalues at or below it, counting those a band left out)
 /// beside Weyl's law for the shape's measure, with the boundary's second term where the shape has a boundary of
 /// known measure and its condition is the shape's own (Neumann or Dirichlet on the whole boundary).
+/// Eigenvalues closer than this, relative, are counted as one cluster: far above the solver's error for a
+/// converged pair (its relative residual tolerance is 1e-10 by default, the eigenvalue's error about its square),
+/// far below any separation a mesh gives two distinct eigenvalues.
+pub const CLUSTER_REL: f64 = 1e-8;
+
 pub(crate) fn counting_json(v: &Validated, e: &Eigen, values: &[f64], spec: &OperatorSpec) -> Value {
     let offset = e.spectrum.stats.below_band.unwrap_or(0);
-    let count: Vec<usize> =
-        (0..values.len()).map(|i| offset + values.iter().rposition(|&x| x <= values[i]).unwrap_or(i) + 1).collect();
+    // N(λ_i) counts a cluster together: values within the solver's accuracy of λ_i (relative CLUSTER_REL, with a
+    // floor for the zero modes) are one eigenvalue of multiplicity, not a staircase of rounding (K4's triple 4 came
+    // back as 3.9999999999999996, 4, 4 and counted 2, 4, 4).
+    let scale = values.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let count: Vec<usize> = values
+        .iter()
+        .map(|&l| {
+            let within = CLUSTER_REL * (l.abs() + 1e-6 * scale);
+            offset + values.iter().filter(|&&x| x <= l + within).count()
+        })
+        .collect();
     let m = measures(v, Some(&e.operator));
     let dimension = (!matches!(v.shape, Shape::Graph(_)) && m.dimension > 0).then_some(m.dimension);
     let measure = dimension.and(m.measure());
@@ -120,6 +134,7 @@ pub(crate) fn counting_json(v: &Validated, e: &Eigen, values: &[f64], spec: &Ope
     json!({
         "lambda": values,
         "count": count,
+        "cluster_tolerance": CLUSTER_REL,
         "weyl": weyl,
         "dimension": dimension,
         "measure": measure,
