@@ -473,7 +473,8 @@ impl Mix {
 /// non-text spliced in, a declared count changed.
 fn mutations(bytes: &[u8], count: usize, seed: u64) -> Vec<Vec<u8>> {
     let mut m = Mix(seed);
-    let extremes: [&[u8]; 8] = [b"nan", b"1e999", b"-1e308", b"0", b"-0", b"4294967296", b"18446744073709551616", b"1e-320"];
+    let extremes: [&[u8]; 8] =
+        [b"nan", b"1e999", b"-1e308", b"0", b"-0", b"4294967296", b"18446744073709551616", b"1e-320"];
     (0..count)
         .map(|i| {
             let mut b = bytes.to_vec();
@@ -610,5 +611,10 @@ fn mutated_shared_meshes_and_extreme_parameters_never_get_a_server_error() {
     }
     assert_eq!(reply(agent().get(&s.url("/livez")).call()).status, 200);
     eprintln!("fuzz pass: {requests} requests, {} shapes stored, {} jobs", stored.len(), jobs.len());
-    assert!(requests > 500 && stored.len() >= 6 && jobs.len() >= 40, "{requests} requests, {} shapes, {} jobs", stored.len(), jobs.len());
+    assert!(
+        requests > 500 && stored.len() >= 6 && jobs.len() >= 40,
+        "{requests} requests, {} shapes, {} jobs",
+        stored.len(),
+        jobs.len()
+    );
 }

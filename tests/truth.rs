@@ -79,7 +79,8 @@ fn heat_curvature_off_a_surface_mesh_is_refused() {
     let sphere = generate::icosphere(3);
     let xyz: String = sphere.vertices.iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
     let cloud = load(xyz.as_bytes(), kac_core::Format::Xyz);
-    let graph_json = serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(generate::petersen_graph()))).unwrap();
+    let graph_json =
+        serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(generate::petersen_graph()))).unwrap();
     let graph = load(&graph_json, kac_core::Format::Json);
     for (v, kind) in [(&cloud, "point_cloud"), (&graph, "graph")] {
         let e = refusal(v, json!({"analysis": "heat-curvature", "k": 8}));
@@ -103,20 +104,16 @@ fn implicit_heat_is_the_heat_kernel_as_the_spectral_one() {
     let v = validated(&mesh);
     let centre = mesh.vertices.iter().position(|p| (p[0] - 0.5).abs() < 1e-9 && (p[1] - 0.5).abs() < 1e-9).unwrap();
     let t = 0.002;
-    let out = run(
-        &v,
-        json!({"analysis": "heat", "method": "implicit", "times": [t], "steps": 200, "sources": [centre]}),
-    );
+    let out =
+        run(&v, json!({"analysis": "heat", "method": "implicit", "times": [t], "steps": 200, "sources": [centre]}));
     let k = array(&out, "heat_kernel");
     let at = k.data[centre * k.cols];
     let plane = 1.0 / (4.0 * PI * t);
     assert!((at / plane - 1.0).abs() < 0.05, "k_t(c, c) = {at}, 1/(4πt) = {plane}");
     // Both methods at a time the spectral sum resolves (λ_200 t ≈ 125): the same numbers.
     let t = 0.05;
-    let implicit = run(
-        &v,
-        json!({"analysis": "heat", "method": "implicit", "times": [t], "steps": 400, "sources": [centre]}),
-    );
+    let implicit =
+        run(&v, json!({"analysis": "heat", "method": "implicit", "times": [t], "steps": 400, "sources": [centre]}));
     let spectral = run(&v, json!({"analysis": "heat", "k": 200, "times": [t], "sources": [centre]}));
     let (a, b) = (array(&implicit, "heat_kernel"), array(&spectral, "heat_kernel"));
     let scale = b.data.iter().fold(0.0f64, |m, x| m.max(x.abs()));
@@ -164,10 +161,8 @@ fn the_intrinsic_dimension_is_two_in_r3_and_never_a_rounded_doubt() {
 #[test]
 fn weyl_estimates_are_heard_right_and_omitted_where_meaningless() {
     let square = validated(&generate::unit_square(128));
-    let out = run(
-        &square,
-        json!({"analysis": "shape-dna", "options": {"k": 200}, "operator": {"boundary": "dirichlet"}}),
-    );
+    let out =
+        run(&square, json!({"analysis": "shape-dna", "options": {"k": 200}, "operator": {"boundary": "dirichlet"}}));
     let w = &out.summary["weyl"];
     let area = w["measure_estimate"].as_f64().unwrap();
     let perimeter = w["boundary_length_estimate"].as_f64().unwrap();
@@ -181,10 +176,8 @@ fn weyl_estimates_are_heard_right_and_omitted_where_meaningless() {
     assert_eq!(out.summary["warnings"], json!([]), "{}", out.summary["warnings"]);
     // The mesh (32 × 32): λ_200 spans under 3 spacings a wavelength; the estimates say they are biased.
     let coarse = validated(&generate::unit_square(32));
-    let out = run(
-        &coarse,
-        json!({"analysis": "shape-dna", "options": {"k": 200}, "operator": {"boundary": "dirichlet"}}),
-    );
+    let out =
+        run(&coarse, json!({"analysis": "shape-dna", "options": {"k": 200}, "operator": {"boundary": "dirichlet"}}));
     assert_eq!(out.summary["warnings"][0]["code"], "weyl-underresolved", "{}", out.summary);
     let sphere = validated(&generate::icosphere(4));
     let out = run(&sphere, json!({"analysis": "shape-dna", "options": {"k": 100}}));
@@ -199,7 +192,8 @@ fn weyl_estimates_are_heard_right_and_omitted_where_meaningless() {
 /// each of its values.
 #[test]
 fn counting_counts_a_cluster_together() {
-    let k4 = serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(generate::complete_graph(4)))).unwrap();
+    let k4 =
+        serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(generate::complete_graph(4)))).unwrap();
     let out = run(&load(&k4, kac_core::Format::Json), json!({"analysis": "spectrum", "k": 4, "counting": true}));
     assert_eq!(out.summary["counting"]["count"], json!([1, 4, 4, 4]), "{}", out.summary["counting"]);
     let sphere = validated(&generate::icosphere(3));
@@ -228,4 +222,27 @@ fn extrapolated_eigenvalues_are_the_headline() {
     assert!(estimate >= (headline - exact).abs(), "estimate {estimate}");
     let plain = run(&square, json!({"analysis": "spectrum", "k": 2, "operator": {"boundary": "dirichlet"}}));
     assert_eq!(plain.summary["eigenvalues_source"], "mesh");
+}
+
+/// Varadhan's estimate at its default time is a usable cross-check on the unit sphere (mean error 0.107 rad at
+/// level 4; at the old default time 100h² it was 0.43), and the result says how far it is from the heat method.
+#[test]
+fn varadhans_default_time_hears_the_sphere() {
+    let mesh = generate::icosphere(4);
+    let out = run(&validated(&mesh), json!({"analysis": "geodesic", "sources": [0]}));
+    let d = array(&out, "distance");
+    assert_eq!(d.cols, 2);
+    let p0 = mesh.vertices[0];
+    let exact = |p: &[f64; 3]| (p[0] * p0[0] + p[1] * p0[1] + p[2] * p0[2]).clamp(-1.0, 1.0).acos();
+    let (mut heat, mut varadhan) = (0.0, 0.0);
+    for (i, p) in mesh.vertices.iter().enumerate() {
+        heat += (d.data[2 * i] - exact(p)).abs();
+        varadhan += (d.data[2 * i + 1] - exact(p)).abs();
+    }
+    let n = mesh.vertices.len() as f64;
+    assert!(heat / n < 0.02, "heat method mean error {}", heat / n);
+    assert!(varadhan / n < 0.15, "Varadhan mean error {}", varadhan / n);
+    let g = &out.summary["geodesic"];
+    let mean = g["varadhan_discrepancy"]["mean"].as_f64().unwrap();
+    assert!(mean > 0.0 && mean < 0.15, "{g}");
 }

@@ -146,7 +146,11 @@ pub const WEYL_MIN_SPACINGS_PER_WAVELENGTH: f64 = 10.0;
 
 /// Warnings about Weyl's estimates: `weyl-underresolved` when the wavelength 2π/√λ_k of the highest eigenvalue
 /// used spans fewer than [`WEYL_MIN_SPACINGS_PER_WAVELENGTH`] mesh spacings h = (|Ω|/n)^{1/d}.
-pub(crate) fn weyl_warnings(w: Option<&kac_core::descriptors::weyl::WeylEstimate>, m: &Measures, n: usize) -> Vec<Value> {
+pub(crate) fn weyl_warnings(
+    w: Option<&kac_core::descriptors::weyl::WeylEstimate>,
+    m: &Measures,
+    n: usize,
+) -> Vec<Value> {
     let (Some(w), Some(measure)) = (w, m.measure()) else { return vec![] };
     let Some(lk) = w.highest_eigenvalue.filter(|l| *l > 0.0) else { return vec![] };
     let h = (measure / n.max(1) as f64).powf(1.0 / f64::from(w.dimension.max(1)));

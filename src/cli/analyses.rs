@@ -306,9 +306,10 @@ pub struct GeodesicCmd {
     /// t = m·h² (h the mean edge length).
     #[arg(long, default_value_t = 1.0)]
     pub time_factor: f64,
-    /// Varadhan cross-check time t' = m'·h² (0: off).
-    #[arg(long, default_value_t = 100.0)]
-    pub varadhan_factor: f64,
+    /// Varadhan cross-check time t' = m'·h² (0: off; default: from the shape's size, max((D/9)², 10h²) with D
+    /// the bounding box's diagonal).
+    #[arg(long)]
+    pub varadhan_factor: Option<f64>,
 }
 
 pub fn geodesic(a: GeodesicCmd) -> Result<(), Failure> {

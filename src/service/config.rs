@@ -173,12 +173,16 @@ pub fn cors_origin(o: &str) -> Result<(), String> {
     let ok = rest.is_some_and(|r| {
         !r.is_empty()
             && r.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | ':' | '[' | ']'))
-            && r.rsplit_once(':').is_none_or(|(h, p)| !h.is_empty() && (p.parse::<u16>().is_ok() || h.ends_with(']') || r.starts_with('[')))
+            && r.rsplit_once(':').is_none_or(|(h, p)| {
+                !h.is_empty() && (p.parse::<u16>().is_ok() || h.ends_with(']') || r.starts_with('['))
+            })
     });
     if ok {
         Ok(())
     } else {
-        Err(format!("--cors-origins {o:?}: give `*` or origins such as https://app.example.org or http://localhost:3000"))
+        Err(format!(
+            "--cors-origins {o:?}: give `*` or origins such as https://app.example.org or http://localhost:3000"
+        ))
     }
 }
 

@@ -65,8 +65,7 @@ fn heat_trace_fit(eigenvalues: &[f64], d: u8, boundary: bool, upper: f64) -> Opt
             let s = 4.0 * PI * t;
             // The expansion's powers (4πt)^{−(d−j)/2}, j = 0..=d: the volume, the boundary (j = 1, left out
             // without one), then the curvature, corner and edge terms down to the constant.
-            let x: Vec<f64> =
-                (0..=d).filter(|&j| boundary || j != 1).map(|j| s.powf(-(dh - 0.5 * j as f64))).collect();
+            let x: Vec<f64> = (0..=d).filter(|&j| boundary || j != 1).map(|j| s.powf(-(dh - 0.5 * j as f64))).collect();
             (x, z)
         })
         .collect();
@@ -121,9 +120,7 @@ pub fn weyl_estimate(eigenvalues: &[f64], zero_tol: f64, measures: &Measures) ->
     // The boundary term is fitted unless the domain is known to have no boundary, and reported only where it is
     // known to have one.
     let fit_boundary = measures.has_boundary != Some(false);
-    let report = |f: Option<(f64, Option<f64>)>| {
-        f.map(|(m, b)| (m, b.filter(|_| measures.has_boundary == Some(true))))
-    };
+    let report = |f: Option<(f64, Option<f64>)>| f.map(|(m, b)| (m, b.filter(|_| measures.has_boundary == Some(true))));
     let wide = report(if nz.len() >= 8 { heat_trace_fit(eigenvalues, d, fit_boundary, 40.0) } else { None });
     let narrow = report(if nz.len() >= 8 { heat_trace_fit(eigenvalues, d, fit_boundary, 20.0) } else { None });
     let measure_name = match d {
