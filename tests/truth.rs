@@ -246,3 +246,16 @@ fn varadhans_default_time_hears_the_sphere() {
     let mean = g["varadhan_discrepancy"]["mean"].as_f64().unwrap();
     assert!(mean > 0.0 && mean < 0.15, "{g}");
 }
+
+/// `wave` reports its discrete energy ½(u̇ᵀMu̇ + uᵀLu) at every time, conserved (as Schrödinger reports its norm):
+/// for u₀ = the l = 1 harmonic z on the unit sphere and no velocity, E = ½ λ₁ ‖z‖²_M = ½ · 2 · 4π/3.
+#[test]
+fn wave_reports_its_conserved_energy() {
+    let mesh = generate::icosphere(4);
+    let z: Vec<f64> = mesh.vertices.iter().map(|p| p[2]).collect();
+    let out = run(&validated(&mesh), json!({"analysis": "wave", "k": 10, "times": [0.0, 0.7, 3.1, 10.0], "initial": z}));
+    let e: Vec<f64> = out.summary["energy"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    let want = 0.5 * 2.0 * 4.0 * PI / 3.0;
+    assert!((e[0] / want - 1.0).abs() < 0.01, "{e:?} vs {want}");
+    assert!(out.summary["energy_relative_drift"].as_f64().unwrap() < 1e-10, "{}", out.summary);
+}

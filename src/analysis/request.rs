@@ -163,11 +163,16 @@ pub struct SolverSpec {
     /// Relative residual tolerance (default 1e-10).
     #[arg(long, default_value_t = kac_core::spectrum::DEFAULT_TOL)]
     pub tol: f64,
-    /// Confirm by Sylvester's inertia (one LDLᵀ of L − τM) that no eigenvalue below the returned ones was missed,
-    /// and solve again for any that were (default true; the result's `solver.completeness`). `false` (the CLI's
-    /// `--no-verify`) skips the check: the result then says `completeness: null`.
+    /// Request field `verify` (default true): confirm by Sylvester's inertia (one LDLᵀ of L − τM) that no
+    /// eigenvalue below the returned ones was missed, and solve again for any that were (the result's
+    /// `solver.completeness`).
     #[serde(skip_serializing_if = "is_true")]
-    #[arg(long = "no-verify", action = clap::ArgAction::SetFalse)]
+    #[arg(
+        long = "no-verify",
+        action = clap::ArgAction::SetFalse,
+        help = "Skip the completeness check by Sylvester's inertia (one LDLᵀ factorization fewer); the result then \
+                says completeness: null and may miss eigenvalues"
+    )]
     pub verify: bool,
     /// auto (default), dense (every eigenpair of the dense pencil; the service takes it while unknowns² is within
     /// --max-output-values) or sparse (shift-invert block Lanczos). The CLI's flag is `--solver-method`

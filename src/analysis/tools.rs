@@ -76,10 +76,18 @@ pub(crate) fn run(
             hooks.control.phase("descriptor", 0, 0)?;
             let (u0, how) = initial_function(v, &e.operator, start)?;
             let v0 = velocity.as_ref().map(|f| input_function(v, &e.operator, f, "velocity")).transpose()?;
-            let (u, dropped) = pde::wave(&basis_of(&e, *k), &e.operator.pair, &u0, v0.as_deref(), times)?;
+            let basis = basis_of(&e, *k);
+            let (u, dropped) = pde::wave(&basis, &e.operator.pair, &u0, v0.as_deref(), times)?;
+            let energy = pde::wave_energy(&basis, &e.operator.pair, &u0, v0.as_deref(), times)?;
+            let e0 = energy.first().copied().unwrap_or(0.0);
+            let drift = energy.iter().map(|x| (x - e0).abs()).fold(0.0, f64::max) / e0.abs().max(f64::MIN_POSITIVE);
             let mut a = to_input_rows(v, &e.operator, u.as_ref(), "wave");
             a.columns = Some(times.clone());
-            let summary = json!({ "k": k, "times": times, "initial": how, "dropped_m_norm": dropped, "velocity": velocity.is_some() });
+            let summary = json!({
+                "k": k, "times": times, "initial": how, "dropped_m_norm": dropped, "velocity": velocity.is_some(),
+                "energy": energy, "energy_relative_drift": drift,
+                "equation": "∂²u/∂t² = −Δu, u(t) = Σ (a cos √λt + b sin √λt/√λ) φ; energy ½(u̇ᵀMu̇ + uᵀLu), conserved",
+            });
             Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays: vec![a] }
         }
         Analysis::Schrodinger { k, times, start, initial_imag, operator, solver } => {
