@@ -505,6 +505,18 @@ pub enum Analysis {
         #[serde(default)]
         operator: OperatorSpec,
     },
+    /// The gradient of a per-vertex function on each element (triangle or tetrahedron; Prop. 9.2): constant per
+    /// element, Σ u_i ∇φ_i. Rows of the `gradient` array: the validated mesh's elements in order.
+    Gradient {
+        /// u per vertex (upload numbering).
+        function: Vec<f64>,
+    },
+    /// The divergence of a per-element vector field (Def. 9.1) per vertex: integrated, (div X)_i = −Σ_f |f|
+    /// X_f·∇φ_i (so that div ∇u = −L u), and pointwise (divided by the lumped mass).
+    Divergence {
+        /// One vector [x, y, z] per element of the validated mesh, in its order (as `gradient` returns them).
+        field: Vec<[f64; 3]>,
+    },
     /// Laplacian eigenmap / GPS coordinates, with the Fiedler vector and bisection.
     Embed {
         #[serde(default = "dimensions_default")]
@@ -590,6 +602,8 @@ impl Analysis {
             Analysis::Diffuse { .. } => "diffuse",
             Analysis::DirichletEnergy { .. } => "dirichlet-energy",
             Analysis::Embed { .. } => "embed",
+            Analysis::Gradient { .. } => "gradient",
+            Analysis::Divergence { .. } => "divergence",
             Analysis::Smooth { .. } => "smooth",
             Analysis::Interpolate { .. } => "interpolate",
         }
@@ -625,6 +639,9 @@ impl Analysis {
                  vertices as a cloud gave K = 1.71 for 1)",
             ),
             Analysis::Geodesic { .. } => only(&[TriangleMesh], "the heat method takes gradients on triangles"),
+            Analysis::Gradient { .. } | Analysis::Divergence { .. } => {
+                only(&[TriangleMesh, TetMesh], "P1 gradients live on a mesh's triangles or tetrahedra")
+            }
             Analysis::Trees {} => {
                 only(&[TriangleMesh, TetMesh, Graph, Polyline], "spanning trees are counted on a graph's edges")
             }
@@ -679,7 +696,11 @@ impl Analysis {
             | Analysis::Embed { operator, .. }
             | Analysis::Smooth { operator, .. }
             | Analysis::Interpolate { operator, .. } => Some(operator),
-            Analysis::Geodesic { .. } | Analysis::Trees { .. } | Analysis::MeanCurvature { .. } => None,
+            Analysis::Geodesic { .. }
+            | Analysis::Trees { .. }
+            | Analysis::MeanCurvature { .. }
+            | Analysis::Gradient { .. }
+            | Analysis::Divergence { .. } => None,
         }
     }
 
@@ -698,7 +719,9 @@ impl Analysis {
             | Analysis::Schrodinger { solver, .. }
             | Analysis::Diffuse { solver, .. }
             | Analysis::Embed { solver, .. } => Some(solver),
-            Analysis::Operator { .. }
+            Analysis::Gradient { .. }
+            | Analysis::Divergence { .. }
+            | Analysis::Operator { .. }
             | Analysis::Geodesic { .. }
             | Analysis::Trees { .. }
             | Analysis::MeanCurvature { .. }

@@ -364,6 +364,36 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
             });
             Output { fingerprints: vec![], summary, arrays: vec![a] }
         }
+        Analysis::Gradient { function } => {
+            let u = from_input_rows(v, function, "function")?;
+            hooks.control.check()?;
+            let g = kac_core::pde::calculus::gradient(&v.shape, &u)?;
+            let data: Vec<f64> = g.iter().flatten().copied().collect();
+            let a = VertexArray { name: "gradient", rows: g.len(), cols: 3, data, columns: None };
+            let norms: Vec<f64> = g.iter().map(|x| (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()).collect();
+            let summary = json!({
+                "elements": g.len(), "gradient_norm": super::tools::finite_stats(&norms),
+                "rows": "the validated mesh's elements (triangles or tetrahedra) in order; columns x, y, z",
+                "definition": "∇u = Σ u_i ∇φ_i, constant on each element (P1)",
+            });
+            Output { fingerprints: vec![], summary, arrays: vec![a] }
+        }
+        Analysis::Divergence { field } => {
+            hooks.control.check()?;
+            let d = kac_core::pde::calculus::divergence(&v.shape, field)?;
+            // The pointwise divergence: the integrated one over each vertex's lumped mass (its share of the area or
+            // volume).
+            let op = operators::build(&v.shape, &OperatorOptions { mass: Some(Mass::Lumped), ..Default::default() })?;
+            let m: Vec<f64> = (0..op.pair.n()).map(|i| op.pair.mass[op.pair.pattern.diag_pos(i)]).collect();
+            let pointwise: Vec<f64> = d.iter().zip(&m).map(|(x, w)| x / w).collect();
+            let mat = faer::Mat::from_fn(d.len(), 2, |i, j| if j == 0 { d[i] } else { pointwise[i] });
+            let a = validated_to_input(v, mat.as_ref(), "divergence");
+            let summary = json!({
+                "columns": ["integrated", "pointwise"],
+                "definition": "(div X)_i = −Σ_f |f| X_f·∇φ_i (so div ∇u = −L u); pointwise: over the lumped mass",
+            });
+            Output { fingerprints: vec![], summary, arrays: vec![a] }
+        }
         Analysis::Trees {} => {
             let (edges, weights) = operators::edge_graph(&v.shape)
                 .ok_or_else(|| AnalysisError::not_applicable("a point cloud has no edges; build a graph first"))?;

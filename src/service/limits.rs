@@ -24,6 +24,8 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
         Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
         Analysis::Operator { .. }
+        | Analysis::Gradient { .. }
+        | Analysis::Divergence { .. }
         | Analysis::Geodesic { .. }
         | Analysis::Trees { .. }
         | Analysis::MeanCurvature { .. }
@@ -123,6 +125,9 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
             (vec![("sources", sources.len()), ("options.varadhan_steps", options.varadhan_steps)], 2)
         }
         Analysis::Trees {} => (vec![], 1),
+        // Per-element arrays: as many rows as elements, about 2 (triangles) to 6 (tets) per vertex.
+        Analysis::Gradient { function } => (vec![("function", function.len())], 3 * 6),
+        Analysis::Divergence { field } => (vec![("field", field.len())], 2),
         Analysis::MeanCurvature {} => (vec![], 3),
         Analysis::Poisson { g, dirichlet_values, .. } => {
             (vec![("g", g.len()), ("dirichlet_values", dirichlet_values.as_ref().map_or(0, Vec::len))], 1)

@@ -19,6 +19,7 @@
 //!
 //! "Fixed" vertices (Dirichlet data) are eliminated, never replaced by identity rows.
 
+pub mod calculus;
 pub mod geodesic;
 
 use crate::descriptors::{graph::components, m_project, Basis, DescriptorError};
