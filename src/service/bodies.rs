@@ -1,5 +1,6 @@
 //! Request bodies before a handler reads them: the declared length against `--max-body-bytes` (so an `Expect:
-//! 100-continue` for too large a body is answered 413 at once, never `100 Continue`), the memory every body in
+//! 100-continue` for too large a body is answered 413 at once, never `100 Continue`; without `Expect` the body
+//! limit refuses it after the limit's bytes), the memory every body in
 //! flight may hold together (`--max-body-memory-bytes`: beyond it 503 `memory-busy` with Retry-After), and a floor
 //! on the rate a body arrives at (`--min-body-rate-bytes-per-s` after `--body-read-timeout-s` of grace), so that
 //! clients trickling a byte now and then cannot hold connections for ever. No handler sees a body otherwise.
@@ -82,14 +83,23 @@ pub async fn guard(State(st): State<AppState>, req: Request, next: Next) -> Resu
     }
     let limit = st.config.max_body_bytes;
     let declared = declared_length(&req);
-    if let Some(n) = declared {
-        if n > limit as u64 {
-            // Answered before the body is polled: hyper sends no `100 Continue` for a body never read.
+    let expects_continue = req
+        .headers()
+        .get(header::EXPECT)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.trim().eq_ignore_ascii_case("100-continue"));
+    if let Some(n) = declared.filter(|&n| n > limit as u64) {
+        // A client that waits for `100 Continue` is answered before the body is polled (hyper sends no `100
+        // Continue` for a body never read), so it never sends it. One that sends at once is refused by the body
+        // limit after the limit's bytes (answering before it finished writing would break its pipe, and many
+        // clients then never read the answer).
+        if expects_continue {
             return Err(ApiError::BodyTooLarge { limit });
         }
     }
-    // A body of unknown length may grow to the limit: that is what it reserves.
-    let reserve = declared.map_or(limit, |n| n as usize);
+    // A body of unknown length may grow to the limit: that is what it reserves (and never more than the limit,
+    // which refuses the rest).
+    let reserve = declared.map_or(limit, |n| (n as usize).min(limit));
     let kib = reserve.div_ceil(1024).max(1).min(u32::MAX as usize) as u32;
     let budget = &st.bodies;
     let Ok(permit) = budget.permits.clone().try_acquire_many_owned(kib) else {
