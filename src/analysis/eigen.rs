@@ -147,6 +147,9 @@ pub fn eigenpairs(
     Ok(e)
 }
 
+/// Shapes with more vertices than this (or any P2 operator) are assembled where a stop can leave the assembly.
+const ASSEMBLY_WATCHED_FROM: usize = 50_000;
+
 /// The operator a solve needs, with its assembly time, between stop checks and within the dense limit.
 fn assemble(
     v: &Validated,
@@ -156,7 +159,15 @@ fn assemble(
 ) -> Result<(Operator, f64), AnalysisError> {
     hooks.control.check()?;
     let t0 = std::time::Instant::now();
-    let operator = build_operator(v, spec)?;
+    // Assembly cannot stop inside (P2 tets of 30k unknowns: 0.3-0.5 s, once 1.6 s under load): beyond a small
+    // shape it runs where a cancel or a timeout can leave it (the abandoned assembly finishes on its own thread).
+    let large = v.shape.vertex_count() > ASSEMBLY_WATCHED_FROM || spec.order == 2;
+    let operator = if large && hooks.control.stop.is_some() {
+        let (owned, spec) = (v.clone(), spec.clone());
+        hooks.control.abandonable("assembly", move || build_operator(&owned, &spec))??
+    } else {
+        build_operator(v, spec)?
+    };
     let assembly_s = t0.elapsed().as_secs_f64();
     hooks.control.check()?;
     hooks.limits.check_dense(solver, operator.pair.n())?;

@@ -88,14 +88,12 @@ pub async fn guard(State(st): State<AppState>, req: Request, next: Next) -> Resu
         .get(header::EXPECT)
         .and_then(|v| v.to_str().ok())
         .is_some_and(|v| v.trim().eq_ignore_ascii_case("100-continue"));
-    if let Some(n) = declared.filter(|&n| n > limit as u64) {
-        // A client that waits for `100 Continue` is answered before the body is polled (hyper sends no `100
-        // Continue` for a body never read), so it never sends it. One that sends at once is refused by the body
-        // limit after the limit's bytes (answering before it finished writing would break its pipe, and many
-        // clients then never read the answer).
-        if expects_continue {
-            return Err(ApiError::BodyTooLarge { limit });
-        }
+    // A client that waits for `100 Continue` is answered before the body is polled (hyper sends no `100 Continue`
+    // for a body never read), so it never sends it. One that sends at once is refused by the body limit after the
+    // limit's bytes (answering before it finished writing would break its pipe, and many clients then never read
+    // the answer).
+    if expects_continue && declared.is_some_and(|n| n > limit as u64) {
+        return Err(ApiError::BodyTooLarge { limit });
     }
     // A body of unknown length may grow to the limit: that is what it reserves (and never more than the limit,
     // which refuses the rest).

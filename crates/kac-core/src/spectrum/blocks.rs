@@ -93,36 +93,8 @@ pub(crate) fn dense_stoppable(pair: &SparsePair, k: usize, control: &Control<'_>
         // No flag, or at most about half a second of work.
         return dense::eigs_dense(pair, k);
     }
-    // At most one dense thread per core, abandoned ones included: a client that submits and cancels over and over
-    // waits here (still stoppable) instead of piling up decompositions.
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    static DENSE_THREADS: AtomicUsize = AtomicUsize::new(0);
-    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
-    while DENSE_THREADS.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| (n < cores).then_some(n + 1)).is_err() {
-        control.check()?;
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
     let owned = pair.clone();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::Builder::new()
-        .name("kac-dense".into())
-        .spawn(move || {
-            let _ = tx.send(dense::eigs_dense(&owned, k));
-            DENSE_THREADS.fetch_sub(1, Ordering::SeqCst);
-        })
-        .inspect_err(|_| {
-            DENSE_THREADS.fetch_sub(1, Ordering::SeqCst);
-        })
-        .map_err(|e| EigenError::Factorization { message: format!("cannot start the dense solve: {e}") })?;
-    loop {
-        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
-            Ok(result) => return result,
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => control.check()?,
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                return Err(EigenError::Factorization { message: "the dense solve stopped without a result".into() })
-            }
-        }
-    }
+    control.abandonable("dense", move || dense::eigs_dense(&owned, k))?
 }
 
 /// Every eigenpair of each block, merged: the k smallest of the union, ascending.

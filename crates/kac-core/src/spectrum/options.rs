@@ -175,6 +175,47 @@ impl Control<'_> {
             Ok(())
         }
     }
+    /// Runs `work`, which cannot stop inside, where a stop still ends the caller at once: on a thread of its own
+    /// while this one watches the flag every 50 ms; a stop returns `Canceled` and the abandoned work finishes on its
+    /// thread with its result dropped (its core stays busy until then; the caller is free). At most one such
+    /// thread per core, abandoned ones included: a caller beyond waits here, still stoppable. Without a flag the
+    /// work runs here.
+    pub fn abandonable<T: Send + 'static>(
+        &self,
+        name: &str,
+        work: impl FnOnce() -> T + Send + 'static,
+    ) -> Result<T, EigenError> {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        if self.stop.is_none() {
+            return Ok(work());
+        }
+        static THREADS: AtomicUsize = AtomicUsize::new(0);
+        let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+        while THREADS.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| (n < cores).then_some(n + 1)).is_err() {
+            self.check()?;
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::Builder::new()
+            .name(format!("kac-{name}"))
+            .spawn(move || {
+                let _ = tx.send(work());
+                THREADS.fetch_sub(1, Ordering::SeqCst);
+            })
+            .inspect_err(|_| {
+                THREADS.fetch_sub(1, Ordering::SeqCst);
+            })
+            .map_err(|e| EigenError::Factorization { message: format!("cannot start the {name} thread: {e}") })?;
+        loop {
+            match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+                Ok(result) => return Ok(result),
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => self.check()?,
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                    return Err(EigenError::Factorization { message: format!("the {name} stopped without a result") })
+                }
+            }
+        }
+    }
     /// Reports the start of a phase, then checks the flag.
     pub fn phase(&self, phase: &'static str, converged: usize, wanted: usize) -> Result<(), EigenError> {
         self.report(phase, converged, wanted);
