@@ -704,6 +704,15 @@ impl Analysis {
         }
     }
 
+    /// Whether the analysis solves an eigenproblem (whose every phase sees the stop flag); the others factor or
+    /// assemble in single calls.
+    pub fn solves_eigenpairs(&self) -> bool {
+        match self {
+            Analysis::Heat { method, .. } | Analysis::Diffuse { method, .. } => *method == HeatMethod::Spectral,
+            other => other.solver().is_some(),
+        }
+    }
+
     /// The eigensolver settings of an analysis that solves for eigenpairs.
     pub fn solver(&self) -> Option<&SolverSpec> {
         match self {

@@ -188,9 +188,30 @@ pub fn shape_dna_of(
     Ok((e, dna, want))
 }
 
+/// Shapes from this many vertices (or with P2 elements) have their analyses without an eigensolve run where a
+/// stop can leave them: their factorizations and assemblies are single calls that do not see the flag.
+pub const WATCHED_FROM_VERTICES: usize = 50_000;
+
 /// Runs an analysis on a validated shape.
 pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
     analysis.applicable(&v.shape)?;
+    // The analyses that solve no eigenproblem (Poisson, implicit heat and diffusion, geodesics, smoothing,
+    // interpolation, the operator, curvature, gradient, ...) factor and assemble in calls a stop flag cannot reach
+    // inside: on a large shape they run on a thread the caller can leave at once (`Control::abandonable`); the
+    // abandoned work finishes with its result dropped.
+    let large =
+        v.shape.vertex_count() >= WATCHED_FROM_VERTICES || analysis.operator_spec().is_some_and(|o| o.order == 2);
+    if hooks.control.stop.is_some() && large && !analysis.solves_eigenpairs() {
+        let (owned, a) = (v.clone(), analysis.clone());
+        let (threads, limits) = (hooks.threads, hooks.limits);
+        return hooks
+            .control
+            .abandonable("analysis", move || run_here(&owned, &a, Hooks { threads, limits, ..Default::default() }))?;
+    }
+    run_here(v, analysis, hooks)
+}
+
+fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
     let head = json!({ "shape_id": v.id.hex(), "analysis": analysis.name(), "algorithm_version": ALGORITHM_VERSION });
     // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
     let reused = std::cell::Cell::new(false);

@@ -85,3 +85,27 @@ fn a_single_dense_decomposition_is_left_behind_on_stop() {
     });
     assert!(matches!(r, Err(EigenError::Canceled)), "{r:?}");
 }
+
+/// Work left to a thread of its own: its result comes back, a stop leaves it at once, and its panic is raised in
+/// the caller (where a job runner catches it), not lost with the thread.
+#[test]
+fn abandonable_work_returns_stops_and_carries_its_panic() {
+    let stop = AtomicBool::new(false);
+    let control = Control { progress: None, stop: Some(&stop) };
+    assert_eq!(control.abandonable("test", || 42).unwrap(), 42);
+    let t = std::time::Instant::now();
+    let r = std::thread::scope(|s| {
+        s.spawn(|| {
+            std::thread::sleep(std::time::Duration::from_millis(100));
+            stop.store(true, Ordering::SeqCst);
+        });
+        control.abandonable("test", || std::thread::sleep(std::time::Duration::from_secs(3)))
+    });
+    assert!(matches!(r, Err(EigenError::Canceled)) && t.elapsed() < std::time::Duration::from_secs(2), "{r:?}");
+    stop.store(false, Ordering::SeqCst);
+    let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let _ = control.abandonable("test", || -> u8 { panic!("inside") });
+    }));
+    let message = panicked.unwrap_err().downcast_ref::<&str>().map(|s| s.to_string());
+    assert_eq!(message.as_deref(), Some("inside"));
+}

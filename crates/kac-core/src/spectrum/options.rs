@@ -199,7 +199,9 @@ impl Control<'_> {
         std::thread::Builder::new()
             .name(format!("kac-{name}"))
             .spawn(move || {
-                let _ = tx.send(work());
+                // A panic is carried back to the caller and raised there (where the service's runner catches it
+                // as the job's), not lost with this thread.
+                let _ = tx.send(std::panic::catch_unwind(std::panic::AssertUnwindSafe(work)));
                 THREADS.fetch_sub(1, Ordering::SeqCst);
             })
             .inspect_err(|_| {
@@ -208,7 +210,8 @@ impl Control<'_> {
             .map_err(|e| EigenError::Factorization { message: format!("cannot start the {name} thread: {e}") })?;
         loop {
             match rx.recv_timeout(std::time::Duration::from_millis(50)) {
-                Ok(result) => return Ok(result),
+                Ok(Ok(result)) => return Ok(result),
+                Ok(Err(panic)) => std::panic::resume_unwind(panic),
                 Err(std::sync::mpsc::RecvTimeoutError::Timeout) => self.check()?,
                 Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
                     return Err(EigenError::Factorization { message: format!("the {name} stopped without a result") })
