@@ -297,3 +297,19 @@ fn gradient_and_divergence_as_analyses() {
         refusal(&load(&k4, kac_core::Format::Json), json!({"analysis": "gradient", "function": [0.0, 1.0, 2.0, 3.0]}));
     assert_eq!(e.code(), "not-applicable");
 }
+
+/// The solvers outside the eigensolver check their factor's predicted fill against the limit too: Poisson on a
+/// 2,562-vertex sphere with a limit of 10,000 values (the solution is 2,562 of them; the factor several times
+/// that) is `output-too-large`, before any numeric factorization.
+#[test]
+fn poisson_counts_its_factor_against_the_limit() {
+    let mesh = generate::icosphere(4);
+    let v = validated(&mesh);
+    let z: Vec<f64> = mesh.vertices.iter().map(|p| p[2]).collect();
+    let a: Analysis = serde_json::from_value(json!({"analysis": "poisson", "g": z})).unwrap();
+    let limits = analysis::SolverLimits { max_pairs: 100, max_values: 10_000 };
+    let e = analysis::run(&v, &a, Hooks { limits, ..Default::default() }).unwrap_err();
+    assert_eq!(e.code(), "output-too-large", "{e}");
+    assert!(e.to_string().contains("above the limit of 10000"), "{e}");
+    assert!(analysis::run(&v, &a, Hooks::default()).is_ok());
+}

@@ -75,7 +75,13 @@ impl std::fmt::Display for AnalysisError {
 
 impl From<DescriptorError> for AnalysisError {
     fn from(e: DescriptorError) -> Self {
-        AnalysisError::Descriptor(e)
+        match e {
+            // A limit the service set: the same answer as every other limit checked once the size is known.
+            DescriptorError::TooLarge { .. } => {
+                AnalysisError::TooLarge(format!("{e} (--max-output-values); ask for a coarser mesh or a lower order"))
+            }
+            e => AnalysisError::Descriptor(e),
+        }
     }
 }
 

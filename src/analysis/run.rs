@@ -188,6 +188,8 @@ pub fn shape_dna_of(
     Ok((e, dna, want))
 }
 
+use kac_core::spectrum::factor;
+
 /// Shapes from this many vertices (or with P2 elements) have their analyses without an eigensolve run where a
 /// stop can leave them: their factorizations and assemblies are single calls that do not see the flag.
 pub const WATCHED_FROM_VERTICES: usize = 50_000;
@@ -204,11 +206,14 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
     if hooks.control.stop.is_some() && large && !analysis.solves_eigenpairs() {
         let (owned, a) = (v.clone(), analysis.clone());
         let (threads, limits) = (hooks.threads, hooks.limits);
-        return hooks
-            .control
-            .abandonable("analysis", move || run_here(&owned, &a, Hooks { threads, limits, ..Default::default() }))?;
+        return hooks.control.abandonable("analysis", move || {
+            factor::with_factor_limit(limits.max_values, || {
+                run_here(&owned, &a, Hooks { threads, limits, ..Default::default() })
+            })
+        })?;
     }
-    run_here(v, analysis, hooks)
+    // Every factorization outside the eigensolver checks its predicted fill against the same limit.
+    factor::with_factor_limit(hooks.limits.max_values, || run_here(v, analysis, hooks))
 }
 
 fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {

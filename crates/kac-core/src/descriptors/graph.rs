@@ -5,7 +5,7 @@
 use super::{Basis, DescriptorError};
 use crate::operators::graph_laplacian::{graph_pair, GraphKind};
 use crate::operators::sparse::{submatrix, Pattern, SparsePair};
-use crate::spectrum::factor::{Cholesky, Symbolic};
+use crate::spectrum::factor::Cholesky;
 use faer::Mat;
 use serde::Serialize;
 use std::sync::Arc;
@@ -76,7 +76,7 @@ pub fn spanning_trees(n: usize, edges: &[[u32; 2]], weights: &[f64]) -> Result<T
     let keep: Vec<usize> = (0..n - 1).collect();
     let (pattern, vals) = submatrix(&pair.pattern, &[&pair.stiffness], &keep);
     let pattern = Arc::new(pattern);
-    let sym = Symbolic::analyze(&pattern).map_err(|message| DescriptorError::Solve { message })?;
+    let sym = crate::descriptors::DescriptorError::analyze(&pattern)?;
     let chol =
         Cholesky::factor(&sym, &vals[0], faer::Par::Seq).map_err(|message| DescriptorError::Solve { message })?;
     let log = chol.log_det();

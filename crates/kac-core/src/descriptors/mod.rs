@@ -100,6 +100,11 @@ pub enum DescriptorError {
     NotApplicable { message: String },
     #[error("the linear system could not be solved: {message}")]
     Solve { message: String },
+    #[error(
+        "the factor of the linear system would hold {values} values (the symbolic analysis' fill), above the limit of \
+         {limit}"
+    )]
+    TooLarge { values: usize, limit: usize },
 }
 
 impl DescriptorError {
@@ -109,6 +114,7 @@ impl DescriptorError {
             DescriptorError::TooFewEigenpairs { .. } => "too-few-eigenpairs",
             DescriptorError::NotApplicable { .. } => "not-applicable",
             DescriptorError::Solve { .. } => "solve-failed",
+            DescriptorError::TooLarge { .. } => "output-too-large",
         }
     }
     /// Whether the request was at fault (it cannot succeed as given) rather than the computation.
@@ -116,9 +122,23 @@ impl DescriptorError {
         match self {
             DescriptorError::InvalidParameter { .. }
             | DescriptorError::TooFewEigenpairs { .. }
-            | DescriptorError::NotApplicable { .. } => true,
+            | DescriptorError::NotApplicable { .. }
+            | DescriptorError::TooLarge { .. } => true,
             DescriptorError::Solve { .. } => false,
         }
+    }
+    /// The symbolic analysis of a pattern, refused when its factor would exceed this thread's limit
+    /// ([`crate::spectrum::factor::with_factor_limit`]).
+    pub(crate) fn analyze(
+        pattern: &std::sync::Arc<crate::operators::sparse::Pattern>,
+    ) -> Result<crate::spectrum::factor::Symbolic, DescriptorError> {
+        let sym = crate::spectrum::factor::Symbolic::analyze(pattern)
+            .map_err(|message| DescriptorError::Solve { message })?;
+        let (values, limit) = (sym.inner.len_val(), crate::spectrum::factor::factor_limit());
+        if values > limit {
+            return Err(DescriptorError::TooLarge { values, limit });
+        }
+        Ok(sym)
     }
     pub(crate) fn param(name: &'static str, message: impl Into<String>) -> Self {
         DescriptorError::InvalidParameter { name, message: message.into() }

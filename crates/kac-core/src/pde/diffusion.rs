@@ -25,7 +25,7 @@ pub fn heat_implicit(pair: &SparsePair, u0: &[f64], times: &[f64], steps: usize)
     if steps == 0 {
         return Err(DescriptorError::param("steps", "at least one step"));
     }
-    let sym = Symbolic::analyze(&pair.pattern).map_err(solve_err)?;
+    let sym = crate::descriptors::DescriptorError::analyze(&pair.pattern)?;
     let mut out = Mat::<f64>::zeros(n, times.len());
     let mut mu = vec![0.0; n];
     for (c, &t) in times.iter().enumerate() {

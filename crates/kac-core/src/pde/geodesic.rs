@@ -19,7 +19,7 @@ use crate::geometry::{vec3, TriangleMesh};
 use crate::operators::cotan_laplacian::{cotan_pair, face_lengths};
 use crate::operators::sparse::matvec;
 use crate::operators::Mass;
-use crate::spectrum::factor::{Cholesky, Symbolic};
+use crate::spectrum::factor::Cholesky;
 use faer::{Mat, Par};
 use serde::{Deserialize, Serialize};
 
@@ -99,7 +99,7 @@ pub fn heat_method(
     let t = opts.time_factor * h * h;
     let pair = cotan_pair(n, f, |i| face_lengths(v, &f[i]), Mass::Lumped)
         .map_err(|e| DescriptorError::NotApplicable { message: e.to_string() })?;
-    let sym = Symbolic::analyze(&pair.pattern).map_err(solve_err)?;
+    let sym = crate::descriptors::DescriptorError::analyze(&pair.pattern)?;
     // 1. heat
     let k: Vec<f64> = pair.mass.iter().zip(&pair.stiffness).map(|(m, l)| m + t * l).collect();
     let chol = Cholesky::factor(&sym, &k, Par::Seq).map_err(solve_err)?;

@@ -24,7 +24,7 @@ pub mod geodesic;
 
 use crate::descriptors::{graph::components, m_project, Basis, DescriptorError};
 use crate::operators::sparse::{matvec, submatrix, Pattern, SparsePair};
-use crate::spectrum::factor::{Cholesky, Symbolic};
+use crate::spectrum::factor::Cholesky;
 use faer::{Mat, MatRef, Par};
 use serde::Serialize;
 use std::sync::Arc;
@@ -56,7 +56,7 @@ pub fn solve_spd(
     let n = pattern.n;
     let c = rhs.ncols();
     let Some((mask, g)) = fixed.filter(|(m, _)| m.iter().any(|&x| x)) else {
-        let sym = Symbolic::analyze(pattern).map_err(solve_err)?;
+        let sym = crate::descriptors::DescriptorError::analyze(pattern)?;
         let chol = Cholesky::factor(&sym, values, Par::Seq).map_err(solve_err)?;
         let mut x = rhs.to_owned();
         chol.solve_in_place(x.as_mut(), Par::Seq);
@@ -89,7 +89,7 @@ pub fn solve_spd(
     }
     let (sub, vals) = submatrix(pattern, &[values], &free);
     let sub = Arc::new(sub);
-    let sym = Symbolic::analyze(&sub).map_err(solve_err)?;
+    let sym = crate::descriptors::DescriptorError::analyze(&sub)?;
     let chol = Cholesky::factor(&sym, &vals[0], Par::Seq).map_err(solve_err)?;
     chol.solve_in_place(b.as_mut(), Par::Seq);
     for (k, &i) in free.iter().enumerate() {

@@ -21,6 +21,26 @@ use super::numeric::{self, FactorError};
 /// latency).
 pub const PIECES_FROM: usize = 8_000_000;
 
+thread_local! {
+    /// The most values a factor may hold on this thread (see [`with_factor_limit`]).
+    static FACTOR_LIMIT: std::cell::Cell<usize> = const { std::cell::Cell::new(usize::MAX) };
+}
+
+/// Runs `f` with a limit on the values of every factor the solvers of this thread make outside the eigensolver
+/// (which takes its own, [`super::EigenOptions::max_factor_values`]): Poisson, diffusion, geodesics, smoothing and
+/// interpolation check the symbolic analysis' fill against it before any numeric factorization.
+pub fn with_factor_limit<T>(limit: usize, f: impl FnOnce() -> T) -> T {
+    let old = FACTOR_LIMIT.with(|l| l.replace(limit));
+    let out = f();
+    FACTOR_LIMIT.with(|l| l.set(old));
+    out
+}
+
+/// The limit [`with_factor_limit`] set on this thread (no limit outside it).
+pub fn factor_limit() -> usize {
+    FACTOR_LIMIT.with(|l| l.get())
+}
+
 /// The symbolic analysis of a pattern, shareable across shifts and masses.
 #[derive(Debug, Clone)]
 pub struct Symbolic {
