@@ -7,10 +7,10 @@ use super::error::ApiError;
 use super::AppState;
 use crate::analysis::Analysis;
 
-pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
-    a.check_options().map_err(ApiError::Analysis)?;
-    // Every analysis says whether it asks for eigenpairs, and how many (no default arm: a new one must say).
-    let asked = match a {
+/// The eigenpairs an analysis asks for, by the name of the field that asks (no default arm: a new analysis must
+/// say whether it asks for any).
+fn asked(a: &Analysis) -> Option<(&'static str, usize)> {
+    match a {
         Analysis::Spectrum { k, .. }
         | Analysis::Hks { k, .. }
         | Analysis::SiHks { k, .. }
@@ -33,7 +33,18 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         | Analysis::DirichletEnergy { .. }
         | Analysis::Smooth { .. }
         | Analysis::Interpolate { .. } => None,
-    };
+    }
+}
+
+/// The eigenpairs an analysis asks the sparse solver for, where it asks for any (an embedding of d dimensions
+/// needs d + 1, the first being the constant).
+fn eigenpairs(a: &Analysis) -> Option<usize> {
+    asked(a).map(|(what, k)| if what == "dimensions" { k + 1 } else { k })
+}
+
+pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
+    a.check_options().map_err(ApiError::Analysis)?;
+    let asked = asked(a);
     // Solver settings no solve could honour (a tolerance below double precision, a shift at 0 or ±1e308, a block
     // or subspace out of range) are refused here, naming the setting, rather than holding a worker until its
     // timeout or reaching an assertion of a dependency.
@@ -55,25 +66,6 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
         });
     }
     Ok(())
-}
-
-/// The eigenpairs an analysis asks the sparse solver for, where it asks for any.
-fn eigenpairs(a: &Analysis) -> Option<usize> {
-    match a {
-        Analysis::Spectrum { k, .. }
-        | Analysis::Hks { k, .. }
-        | Analysis::SiHks { k, .. }
-        | Analysis::Wks { k, .. }
-        | Analysis::Gps { k, .. }
-        | Analysis::Heat { k, .. }
-        | Analysis::HeatCurvature { k, .. }
-        | Analysis::Wave { k, .. }
-        | Analysis::Schrodinger { k, .. } => Some(*k),
-        Analysis::Diffuse { k, method, .. } => (*method == crate::analysis::HeatMethod::Spectral).then_some(*k),
-        Analysis::ShapeDna { options, .. } => Some(options.k),
-        Analysis::Embed { dimensions, .. } => Some(dimensions + 1),
-        _ => None,
-    }
 }
 
 /// The unknowns an analysis' operator will have, at most: the vertices, or with quadratic elements the vertices
