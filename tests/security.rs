@@ -618,3 +618,32 @@ fn mutated_shared_meshes_and_extreme_parameters_never_get_a_server_error() {
         jobs.len()
     );
 }
+
+/// A body's memory reservation ends with the body: a synchronous analysis that waits for its job after its upload
+/// was read holds none of the budget, so another upload of the same size goes through meanwhile.
+#[test]
+fn a_read_body_no_longer_holds_the_budget() {
+    let body = off(4);
+    let (limit, budget) = (body.len() + 1000, body.len() + 1000 + body.len() / 2);
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(
+        &root.path().join("data"),
+        &[
+            "--max-body-bytes",
+            &limit.to_string(),
+            "--max-body-memory-bytes",
+            &budget.to_string(),
+            "--test-job-delay-ms",
+            "3000",
+        ],
+    );
+    let url = s.url("/v1/analyze?format=off&wait=10&analysis=%7B%22analysis%22%3A%22spectrum%22%2C%22k%22%3A3%7D");
+    let waiting = std::thread::spawn({
+        let body = body.clone();
+        move || reply(agent().post(&url).send_bytes(&body)).status
+    });
+    std::thread::sleep(Duration::from_millis(1000));
+    let second = upload(&s, &body, "?format=off");
+    assert!(second.status == 200 || second.status == 201, "{} {}", second.status, second.body);
+    assert_eq!(waiting.join().unwrap(), 200);
+}

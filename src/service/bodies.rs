@@ -107,34 +107,40 @@ pub async fn guard(State(st): State<AppState>, req: Request, next: Next) -> Resu
     let floor = st.config.min_body_rate_bytes_per_s as f64;
     let grace = Duration::from_secs_f64(st.config.body_read_timeout_s);
     let (parts, body) = req.into_parts();
-    let body = if floor > 0.0 { rate_floor(body, floor, grace) } else { body };
-    let resp = next.run(Request::from_parts(parts, body)).await;
-    // The reservation lasts while the handler runs (it holds the body's bytes until then).
-    drop(permit);
-    Ok(resp)
+    // The reservation lasts while the body is being received, and is released when it ends (complete, failed,
+    // cut off, or dropped unread): a handler that then waits (a synchronous analysis' `wait`) holds none of it.
+    let body = guarded(body, floor, grace, permit);
+    Ok(next.run(Request::from_parts(parts, body)).await)
 }
 
-/// The body as a stream that fails with [`TooSlow`] when, `grace` after it began, fewer than `floor` bytes per
-/// second of the time since have arrived.
-fn rate_floor(body: Body, floor: f64, grace: Duration) -> Body {
+/// The body as a stream that holds the memory reservation `permit` until it ends, and (with a `floor` above 0)
+/// fails with [`TooSlow`] when, `grace` after it began, fewer than `floor` bytes per second of the time since have
+/// arrived.
+fn guarded(body: Body, floor: f64, grace: Duration, permit: tokio::sync::OwnedSemaphorePermit) -> Body {
     let start = tokio::time::Instant::now();
     let stream = body.into_data_stream();
-    let s = futures_util::stream::unfold((stream, 0u64, false), move |(mut stream, received, done)| async move {
-        if done {
-            return None;
-        }
-        // The moment by which more than `received` bytes must have come.
-        let due = start + grace + Duration::from_secs_f64(received as f64 / floor);
-        match tokio::time::timeout_at(due, stream.next()).await {
+    let state = (stream, 0u64, Some(permit));
+    let s = futures_util::stream::unfold(state, move |(mut stream, received, permit)| async move {
+        // Ended: the permit is gone with the state.
+        permit.as_ref()?;
+        // The moment by which more than `received` bytes must have come (none without a floor).
+        let next = stream.next();
+        let got = if floor > 0.0 {
+            let due = start + grace + Duration::from_secs_f64(received as f64 / floor);
+            tokio::time::timeout_at(due, next).await
+        } else {
+            Ok(next.await)
+        };
+        match got {
             Ok(Some(Ok(chunk))) => {
                 let n = received + chunk.len() as u64;
-                Some((Ok(chunk), (stream, n, false)))
+                Some((Ok(chunk), (stream, n, permit)))
             }
-            Ok(Some(Err(e))) => Some((Err(axum::BoxError::from(e)), (stream, received, true))),
+            Ok(Some(Err(e))) => Some((Err(axum::BoxError::from(e)), (stream, received, None))),
             Ok(None) => None,
             Err(_) => {
                 let seconds = Instant::now().duration_since(start.into_std()).as_secs_f64();
-                Some((Err(axum::BoxError::from(TooSlow { received, seconds, floor })), (stream, received, true)))
+                Some((Err(axum::BoxError::from(TooSlow { received, seconds, floor })), (stream, received, None)))
             }
         }
     });

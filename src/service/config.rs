@@ -58,8 +58,9 @@ pub struct Config {
     #[arg(long, env = "KAC_MAX_BODY_MEMORY_BYTES", default_value_t = 1024 * 1024 * 1024, value_parser = at_least_one)]
     pub max_body_memory_bytes: usize,
     /// Slowest a request body may arrive, in bytes per second, once --body-read-timeout-s has passed since it
-    /// began (0: no floor); a slower body gets 408 `body-timeout` and its connection is freed.
-    #[arg(long, env = "KAC_MIN_BODY_RATE_BYTES_PER_S", default_value_t = 1024)]
+    /// began (0: no floor); a slower body gets 408 `body-timeout` and its connection is freed. With the default,
+    /// the largest body allowed holds its reservation for at most about an hour.
+    #[arg(long, env = "KAC_MIN_BODY_RATE_BYTES_PER_S", default_value_t = 65536)]
     pub min_body_rate_bytes_per_s: u64,
     /// Connections served at once; one more is answered 503 `too-many-connections` and closed.
     #[arg(long, env = "KAC_MAX_CONNECTIONS", default_value_t = 1024, value_parser = at_least_one)]
