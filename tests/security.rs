@@ -375,12 +375,7 @@ fn the_default_krylov_basis_counts_against_the_output_limit() {
 fn the_smaller_items_of_the_issue() {
     let root = tempfile::tempdir().unwrap();
     let log = root.path().join("stderr.log");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_kac"))
-        .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
-        .arg(root.path().join("data"))
-        .args(["--lease-s", "0.6"])
-        .env("RUST_LOG", "warn")
-        .stdout(std::process::Stdio::piped())
+    let mut child = server::serve(&root.path().join("data"), &["--lease-s", "0.6"])
         .stderr(std::fs::File::create(&log).unwrap())
         .spawn()
         .unwrap();

@@ -78,7 +78,7 @@ pub(crate) fn run(
             let v0 = velocity.as_ref().map(|f| input_function(v, &e.operator, f, "velocity")).transpose()?;
             let basis = basis_of(&e, *k);
             let (u, dropped) = pde::wave(&basis, &e.operator.pair, &u0, v0.as_deref(), times)?;
-            let energy = pde::wave_energy(&basis, &e.operator.pair, &u0, v0.as_deref(), times)?;
+            let energy = pde::wave_energy(&basis, &e.operator.pair, u.as_ref(), (&u0, v0.as_deref()), times)?;
             let e0 = energy.first().copied().unwrap_or(0.0);
             let drift = energy.iter().map(|x| (x - e0).abs()).fold(0.0, f64::max) / e0.abs().max(f64::MIN_POSITIVE);
             let mut a = to_input_rows(v, &e.operator, u.as_ref(), "wave");

@@ -28,10 +28,6 @@ impl BodyBudget {
         let kib = bytes.div_ceil(1024).clamp(1, Semaphore::MAX_PERMITS.min(u32::MAX as usize));
         BodyBudget { permits: Arc::new(Semaphore::new(kib)), bytes }
     }
-    /// KiB of the budget still free.
-    pub fn free_bytes(&self) -> usize {
-        self.permits.available_permits() * 1024
-    }
 }
 
 /// A body arrived too slowly: below the rate floor once the grace period was over.

@@ -17,18 +17,21 @@ pub struct Server {
     pub addr: String,
 }
 
+/// `kac serve` on a free loopback port and `data_dir` with `extra` flags, its standard output piped.
+pub fn serve(data_dir: &Path, extra: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_kac"));
+    c.args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
+        .arg(data_dir)
+        .args(extra)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped());
+    c
+}
+
 impl Server {
     /// Starts `kac serve` on `data_dir` with `extra` flags; panics if it does not print its address.
     pub fn start(data_dir: &Path, extra: &[&str]) -> Server {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_kac"))
-            .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
-            .arg(data_dir)
-            .args(extra)
-            .env("RUST_LOG", "warn")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap();
+        let mut child = serve(data_dir, extra).stderr(Stdio::inherit()).spawn().unwrap();
         let mut line = String::new();
         BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
         let v: Value = serde_json::from_str(&line).unwrap_or_else(|_| panic!("first line: {line}"));
@@ -59,15 +62,7 @@ impl Drop for Server {
 
 /// What a `kac serve` that refuses to start printed: its exit status and its standard error, within `timeout`.
 pub fn refused_start(data_dir: &Path, extra: &[&str], timeout: Duration) -> (Option<i32>, String, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_kac"))
-        .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
-        .arg(data_dir)
-        .args(extra)
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = serve(data_dir, extra).stderr(Stdio::piped()).spawn().unwrap();
     let t = std::time::Instant::now();
     loop {
         if let Some(status) = child.try_wait().unwrap() {

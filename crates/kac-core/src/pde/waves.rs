@@ -36,16 +36,19 @@ pub fn wave(
     Ok((phi * w.as_ref(), dropped))
 }
 
-/// The discrete energy of the wave of [`wave`] at each time, E(t) = ½(u̇ᵀM u̇ + uᵀL u), computed from the vertex
-/// values of u(t) and u̇(t) (so that its conservation, exact for the modal solution, is checked to rounding).
+/// The discrete energy of the wave `u` that [`wave`] returned for these inputs, at each time,
+/// E(t) = ½(u̇ᵀM u̇ + uᵀL u), computed from the vertex values of u(t) and u̇(t) (so that its conservation, exact for
+/// the modal solution, is checked to rounding).
 pub fn wave_energy(
     basis: &Basis<'_>,
     pair: &SparsePair,
-    u0: &[f64],
-    v0: Option<&[f64]>,
+    u: MatRef<'_, f64>,
+    (u0, v0): (&[f64], Option<&[f64]>),
     times: &[f64],
 ) -> Result<Vec<f64>, DescriptorError> {
-    let (u, _) = wave(basis, pair, u0, v0, times)?;
+    if u.nrows() != basis.n() || u.ncols() != times.len() {
+        return Err(DescriptorError::param("u", "the wave of these times on this basis"));
+    }
     let (a, _) = m_project(basis, pair, u0);
     let b = v0.map(|v| m_project(basis, pair, v).0).unwrap_or_else(|| vec![0.0; basis.k()]);
     // u̇(t) in the basis: the derivative of each mode.
