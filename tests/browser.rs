@@ -161,6 +161,11 @@ async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() 
     assert!(drawn(&shape) > shape.len() / 50, "the mesh is drawn: {} of {} pixels", drawn(&shape), shape.len());
     let report = js(&c, "return document.getElementById('report').textContent").await;
     assert!(report.as_str().unwrap().contains("vertices"), "the validation report is shown: {report}");
+    // The form offers what the truth table allows on a triangle mesh: every analysis applies to it.
+    until(&c, "document.getElementById('report').dataset.class === 'triangle_mesh'", "the shape's class").await;
+    let disabled =
+        js(&c, "return [...document.getElementById('analysis').options].filter(o => o.disabled).length").await;
+    assert_eq!(disabled, json!(0), "no analysis is refused on a triangle mesh");
 
     // A spectrum with its eigenvectors, from the form.
     js(&c, "document.getElementById('analysis').value = 'spectrum'; document.getElementById('analysis').dispatchEvent(new Event('change')); return 0").await;
@@ -235,5 +240,22 @@ async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() 
     let again = canvas(&c, "7-link").await;
     assert!(drawn(&again) > again.len() / 50);
     no_errors(&c, "link").await;
+
+    // A polyline: the form disables what the truth table refuses on it, with the reason as the tooltip.
+    let segment = dir.path().join("segment.json");
+    let polyline = kac_core::Shape::Polyline(kac_core::geometry::generate::segment(32, 1.0));
+    std::fs::write(&segment, serde_json::to_vec(&kac_core::io::write::json(&polyline)).unwrap()).unwrap();
+    c.find(Locator::Id("file")).await.unwrap().send_keys(segment.to_str().unwrap()).await.unwrap();
+    until(&c, "document.getElementById('report').dataset.class === 'polyline'", "the polyline's class").await;
+    let geodesic = js(
+        &c,
+        "const o = [...document.getElementById('analysis').options].find(o => o.value === 'geodesic'); return [o.disabled, o.title]",
+    )
+    .await;
+    assert_eq!(geodesic[0], json!(true), "geodesic is not offered on a polyline: {geodesic}");
+    assert!(geodesic[1].as_str().unwrap().contains("triangle mesh"), "the reason names what works: {geodesic}");
+    let offered = js(&c, "return document.getElementById('analysis').selectedOptions[0].disabled").await;
+    assert_eq!(offered, json!(false), "the selected analysis applies");
+    no_errors(&c, "polyline").await;
     c.close().await.unwrap();
 }

@@ -372,8 +372,8 @@ fn every_class_of_bad_input_gets_its_problem() {
     .unwrap();
     let gid = upload(&s, &g, "?format=json").body["id"].as_str().unwrap().to_string();
     let j = submit(&s, json!({ "shape_id": gid, "analysis": "geodesic", "sources": [0] }));
-    assert_problem(&j, 422, "not-applicable");
-    assert!(j.body["detail"].as_str().unwrap().contains("triangle_mesh"), "{}", j.body);
+    assert_problem(&j, 422, "unsupported");
+    assert!(j.body["detail"].as_str().unwrap().contains("triangle mesh"), "{}", j.body);
     // Every problem type is documented.
     let doc = reply(agent().get(&s.url("/problems/queue-full")).call());
     assert_eq!(doc.status, 200);

@@ -82,11 +82,11 @@ fn heat_curvature_off_a_surface_mesh_is_refused() {
     let graph_json =
         serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(generate::petersen_graph()))).unwrap();
     let graph = load(&graph_json, kac_core::Format::Json);
-    for (v, kind) in [(&cloud, "point_cloud"), (&graph, "graph")] {
+    for (v, kind) in [(&cloud, "point cloud in R³"), (&graph, "graph")] {
         let e = refusal(v, json!({"analysis": "heat-curvature", "k": 8}));
-        assert_eq!(e.code(), "not-applicable", "{e}");
+        assert_eq!(e.code(), "unsupported", "{e}");
         let m = e.to_string();
-        assert!(m.contains("heat-curvature") && m.contains(kind) && m.contains("triangle_mesh"), "{m}");
+        assert!(m.contains("heat-curvature") && m.contains(kind) && m.contains("triangle mesh"), "{m}");
     }
     // On the surface itself it is computed, and near 1 on the unit sphere.
     let out = run(&validated(&sphere), json!({"analysis": "heat-curvature", "k": 100}));
@@ -295,7 +295,7 @@ fn gradient_and_divergence_as_analyses() {
         serde_json::to_vec(&kac_core::io::write::json(&kac_core::Shape::Graph(generate::complete_graph(4)))).unwrap();
     let e =
         refusal(&load(&k4, kac_core::Format::Json), json!({"analysis": "gradient", "function": [0.0, 1.0, 2.0, 3.0]}));
-    assert_eq!(e.code(), "not-applicable");
+    assert_eq!(e.code(), "unsupported");
 }
 
 /// The solvers outside the eigensolver check their factor's predicted fill against the limit too: Poisson on a

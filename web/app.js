@@ -152,6 +152,27 @@ async function upload(file) {
   });
 }
 
+// The truth table for the selected shape (GET /v1/analyses?shape_id=): analyses that do not apply to its class
+// are disabled in the form, with the reason as their tooltip; the first that applies is selected.
+async function markApplicable(id) {
+  const table = await api('GET', `/v1/analyses?shape_id=${encodeURIComponent(id)}`);
+  const rows = Object.fromEntries(table.analyses.map((a) => [a.name, a]));
+  for (const o of $('analysis').options) {
+    const row = rows[o.value];
+    o.disabled = row ? !row.applies : false;
+    o.title = row && !row.applies ? row.reason : row ? row.summary : '';
+  }
+  const sel = $('analysis');
+  if (sel.selectedOptions[0]?.disabled) {
+    const first = [...sel.options].find((o) => !o.disabled);
+    if (first) {
+      sel.value = first.value;
+      renderForm(first.value);
+    }
+  }
+  $('report').dataset.class = table.class || '';
+}
+
 async function selectShape(id) {
   await guarded(async () => {
     const s = await api('GET', `/v1/shapes/${encodeURIComponent(id)}`);
@@ -173,6 +194,7 @@ async function selectShape(id) {
       (r.report?.repairs || []).length ? `repairs: ${r.report.repairs.map((x) => `${x.code} ×${x.count}`).join(', ')}` : 'no repairs',
     ].filter(Boolean);
     $('report').replaceChildren(...facts.map((f) => Object.assign(document.createElement('div'), { textContent: f })));
+    await markApplicable(id);
     const g = parseGeometry(await api('GET', `/v1/shapes/${encodeURIComponent(id)}/geometry`));
     state.geometry = g;
     viewer.setGeometry(g);

@@ -12,6 +12,9 @@ pub enum AnalysisError {
     InvalidK(String),
     /// The analysis does not apply to this kind of shape (`not-applicable`).
     NotApplicable(String),
+    /// The truth table refuses this cell: analysis × shape class × boundary condition × order × extrapolation
+    /// (`unsupported`; see [`super::registry`]).
+    Unsupported(String),
     /// The request would make the solver hold more than a limit allows (`output-too-large`).
     TooLarge(String),
     Operator(operators::OperatorError),
@@ -35,6 +38,7 @@ impl AnalysisError {
             AnalysisError::InvalidParameter(_) => "invalid-parameter",
             AnalysisError::InvalidK(_) => "invalid-k",
             AnalysisError::NotApplicable(_) => "not-applicable",
+            AnalysisError::Unsupported(_) => "unsupported",
             AnalysisError::TooLarge(_) => "output-too-large",
             AnalysisError::Operator(e) => e.code(),
             AnalysisError::Eigen(e) => e.code(),
@@ -47,6 +51,7 @@ impl AnalysisError {
             AnalysisError::InvalidParameter(_)
             | AnalysisError::InvalidK(_)
             | AnalysisError::NotApplicable(_)
+            | AnalysisError::Unsupported(_)
             | AnalysisError::TooLarge(_) => true,
             AnalysisError::Operator(e) => e.caller_fault(),
             AnalysisError::Eigen(e) => e.caller_fault(),
@@ -65,6 +70,7 @@ impl std::fmt::Display for AnalysisError {
             AnalysisError::InvalidParameter(m)
             | AnalysisError::InvalidK(m)
             | AnalysisError::NotApplicable(m)
+            | AnalysisError::Unsupported(m)
             | AnalysisError::TooLarge(m) => f.write_str(m),
             AnalysisError::Operator(e) => e.fmt(f),
             AnalysisError::Eigen(e) => e.fmt(f),

@@ -27,6 +27,7 @@ mod error;
 mod extrapolate;
 mod operator;
 mod output;
+pub mod registry;
 mod request;
 mod rows;
 mod run;

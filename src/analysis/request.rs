@@ -609,50 +609,6 @@ impl Analysis {
         }
     }
 
-    /// Where the analysis has a meaning: the kinds of shape it applies to, checked at submission (the service)
-    /// and before a run (the CLI), so that an analysis asked where it has no meaning is refused (422
-    /// `not-applicable`, naming the analysis, the kind and what it applies to), never computed.
-    pub fn applicable(&self, shape: &kac_core::Shape) -> Result<(), AnalysisError> {
-        use kac_core::ShapeKind::{Graph, Polyline, TetMesh, TriangleMesh};
-        let kind = shape.kind();
-        let only = |kinds: &[kac_core::ShapeKind], why: &str| -> Result<(), AnalysisError> {
-            if kinds.contains(&kind) {
-                return Ok(());
-            }
-            let names: Vec<&str> = kinds.iter().map(|k| k.as_str()).collect();
-            Err(AnalysisError::not_applicable(format!(
-                "{} applies to {}, not a {}: {why}",
-                self.name(),
-                names.join(" and "),
-                kind.as_str()
-            )))
-        };
-        match self {
-            Analysis::MeanCurvature {} => {
-                only(&[TriangleMesh], "H is read from the cotan Laplacian of a surface's coordinates")
-            }
-            Analysis::HeatCurvature { .. } => only(
-                &[TriangleMesh],
-                "the expansion 4πt·k_t(x,x) = 1 + tK/3 + O(t²) holds on surfaces; a graph or a curve has no \
-                 Gaussian curvature, a tet mesh's kernel has a solid's expansion, and a point cloud's operator \
-                 smooths at its own kernel time, which biases every time the window can use (the unit sphere's \
-                 vertices as a cloud gave K = 1.71 for 1)",
-            ),
-            Analysis::Geodesic { .. } => only(&[TriangleMesh], "the heat method takes gradients on triangles"),
-            Analysis::Gradient { .. } | Analysis::Divergence { .. } => {
-                only(&[TriangleMesh, TetMesh], "P1 gradients live on a mesh's triangles or tetrahedra")
-            }
-            Analysis::Trees {} => {
-                only(&[TriangleMesh, TetMesh, Graph, Polyline], "spanning trees are counted on a graph's edges")
-            }
-            Analysis::Spectrum { extrapolate: true, .. } => only(
-                &[TriangleMesh, TetMesh],
-                "extrapolation refines the mesh's elements (flat triangle meshes and tet meshes)",
-            ),
-            _ => Ok(()),
-        }
-    }
-
     /// Options that only mean something together: `refinements` and `grading` with `extrapolate`, which takes
     /// the k smallest pairs (not a `band`) on 1 to 3 refinements. Checked at submission and again before a run,
     /// so that no option is silently ignored.

@@ -56,6 +56,29 @@ pub(crate) fn to_operator_rows(op: &Operator, list: &[usize]) -> Result<Vec<usiz
     }
 }
 
+/// Values given at validated vertices → `(operator row, value)` pairs. With P2 elements an edge unknown whose two
+/// ends are both given gets their mean (the straight edge's interpolant: exact for linear data, O(h²) otherwise),
+/// so that a condition given at vertices holds along the edges between them rather than only at their ends.
+pub(crate) fn fixed_rows(op: &Operator, fixed: &[(usize, f64)]) -> Result<Vec<(usize, f64)>, AnalysisError> {
+    let mut unknowns: Vec<(usize, f64)> = fixed.to_vec();
+    if let Some(edges) = &op.edge_unknowns {
+        let mut given = vec![None; op.full_size];
+        for &(i, x) in fixed {
+            if let Some(slot) = given.get_mut(i) {
+                *slot = Some(x);
+            }
+        }
+        for (e, [a, b]) in edges.iter().enumerate() {
+            if let (Some(x), Some(y)) = (given[*a as usize], given[*b as usize]) {
+                unknowns.push((op.full_size + e, 0.5 * (x + y)));
+            }
+        }
+    }
+    let ids: Vec<usize> = unknowns.iter().map(|u| u.0).collect();
+    let rows = to_operator_rows(op, &ids)?;
+    Ok(rows.into_iter().zip(unknowns.into_iter().map(|u| u.1)).collect())
+}
+
 /// A per-vertex function in the input numbering → the validated numbering (welded vertices: the first value).
 pub(crate) fn from_input_rows(v: &Validated, f: &[f64], what: &str) -> Result<Vec<f64>, AnalysisError> {
     if f.len() != v.vertex_map.len() {

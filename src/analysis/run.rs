@@ -196,7 +196,7 @@ pub const WATCHED_FROM_VERTICES: usize = 50_000;
 
 /// Runs an analysis on a validated shape.
 pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
-    analysis.applicable(&v.shape)?;
+    analysis.supported(&v.shape)?;
     // The analyses that solve no eigenproblem (Poisson, implicit heat and diffusion, geodesics, smoothing,
     // interpolation, the operator, curvature, gradient, ...) factor and assemble in calls a stop flag cannot reach
     // inside: on a large shape they run on a thread the caller can leave at once (`Control::abandonable`); the
@@ -500,8 +500,8 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
             match (values.is_empty(), labels.is_empty()) {
                 (false, true) => {
                     let idx = map_vertices(v, &values.iter().map(|x| x.0).collect::<Vec<_>>(), "values")?;
-                    let idx = to_operator_rows(&op, &idx)?;
-                    let known: Vec<(usize, f64)> = idx.into_iter().zip(values.iter().map(|x| x.1)).collect();
+                    let given: Vec<(usize, f64)> = idx.into_iter().zip(values.iter().map(|x| x.1)).collect();
+                    let known = fixed_rows(&op, &given)?;
                     let u = pde::harmonic(&op.pair, &known)?;
                     let um = faer::Mat::from_fn(u.len(), 1, |i, _| u[i]);
                     let a = to_input_rows(v, &op, um.as_ref(), "interpolated");

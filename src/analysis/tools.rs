@@ -114,8 +114,8 @@ pub(crate) fn run(
             let fixed = match dirichlet_values {
                 Some(list) => {
                     let ids: Vec<u32> = list.iter().map(|p| p.0).collect();
-                    let rows = to_operator_rows(&op, &map_vertices(v, &ids, "dirichlet_values")?)?;
-                    Some(rows.into_iter().zip(list.iter().map(|p| p.1)).collect::<Vec<_>>())
+                    let vertices = map_vertices(v, &ids, "dirichlet_values")?;
+                    Some(fixed_rows(&op, &vertices.into_iter().zip(list.iter().map(|p| p.1)).collect::<Vec<_>>())?)
                 }
                 None => None,
             };

@@ -70,6 +70,13 @@ enum Command {
     Serve(crate::service::config::Config),
     /// Print the OpenAPI document.
     Openapi,
+    /// Print the truth table of analyses: where each is valid (shape classes, boundary conditions, order 2,
+    /// extrapolation); every other combination is refused (`unsupported`).
+    Analyses {
+        /// As the README's Markdown table (default: JSON, as GET /v1/analyses).
+        #[arg(long)]
+        markdown: bool,
+    },
 }
 
 impl From<crate::analysis::AnalysisError> for Failure {
@@ -167,6 +174,15 @@ pub fn run() -> i32 {
         Command::Serve(c) => crate::service::serve(c).map_err(|message| Failure { code: 1, message }),
         Command::Openapi => {
             println!("{}", crate::service::openapi::document());
+            Ok(())
+        }
+        Command::Analyses { markdown: true } => {
+            print!("{}", crate::analysis::registry::markdown_table());
+            Ok(())
+        }
+        Command::Analyses { markdown: false } => {
+            let table = serde_json::to_string_pretty(&crate::analysis::registry::table(None)).unwrap_or_default();
+            println!("{table}");
             Ok(())
         }
     };

@@ -401,6 +401,11 @@ pub const CODES: &[(&str, &str)] = &[
     ("invalid-parameter", "A descriptor or operator parameter is out of range."),
     ("too-few-eigenpairs", "The descriptor needs more eigenpairs than were requested."),
     ("not-applicable", "The analysis does not apply to this kind of shape."),
+    (
+        "unsupported",
+        "The truth table of analyses refuses this combination of analysis, shape class, boundary condition, \
+         order and extrapolation (GET /v1/analyses lists what is supported).",
+    ),
     ("solve-failed", "A linear system could not be solved."),
     ("operator-not-applicable", "The operator does not apply to this kind of shape."),
     ("mass-not-applicable", "The mass matrix does not apply to this operator."),
@@ -439,6 +444,7 @@ mod tests {
             AnalysisError::invalid_parameter("m"),
             AnalysisError::invalid_k("m"),
             AnalysisError::not_applicable("m"),
+            AnalysisError::Unsupported("m".into()),
             AnalysisError::TooLarge("m".into()),
             AnalysisError::Operator(OperatorError::NotApplicable { operator: "cotan", kind: "graph" }),
             AnalysisError::Operator(OperatorError::MassNotApplicable { operator: "graph", mass: "lumped" }),

@@ -299,7 +299,7 @@ impl Watch {
 
 /// Submits a job, or returns the existing one for the same request (true: newly enqueued).
 pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(JobView, bool), ApiError> {
-    analysis.applicable(&shape.validated.shape).map_err(ApiError::Analysis)?;
+    analysis.supported(&shape.validated.shape).map_err(ApiError::Analysis)?;
     super::limits::check_limits(state, &analysis)?;
     super::limits::check_work(state, &analysis, super::limits::unknowns(&analysis, &shape.validated.shape))?;
     let canonical = serde_json::to_value(&analysis).map_err(|e| ApiError::Internal { detail: e.to_string() })?;

@@ -4,6 +4,7 @@
 
 mod analyses;
 mod health;
+mod registry;
 mod results;
 mod retrieval;
 mod shapes;
@@ -11,6 +12,7 @@ mod viewer;
 
 pub(crate) use analyses::*;
 pub(crate) use health::*;
+pub(crate) use registry::*;
 pub(crate) use results::*;
 pub(crate) use retrieval::*;
 pub(crate) use shapes::*;
@@ -56,6 +58,7 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/results/{id}", get(get_result))
         .route("/v1/results/{id}/arrays/{file}", get(get_array))
         .route("/v1/analyze", post(analyze))
+        .route("/v1/analyses", get(list_analyses))
         .route("/v1/compare", post(compare))
         .route("/v1/search", post(search))
         .route("/problems/{code}", get(problem_doc))
