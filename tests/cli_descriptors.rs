@@ -190,3 +190,47 @@ fn interpolation_and_clamped_smoothing_keep_linear_functions_on_a_flat_square() 
     let out = kac().args(["interpolate", q, "--values", "0:1", "--labels", "1:2"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// `kac gradient` and `kac divergence` as a user chains them: the gradient of a linear function is exact on
+/// every triangle, written as .npy, and its divergence is zero at interior vertices (Δ of a linear function); both
+/// refuse a graph (`unsupported`, exit status 2).
+#[test]
+fn gradient_then_divergence_on_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let sq = generate(dir.path(), "square", &["--n", "8"], "sq.off");
+    let text = std::fs::read_to_string(&sq).unwrap();
+    let xy: Vec<[f64; 2]> = text
+        .lines()
+        .skip(2)
+        .take(81)
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1]]
+        })
+        .collect();
+    let u: Vec<f64> = xy.iter().map(|p| p[0] + 2.0 * p[1]).collect();
+    let u_npy = dir.path().join("u.npy");
+    std::fs::write(&u_npy, kac_core::io::npy::encode_f64(u.len(), 1, &u)).unwrap();
+    let g_npy = dir.path().join("g.npy");
+    let sq = sq.to_str().unwrap();
+    let g = run_json(&["gradient", sq, "--function", u_npy.to_str().unwrap(), "--out", g_npy.to_str().unwrap()]);
+    assert_eq!(g["analysis"], "gradient");
+    let (rows, cols, data) = kac_core::io::npy::decode_f64(&std::fs::read(&g_npy).unwrap()).unwrap();
+    assert_eq!((rows, cols), (128, 3));
+    for r in 0..rows {
+        let e = (data[3 * r] - 1.0).abs() + (data[3 * r + 1] - 2.0).abs() + data[3 * r + 2].abs();
+        assert!(e < 1e-12, "element {r}: {:?}", &data[3 * r..3 * r + 3]);
+    }
+    let d = run_json(&["divergence", sq, "--field", g_npy.to_str().unwrap()]);
+    let integrated = column(&d, "divergence", 0);
+    for (i, p) in xy.iter().enumerate() {
+        if p[0] > 0.0 && p[0] < 1.0 && p[1] > 0.0 && p[1] < 1.0 {
+            assert!(integrated[i].abs() < 1e-12, "vertex {i}: {}", integrated[i]);
+        }
+    }
+    let graph = generate(dir.path(), "path", &["--n", "5"], "p.json");
+    let out =
+        kac().args(["gradient", graph.to_str().unwrap(), "--function", u_npy.to_str().unwrap()]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("triangle mesh"), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -313,3 +313,73 @@ fn poisson_counts_its_factor_against_the_limit() {
     assert!(e.to_string().contains("above the limit of 10000"), "{e}");
     assert!(analysis::run(&v, &a, Hooks::default()).is_ok());
 }
+
+fn codes(out: &analysis::Output) -> Vec<String> {
+    out.summary["warnings"]
+        .as_array()
+        .unwrap_or_else(|| panic!("every result has warnings: {}", out.summary))
+        .iter()
+        .map(|w| w["code"].as_str().unwrap().to_string())
+        .collect()
+}
+
+/// A curvature window below what the mesh resolves says so (`curvature-window-unresolved`), as does one at which
+/// the k pairs miss part of the kernel (`curvature-window-truncated`); the default window says nothing.
+#[test]
+fn a_curvature_window_below_its_resolution_warns() {
+    let v = validated(&generate::icosphere(3));
+    let out = run(&v, json!({"analysis": "heat-curvature", "k": 100}));
+    assert_eq!(codes(&out), Vec::<String>::new(), "{}", out.summary["fit"]);
+    let resolved = out.summary["resolved_time"].as_f64().unwrap();
+    let t = resolved / 10.0;
+    let out = run(&v, json!({"analysis": "heat-curvature", "k": 100, "times": [t, 2.0 * t, 4.0 * t]}));
+    let c = codes(&out);
+    assert!(c.contains(&"curvature-window-unresolved".to_string()), "{c:?}");
+    assert!(c.contains(&"curvature-window-truncated".to_string()), "{c:?}");
+}
+
+/// A point cloud whose estimated dimension rounds to another integer than the one given says so; so does a cloud
+/// still noisier than its spacing after denoising; a clean cloud says nothing.
+#[test]
+fn doubtful_cloud_estimates_warn() {
+    // The regular 70 × 70 grid on the flat torus reads 2.73 (see above): given m = 2, the result warns.
+    let n = 70;
+    let grid: String = (0..n * n)
+        .map(|k| {
+            let (x, y) = (2.0 * PI * (k / n) as f64 / n as f64, 2.0 * PI * (k % n) as f64 / n as f64);
+            format!("{} {} {} {}\n", x.cos(), x.sin(), y.cos(), y.sin())
+        })
+        .collect();
+    let torus = load(grid.as_bytes(), kac_core::Format::Xyz);
+    let out = run(&torus, json!({"analysis": "spectrum", "k": 6, "operator": {"intrinsic_dimension": 2}}));
+    assert!(codes(&out).contains(&"intrinsic-dimension-disagrees".to_string()), "{}", out.summary["parameters"]);
+    let xyz = |sigma: f64| -> String {
+        let points = generate::random_sphere_points(3000, 7);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut normal = || {
+            // Box–Muller from a xorshift stream: reproducible noise without a dependency.
+            let mut u = || {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (a, b) = (u().max(1e-300), u());
+            (-2.0 * a.ln()).sqrt() * (2.0 * PI * b).cos()
+        };
+        points
+            .iter()
+            .map(|p| {
+                let r = 1.0 + sigma * normal();
+                format!("{} {} {}\n", r * p[0], r * p[1], r * p[2])
+            })
+            .collect()
+    };
+    let clean = load(xyz(0.0).as_bytes(), kac_core::Format::Xyz);
+    let out = run(&clean, json!({"analysis": "spectrum", "k": 4}));
+    assert_eq!(codes(&out), Vec::<String>::new(), "{}", out.summary["parameters"]);
+    // σ = 0.15 against a spacing of about 0.065: the noise stays above a spacing after the projection.
+    let noisy = load(xyz(0.15).as_bytes(), kac_core::Format::Xyz);
+    let out = run(&noisy, json!({"analysis": "spectrum", "k": 4}));
+    assert!(codes(&out).contains(&"cloud-noisy".to_string()), "{}", out.summary["parameters"]);
+}

@@ -401,7 +401,7 @@ fn values_fixture(class: ShapeClass, order: u8) -> ValuesFixture {
             Shape::TetMesh(generate::unit_cube_tets(if p2 { 6 } else { 12 })),
             3,
             "unit cube, linear on the boundary",
-            0.08,
+            0.03,
         ),
         ShapeClass::CloudR3 => {
             // Polar caps θ ≤ 0.6 and θ ≥ π − 0.6 hold ln tan(θ/2), harmonic on the band between them.

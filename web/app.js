@@ -433,6 +433,10 @@ async function openJob(id, array, column = 0) {
     state.result = r;
     state.arrays = {};
     $('summary').textContent = JSON.stringify(r, (k, v) => (Array.isArray(v) && v.length > 40 ? `[${v.length} values]` : v), 1);
+    // Warnings (numbers outside their domain of validity) above the numbers, where they are seen first.
+    const warnings = (r.warnings || []).map((w) => `⚠ ${w.code}: ${w.message}`);
+    $('warnings').textContent = warnings.join('\n');
+    $('warnings').hidden = warnings.length === 0;
     // Per-vertex arrays only (they have a coloured PLY); an operator's matrices are links in the summary.
     const names = Object.keys(r.arrays || {}).filter((n) => r.arrays[n].ply);
     $('array').innerHTML = '';

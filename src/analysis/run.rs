@@ -539,10 +539,75 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
         }
     };
     let mut summary = merge(head, out.summary);
+    // Every result has `warnings` (the one place it says a number is outside its domain of validity), with what
+    // the operator's parameters tell (a point cloud's dimension and noise) after the analysis' own.
+    let mut warnings = summary.get("warnings").and_then(Value::as_array).cloned().unwrap_or_default();
+    warnings.extend(operator_warnings(&summary["parameters"]));
     if let Some(o) = summary.as_object_mut() {
         o.insert("eigenpairs_reused".into(), reused.get().into());
+        o.insert("warnings".into(), Value::Array(warnings));
     }
     Ok(Output { fingerprints: out.fingerprints, summary, arrays: out.arrays })
+}
+
+/// A warning: a code (stable, documented in the README) and a sentence.
+pub(crate) fn warning(code: &str, message: String) -> Value {
+    json!({ "code": code, "message": message })
+}
+
+/// How far a point cloud's noise level (after denoising) may reach relative to its spacing before the operator is
+/// built on points still off their surface.
+pub const NOISE_WARN_SPACINGS: f64 = 1.0;
+
+/// Warnings read from an operator's parameters:
+/// - `intrinsic-dimension-disagrees`: a point cloud in Rⁿ was given an intrinsic dimension that the neighbourhoods'
+///   estimate (Levina–Bickel) rounds to another integer;
+/// - `cloud-noisy`: after denoising, the cloud's noise level is above [`NOISE_WARN_SPACINGS`] spacings, so the
+///   operator is built on points still scattered about their surface;
+/// - `cloud-clumps-kept`: small separate pieces were kept (they hold more than the share that may be dropped).
+pub(crate) fn operator_warnings(parameters: &Value) -> Vec<Value> {
+    let mut w = vec![];
+    let (given, m, estimate) = (
+        parameters["intrinsic_dimension_given"].as_bool(),
+        parameters["intrinsic_dimension"].as_f64(),
+        parameters["intrinsic_dimension_estimate"].as_f64(),
+    );
+    if let (Some(true), Some(m), Some(e)) = (given, m, estimate) {
+        if (e - m).abs() > 0.5 {
+            w.push(warning(
+                "intrinsic-dimension-disagrees",
+                format!(
+                    "the intrinsic dimension given is {m}, the neighbourhoods' estimate (Levina–Bickel) {e:.2}: \
+                     eigenvalues scale with the dimension used, so check it (regular grids bias the estimate)"
+                ),
+            ));
+        }
+    }
+    let denoise = &parameters["denoise"];
+    if let (Some(true), Some(noise), Some(h)) =
+        (denoise["applied"].as_bool(), denoise["report"]["noise"].as_f64(), parameters["spacing_h"].as_f64())
+    {
+        if h > 0.0 && noise > NOISE_WARN_SPACINGS * h {
+            w.push(warning(
+                "cloud-noisy",
+                format!(
+                    "the cloud's noise level {noise:.3e} is {:.1} spacings (h = {h:.3e}) after denoising: the operator \
+                     is built on points still scattered about the surface, and its eigenvalues are biased high",
+                    noise / h
+                ),
+            ));
+        }
+    }
+    if let Some(kept) = parameters["outliers"]["clumps_kept"].as_u64().filter(|&k| k > 0) {
+        w.push(warning(
+            "cloud-clumps-kept",
+            format!(
+                "{kept} points in small separate pieces were kept (together above the share that may be dropped): \
+                 each piece adds a zero eigenvalue of its own"
+            ),
+        ));
+    }
+    w
 }
 
 /// The output of a per-vertex signature: its summary with the operator's, and its values as one array.

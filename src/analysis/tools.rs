@@ -4,6 +4,9 @@
 
 use super::*;
 
+/// The truncation bound at a curvature window's first time above which the result warns.
+pub const CURVATURE_TRUNCATION_WARN: f64 = 1e-3;
+
 /// Runs one of the tools (the runner passes only these).
 pub(crate) fn run(
     v: &Validated,
@@ -57,8 +60,33 @@ pub(crate) fn run(
             }
             let column = |x: &[f64]| faer::Mat::from_fn(x.len(), 1, |i, _| x[i]);
             let mut arrays = vec![to_input_rows(v, &e.operator, column(&hc.k).as_ref(), "heat_curvature")];
-            let mut summary =
-                json!({ "k": k, "heat_curvature": finite_stats(&hc.k), "fit": hc, "boundary_vertices": on_boundary });
+            // The window's validity: below the discretization's resolution the estimate follows the mesh, and
+            // where the k pairs do not decide the kernel at its first time, truncation biases it.
+            let mut warnings = vec![];
+            if hc.times[0] < resolved {
+                warnings.push(super::run::warning(
+                    "curvature-window-unresolved",
+                    format!(
+                        "the window starts at t = {:.3e}, below the smallest time the mesh resolves ({resolved:.3e}, \
+                         20 × the mean area per vertex): the estimate follows the mesh, not the surface",
+                        hc.times[0]
+                    ),
+                ));
+            }
+            if hc.truncation_bound > CURVATURE_TRUNCATION_WARN {
+                warnings.push(super::run::warning(
+                    "curvature-window-truncated",
+                    format!(
+                        "at the window's first time the {k} pairs may miss {:.1e} of the heat trace (above \
+                         {CURVATURE_TRUNCATION_WARN:e}): ask for more pairs or later times",
+                        hc.truncation_bound
+                    ),
+                ));
+            }
+            let mut summary = json!({
+                "k": k, "heat_curvature": finite_stats(&hc.k), "fit": hc, "boundary_vertices": on_boundary,
+                "resolved_time": resolved, "warnings": warnings,
+            });
             if on_boundary > 0 || e.operator.dirichlet() {
                 summary["boundary_note"] = json!(
                     "the shape has a boundary: boundary vertices get no value, and within about √t of it the heat kernel's boundary term biases the estimate"

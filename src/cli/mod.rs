@@ -58,6 +58,10 @@ enum Command {
     Diffuse(pde::DiffuseCmd),
     /// The Dirichlet energy ½ uᵀLu of a function (or of each coordinate).
     DirichletEnergy(pde::DirichletEnergyCmd),
+    /// The gradient of a per-vertex function on each triangle or tetrahedron (Prop. 9.2).
+    Gradient(pde::GradientCmd),
+    /// The divergence of a per-element vector field per vertex (Def. 9.1), integrated and pointwise.
+    Divergence(pde::DivergenceCmd),
     /// Laplacian eigenmap or GPS embedding, with the Fiedler vector and bisection.
     Embed(analyses::EmbedCmd),
     /// Smooth vertex coordinates or a function: (M + αL) u = M ū.
@@ -167,6 +171,8 @@ pub fn run() -> i32 {
         Command::Poisson(a) => pde::poisson(a),
         Command::Diffuse(a) => pde::diffuse(a),
         Command::DirichletEnergy(a) => pde::dirichlet_energy(a),
+        Command::Gradient(a) => pde::gradient(a),
+        Command::Divergence(a) => pde::divergence(a),
         Command::Embed(a) => analyses::embed(a),
         Command::Smooth(a) => analyses::smooth(a),
         Command::Interpolate(a) => analyses::interpolate(a),

@@ -100,3 +100,49 @@ pub fn dirichlet_energy(a: DirichletEnergyCmd) -> Result<(), Failure> {
     };
     emit(run(&v, &analysis, &a.out)?, &a.out)
 }
+
+#[derive(clap::Args, Debug)]
+pub struct GradientCmd {
+    #[command(flatten)]
+    pub shape: ShapeArgs,
+    /// u per vertex (.npy, one column, the input file's vertex numbering).
+    #[arg(long)]
+    pub function: PathBuf,
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// The gradient of a per-vertex function on each triangle or tetrahedron (the `gradient` analysis).
+pub fn gradient(a: GradientCmd) -> Result<(), Failure> {
+    let (v, _) = a.shape.load()?;
+    let analysis = Analysis::Gradient { function: npy_column(&a.function)? };
+    emit(run(&v, &analysis, &a.out)?, &a.out)
+}
+
+#[derive(clap::Args, Debug)]
+pub struct DivergenceCmd {
+    #[command(flatten)]
+    pub shape: ShapeArgs,
+    /// The field (.npy, one row [x, y, z] per element of the validated mesh, as `gradient` writes them).
+    #[arg(long)]
+    pub field: PathBuf,
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// The divergence of a per-element field per vertex (the `divergence` analysis).
+pub fn divergence(a: DivergenceCmd) -> Result<(), Failure> {
+    let (v, _) = a.shape.load()?;
+    let path = &a.field;
+    let bytes = std::fs::read(path).map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
+    let (rows, cols, data) = kac_core::io::npy::decode_f64(&bytes)
+        .map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
+    if cols != 3 {
+        return Err(Failure {
+            code: 2,
+            message: format!("{}: {rows} × {cols}; give one row [x, y, z] per element", path.display()),
+        });
+    }
+    let field = (0..rows).map(|r| [data[3 * r], data[3 * r + 1], data[3 * r + 2]]).collect();
+    emit(run(&v, &Analysis::Divergence { field }, &a.out)?, &a.out)
+}
