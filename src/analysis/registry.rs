@@ -148,9 +148,15 @@ pub struct Entry {
     /// Whether the request has `extrapolate`.
     pub takes_extrapolate: bool,
     pub extrapolate: &'static [ShapeClass],
+    /// Methods the request may choose (`method`), each checked by the walk; empty: one method.
+    pub methods: &'static [&'static str],
     /// What the result states about how approximate it is (estimates, warnings).
     pub accuracy: &'static str,
 }
+
+/// The point-cloud normalizations every analysis with an operator takes on clouds (`operator.normalization`),
+/// each checked by the walk against the sphere's and the torus' spectra.
+pub const CLOUD_NORMALIZATIONS: &[&str] = &["symmetric", "chapter"];
 
 use ShapeClass::{Graph, Polyline, TetMesh, TriangleMesh};
 
@@ -179,6 +185,7 @@ const fn spectral(name: &'static str, summary: &'static str, accuracy: &'static 
         order2: P2,
         takes_extrapolate: false,
         extrapolate: NONE,
+        methods: &[],
         accuracy,
     }
 }
@@ -204,6 +211,7 @@ const fn geometric(
         order2: NONE,
         takes_extrapolate: false,
         extrapolate: NONE,
+        methods: &[],
         accuracy,
     }
 }
@@ -237,11 +245,14 @@ pub static REGISTRY: &[Entry] = &[
         "shape-DNA (normalized, reweighted eigenvalues) and Weyl's-law estimates",
         "Weyl estimates with uncertainties, omitted where meaningless; `weyl-underresolved` warning",
     ),
-    spectral(
-        "heat",
-        "heat trace and heat kernel rows k_t(source, ·), spectral or backward Euler",
-        "the heat trace's truncation bound per time",
-    ),
+    Entry {
+        methods: &["spectral", "implicit"],
+        ..spectral(
+            "heat",
+            "heat trace and heat kernel rows k_t(source, ·), spectral or backward Euler",
+            "the heat trace's truncation bound per time",
+        )
+    },
     geometric(
         "geodesic",
         "geodesic distance from sources by the heat method, Varadhan's estimate beside it",
@@ -288,11 +299,14 @@ pub static REGISTRY: &[Entry] = &[
             "the mean of g removed per component (Neumann) reported",
         )
     },
-    spectral(
-        "diffuse",
-        "heat diffusion of a function, spectral (with its truncation bound) or backward Euler",
-        "truncation bound (spectral)",
-    ),
+    Entry {
+        methods: &["spectral", "implicit"],
+        ..spectral(
+            "diffuse",
+            "heat diffusion of a function, spectral (with its truncation bound) or backward Euler",
+            "truncation bound (spectral)",
+        )
+    },
     spectral("dirichlet-energy", "½ uᵀLu, uᵀMu and the Rayleigh quotient of a function", "exact (discrete)"),
     geometric(
         "gradient",
@@ -477,6 +491,8 @@ pub struct AnalysisSupport {
     pub order2: Vec<ShapeClass>,
     /// Classes where `extrapolate` is supported.
     pub extrapolate: Vec<ShapeClass>,
+    /// Methods the request may choose (`method`); empty: one.
+    pub methods: Vec<String>,
     /// What the result says about how approximate it is.
     pub accuracy: String,
     /// With `shape_id`: whether it applies to the shape's class (with Neumann conditions and order 1).
@@ -513,6 +529,7 @@ fn row(e: &Entry, class: Option<ShapeClass>) -> AnalysisSupport {
         dirichlet_values: e.values.to_vec(),
         order2: if e.takes_operator { e.order2.to_vec() } else { vec![] },
         extrapolate: e.extrapolate.to_vec(),
+        methods: e.methods.iter().map(|m| m.to_string()).collect(),
         accuracy: e.accuracy.into(),
         applies: status.map(|s| s == Status::Supported),
         reason,
