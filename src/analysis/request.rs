@@ -471,6 +471,7 @@ pub enum Analysis {
         g: Vec<f64>,
         /// f fixed at these vertices (upload numbering): `[[vertex, value], …]`; none: Neumann.
         #[serde(default, skip_serializing_if = "Option::is_none")]
+        #[schema(value_type = Option<Vec<Vec<f64>>>)]
         dirichlet_values: Option<Vec<(u32, f64)>>,
         #[serde(default)]
         operator: OperatorSpec,

@@ -65,8 +65,100 @@ pub struct ApiDoc;
 pub fn document() -> String {
     let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
     close_request_schemas(&mut doc);
+    name_analysis_variants(&mut doc);
     list_problem_codes(&mut doc);
     serde_json::to_string_pretty(&doc).unwrap_or_default()
+}
+
+/// The analyses as named, flat schemas with a discriminator, the construct client generators read: each `oneOf`
+/// variant of `Analysis` becomes `components.schemas.{Name}Analysis` (`SpectrumAnalysis`, `HksAnalysis`, …), a
+/// variant composed with `allOf` (the evolutions' flattened `InitialData`) is merged into one object with the same
+/// properties and required fields, and `Analysis` maps each `analysis` value to its schema. The meaning is
+/// unchanged: the same fields, the same required ones (openapi-python-client cannot read a union member composed
+/// with `allOf`, and types every result of an unnamed union as one anonymous class).
+fn name_analysis_variants(doc: &mut serde_json::Value) {
+    use serde_json::{Map, Value};
+    let Some(variants) = doc.pointer("/components/schemas/Analysis/oneOf").and_then(Value::as_array).cloned() else {
+        return;
+    };
+    let mut refs = vec![];
+    let mut mapping = Map::new();
+    for v in variants {
+        let mut flat = Map::new();
+        let (mut props, mut required) = (Map::new(), Vec::<Value>::new());
+        let parts: Vec<Value> = match v.get("allOf").and_then(Value::as_array) {
+            Some(parts) => parts.clone(),
+            None => vec![v.clone()],
+        };
+        for part in parts {
+            let part = match part.get("$ref").and_then(Value::as_str) {
+                Some(r) => doc.pointer(&r.replacen('#', "", 1)).cloned().unwrap_or(Value::Null),
+                None => part,
+            };
+            if let Some(p) = part.get("properties").and_then(Value::as_object) {
+                props.extend(p.clone());
+            }
+            for r in part.get("required").and_then(Value::as_array).into_iter().flatten() {
+                if !required.contains(r) {
+                    required.push(r.clone());
+                }
+            }
+        }
+        let Some(name) = props.get("analysis").and_then(|a| a.pointer("/enum/0")).and_then(Value::as_str) else {
+            return;
+        };
+        let name = name.to_string();
+        let pascal: String = name
+            .split('-')
+            .map(|w| {
+                let mut c = w.chars();
+                c.next().map(|f| f.to_ascii_uppercase().to_string() + c.as_str()).unwrap_or_default()
+            })
+            .collect();
+        let component = format!("{pascal}Analysis");
+        if let Some(d) = v.get("description") {
+            flat.insert("description".into(), d.clone());
+        }
+        flat.insert("type".into(), "object".into());
+        flat.insert("properties".into(), Value::Object(props));
+        flat.insert("required".into(), Value::Array(required));
+        let reference = format!("#/components/schemas/{component}");
+        if let Some(Value::Object(schemas)) = doc.pointer_mut("/components/schemas") {
+            schemas.insert(component, Value::Object(flat));
+        }
+        mapping.insert(name, reference.clone().into());
+        refs.push(serde_json::json!({ "$ref": reference }));
+    }
+    // A job request is an analysis with a shape: `{Name}JobRequest` = the analysis' schema and `JobTarget`
+    // (`shape_id`), one per analysis under the same discriminator (a generator cannot take `allOf` of a union).
+    let target = doc.pointer("/components/schemas/JobRequest/allOf/1").cloned();
+    let mut job_refs = vec![];
+    let mut job_mapping = Map::new();
+    if let Some(target) = target {
+        if let Some(Value::Object(schemas)) = doc.pointer_mut("/components/schemas") {
+            schemas.insert("JobTarget".into(), target);
+            for (name, reference) in &mapping {
+                let component = reference.as_str().unwrap_or_default().trim_start_matches("#/components/schemas/");
+                let job = format!("{}JobRequest", component.trim_end_matches("Analysis"));
+                schemas.insert(
+                    job.clone(),
+                    serde_json::json!({ "allOf": [{ "$ref": reference }, { "$ref": "#/components/schemas/JobTarget" }] }),
+                );
+                let job_ref = format!("#/components/schemas/{job}");
+                job_mapping.insert(name.clone(), job_ref.clone().into());
+                job_refs.push(serde_json::json!({ "$ref": job_ref }));
+            }
+        }
+        if let Some(Value::Object(j)) = doc.pointer_mut("/components/schemas/JobRequest") {
+            j.remove("allOf");
+            j.insert("oneOf".into(), Value::Array(job_refs));
+            j.insert("discriminator".into(), serde_json::json!({ "propertyName": "analysis", "mapping": job_mapping }));
+        }
+    }
+    if let Some(Value::Object(a)) = doc.pointer_mut("/components/schemas/Analysis") {
+        a.insert("oneOf".into(), Value::Array(refs));
+        a.insert("discriminator".into(), serde_json::json!({ "propertyName": "analysis", "mapping": mapping }));
+    }
 }
 
 /// Every problem code the service can answer with, as the `enum` of `Problem.code` (each is described at
