@@ -383,3 +383,21 @@ fn doubtful_cloud_estimates_warn() {
     let out = run(&noisy, json!({"analysis": "spectrum", "k": 4}));
     assert!(codes(&out).contains(&"cloud-noisy".to_string()), "{}", out.summary["parameters"]);
 }
+
+/// Given values on top of eliminated points are a Dirichlet problem on a cloud, which the truth table refuses
+/// (a cloud's kernel Laplacian has no boundary term): Poisson with both `dirichlet_values` and
+/// `dirichlet_vertices` on a point cloud is `unsupported`, as `dirichlet_vertices` alone is.
+#[test]
+fn values_on_eliminated_cloud_points_are_refused() {
+    let sphere = generate::icosphere(2);
+    let xyz: String = sphere.vertices.iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
+    let cloud = load(xyz.as_bytes(), kac_core::Format::Xyz);
+    let g = vec![0.0; sphere.vertices.len()];
+    let e = refusal(
+        &cloud,
+        json!({"analysis": "poisson", "g": g, "dirichlet_values": [[1, 0.0]], "operator": {"dirichlet_vertices": [0]}}),
+    );
+    assert_eq!(e.code(), "unsupported", "{e}");
+    // Values alone are a harmonic-extension problem the cloud's operator supports.
+    run(&cloud, json!({"analysis": "poisson", "g": g, "dirichlet_values": [[1, 0.0], [5, 1.0]]}));
+}

@@ -155,7 +155,14 @@ async function upload(file) {
 // The truth table for the selected shape (GET /v1/analyses?shape_id=): analyses that do not apply to its class
 // are disabled in the form, with the reason as their tooltip; the first that applies is selected.
 async function markApplicable(id) {
-  const table = await api('GET', `/v1/analyses?shape_id=${encodeURIComponent(id)}`);
+  let table;
+  try {
+    table = await api('GET', `/v1/analyses?shape_id=${encodeURIComponent(id)}`);
+  } catch (e) {
+    // Without the table every analysis stays offered; the service refuses what does not apply (unsupported).
+    for (const o of $('analysis').options) o.disabled = false;
+    return;
+  }
   const rows = Object.fromEntries(table.analyses.map((a) => [a.name, a]));
   for (const o of $('analysis').options) {
     const row = rows[o.value];
@@ -180,6 +187,7 @@ async function selectShape(id) {
     state.summary = s.summary;
     state.job = null;
     state.result = null;
+    $('warnings').hidden = true;
     state.array = null;
     state.vertex = null;
     $('shapes').value = id;
@@ -380,6 +388,8 @@ function follow(job) {
         $('progress').value = v.progress.converged;
       } else $('progress').removeAttribute('value');
       if (['succeeded', 'failed', 'canceled'].includes(v.status)) {
+        // A finished job's warnings are its result's; until it is shown, none (not the previous result's).
+        $('warnings').hidden = true;
         if (events) events.close();
         events = null;
         done(v);

@@ -1,8 +1,8 @@
 //! The truth table: one registry of analyses, stating where each is valid. A *cell* is an analysis on a class of
 //! shape (triangle mesh, tet mesh, point cloud in R³ or in Rⁿ, graph, polyline) under a boundary condition
 //! (Neumann, Dirichlet, Dirichlet with given values), with elements of order 1 or 2, with or without
-//! extrapolation. Every cell is either supported, and then checked against a closed form by `tests/truth.rs`
-//! (which walks this table and fails on a supported cell without a check), or refused at submission
+//! extrapolation. Every cell is either supported, and then checked against a closed form
+//! (`tests/truth_table.rs` walks this table and fails on a supported cell without a check), or refused at submission
 //! (`unsupported`, naming the analysis, the class and what would work), or cannot be asked at all (the request
 //! has no field for it, and the strict request check refuses the field). The service (at submission and in
 //! `GET /v1/analyses`), the CLI (before a run, and `kac analyses`), the viewer (which offers only what the shape
@@ -464,6 +464,14 @@ impl Analysis {
             // Not a cell: an order that does not exist is the operator's `invalid-parameter`.
             return Ok(());
         }
+        // Given values on top of eliminated vertices (Poisson with both) need the Dirichlet cell too.
+        let spec = self.operator_spec();
+        let eliminated = spec.is_some_and(|s| s.boundary == BoundarySpec::Dirichlet || s.dirichlet_vertices.is_some());
+        if cell.condition == Condition::DirichletValues && eliminated {
+            if let Status::Refused(why) = status(&Cell { condition: Condition::Dirichlet, ..cell }) {
+                return Err(AnalysisError::Unsupported(why));
+            }
+        }
         match status(&cell) {
             Status::Supported => Ok(()),
             Status::Refused(why) => Err(AnalysisError::Unsupported(why)),
@@ -525,15 +533,20 @@ fn row(e: &Entry, class: Option<ShapeClass>) -> AnalysisSupport {
         summary: e.summary.into(),
         classes: e.classes.to_vec(),
         takes_operator: e.takes_operator,
-        dirichlet: if e.takes_operator { e.dirichlet.to_vec() } else { vec![] },
-        dirichlet_values: e.values.to_vec(),
-        order2: if e.takes_operator { e.order2.to_vec() } else { vec![] },
-        extrapolate: e.extrapolate.to_vec(),
+        dirichlet: if e.takes_operator { within(e, e.dirichlet) } else { vec![] },
+        dirichlet_values: within(e, e.values),
+        order2: if e.takes_operator { within(e, e.order2) } else { vec![] },
+        extrapolate: within(e, e.extrapolate),
         methods: e.methods.iter().map(|m| m.to_string()).collect(),
         accuracy: e.accuracy.into(),
         applies: status.map(|s| s == Status::Supported),
         reason,
     }
+}
+
+/// The classes of a list that the analysis applies to at all (a column of the table names no other).
+fn within(e: &Entry, list: &[ShapeClass]) -> Vec<ShapeClass> {
+    list.iter().copied().filter(|c| e.classes.contains(c)).collect()
 }
 
 /// The truth table (`GET /v1/analyses`, `kac analyses`); with a class, which analyses apply to it.
@@ -547,7 +560,8 @@ pub fn markdown_table() -> String {
         "| analysis | what it computes | shapes | Dirichlet | order 2 | extrapolate | how approximate |\n\
          |---|---|---|---|---|---|---|\n",
     );
-    let short = |c: &[ShapeClass]| -> String {
+    let short = |c: &[ShapeClass], e: &Entry| -> String {
+        let c = within(e, c);
         if c.is_empty() {
             return "—".into();
         }
@@ -559,17 +573,17 @@ pub fn markdown_table() -> String {
     for e in REGISTRY {
         let dirichlet = match (e.takes_operator, e.takes_values) {
             (false, _) => "—".to_string(),
-            (true, false) => short(e.dirichlet),
-            (true, true) => format!("{}; values: {}", short(e.dirichlet), short(e.values)),
+            (true, false) => short(e.dirichlet, e),
+            (true, true) => format!("{}; values: {}", short(e.dirichlet, e), short(e.values, e)),
         };
         s.push_str(&format!(
             "| `{}` | {} | {} | {} | {} | {} | {} |\n",
             e.name,
             e.summary,
-            short(e.classes),
+            short(e.classes, e),
             dirichlet,
-            if e.takes_operator { short(e.order2) } else { "—".into() },
-            if e.takes_extrapolate { short(e.extrapolate) } else { "—".into() },
+            if e.takes_operator { short(e.order2, e) } else { "—".into() },
+            if e.takes_extrapolate { short(e.extrapolate, e) } else { "—".into() },
             e.accuracy
         ));
     }

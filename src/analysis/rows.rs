@@ -56,12 +56,18 @@ pub(crate) fn to_operator_rows(op: &Operator, list: &[usize]) -> Result<Vec<usiz
     }
 }
 
-/// Values given at validated vertices → `(operator row, value)` pairs. With P2 elements an edge unknown whose two
-/// ends are both given gets their mean (the straight edge's interpolant: exact for linear data, O(h²) otherwise),
-/// so that a condition given at vertices holds along the edges between them rather than only at their ends.
-pub(crate) fn fixed_rows(op: &Operator, fixed: &[(usize, f64)]) -> Result<Vec<(usize, f64)>, AnalysisError> {
+/// Values given at validated vertices → `(operator row, value)` pairs. With P2 elements an edge unknown on the
+/// shape's boundary whose two ends are both given gets their mean (the straight edge's interpolant: exact for
+/// linear data, O(h²) otherwise), so that a condition given along the boundary holds between its vertices rather
+/// than only at them; edges inside the shape stay free, even between two given vertices.
+pub(crate) fn fixed_rows(
+    shape: &Shape,
+    op: &Operator,
+    fixed: &[(usize, f64)],
+) -> Result<Vec<(usize, f64)>, AnalysisError> {
     let mut unknowns: Vec<(usize, f64)> = fixed.to_vec();
     if let Some(edges) = &op.edge_unknowns {
+        let boundary = operators::boundary::boundary_edges(shape);
         let mut given = vec![None; op.full_size];
         for &(i, x) in fixed {
             if let Some(slot) = given.get_mut(i) {
@@ -70,7 +76,9 @@ pub(crate) fn fixed_rows(op: &Operator, fixed: &[(usize, f64)]) -> Result<Vec<(u
         }
         for (e, [a, b]) in edges.iter().enumerate() {
             if let (Some(x), Some(y)) = (given[*a as usize], given[*b as usize]) {
-                unknowns.push((op.full_size + e, 0.5 * (x + y)));
+                if boundary.binary_search(&[(*a).min(*b), (*a).max(*b)]).is_ok() {
+                    unknowns.push((op.full_size + e, 0.5 * (x + y)));
+                }
             }
         }
     }
@@ -103,3 +111,25 @@ pub(crate) fn from_input_rows(v: &Validated, f: &[f64], what: &str) -> Result<Ve
 kac_core::object_only_serde!(OperatorSpec);
 
 kac_core::object_only_serde!(SolverSpec);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// With P2 elements and values given on every boundary vertex of a cube, exactly the boundary edges' midpoints
+    /// are fixed: the cube's edges hold interior edges whose two ends are on the boundary (a diagonal from one face
+    /// to the next), and those stay free.
+    #[test]
+    fn p2_values_fix_boundary_edges_only() {
+        let shape = Shape::TetMesh(kac_core::geometry::generate::unit_cube_tets(6));
+        let op = operators::build(&shape, &OperatorOptions { order: 2, ..Default::default() }).unwrap();
+        let on_boundary = operators::boundary::boundary_vertices(&shape);
+        let given: Vec<(usize, f64)> = (0..on_boundary.len()).filter(|&i| on_boundary[i]).map(|i| (i, 1.0)).collect();
+        let rows = fixed_rows(&shape, &op, &given).unwrap();
+        let edges = op.edge_unknowns.as_ref().unwrap();
+        let both_ends = edges.iter().filter(|e| on_boundary[e[0] as usize] && on_boundary[e[1] as usize]).count();
+        let boundary_edges = operators::boundary::boundary_edges(&shape).len();
+        assert!(both_ends > boundary_edges, "the cube has interior edges between boundary vertices");
+        assert_eq!(rows.len(), given.len() + boundary_edges);
+    }
+}

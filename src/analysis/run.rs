@@ -501,7 +501,7 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                 (false, true) => {
                     let idx = map_vertices(v, &values.iter().map(|x| x.0).collect::<Vec<_>>(), "values")?;
                     let given: Vec<(usize, f64)> = idx.into_iter().zip(values.iter().map(|x| x.1)).collect();
-                    let known = fixed_rows(&op, &given)?;
+                    let known = fixed_rows(&v.shape, &op, &given)?;
                     let u = pde::harmonic(&op.pair, &known)?;
                     let um = faer::Mat::from_fn(u.len(), 1, |i, _| u[i]);
                     let a = to_input_rows(v, &op, um.as_ref(), "interpolated");

@@ -143,7 +143,11 @@ pub(crate) fn run(
                 Some(list) => {
                     let ids: Vec<u32> = list.iter().map(|p| p.0).collect();
                     let vertices = map_vertices(v, &ids, "dirichlet_values")?;
-                    Some(fixed_rows(&op, &vertices.into_iter().zip(list.iter().map(|p| p.1)).collect::<Vec<_>>())?)
+                    Some(fixed_rows(
+                        &v.shape,
+                        &op,
+                        &vertices.into_iter().zip(list.iter().map(|p| p.1)).collect::<Vec<_>>(),
+                    )?)
                 }
                 None => None,
             };

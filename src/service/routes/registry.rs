@@ -3,7 +3,6 @@
 
 use super::*;
 use crate::analysis::registry::{self, AnalysesTable, ShapeClass};
-use axum::extract::Query;
 
 #[derive(Deserialize, utoipa::IntoParams)]
 pub struct AnalysesQuery {

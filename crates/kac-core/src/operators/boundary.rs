@@ -30,6 +30,37 @@ pub fn boundary_vertices(shape: &Shape) -> Vec<bool> {
     }
 }
 
+/// The edges on a shape's boundary, each as [low, high], sorted: a surface's edges of one triangle, the edges of
+/// a solid's boundary faces; none on other shapes.
+pub fn boundary_edges(shape: &Shape) -> Vec<[u32; 2]> {
+    match shape {
+        Shape::TriangleMesh(m) => {
+            let topo = topology::EdgeTopology::new(&m.faces);
+            let mut b: Vec<[u32; 2]> = topo
+                .edges
+                .iter()
+                .enumerate()
+                .filter(|&(e, _)| topo.valence(e) == 1)
+                .map(|(_, &e)| [e[0].min(e[1]), e[0].max(e[1])])
+                .collect();
+            b.sort_unstable();
+            b
+        }
+        Shape::TetMesh(m) => {
+            let (faces, _) = topology::tet_boundary(&m.tets);
+            let mut b: Vec<[u32; 2]> = faces
+                .iter()
+                .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
+                .map(|[a, b]| [a.min(b), a.max(b)])
+                .collect();
+            b.sort_unstable();
+            b.dedup();
+            b
+        }
+        _ => vec![],
+    }
+}
+
 pub fn apply(
     shape: &Shape,
     pair: SparsePair,
@@ -52,26 +83,11 @@ pub fn apply_p2(
 ) -> Result<(SparsePair, Option<Vec<u32>>), OperatorError> {
     let nv = shape.vertex_count();
     let Some(mut fixed) = fixed_vertices(shape, nv, boundary)? else { return Ok((pair, None)) };
-    let on_boundary: Vec<[u32; 2]> = match (shape, boundary) {
-        (_, Boundary::DirichletVertices(_)) => {
+    let on_boundary: Vec<[u32; 2]> = match boundary {
+        Boundary::DirichletVertices(_) => {
             edges.iter().copied().filter(|e| fixed[e[0] as usize] && fixed[e[1] as usize]).collect()
         }
-        (Shape::TriangleMesh(m), _) => {
-            let topo = topology::EdgeTopology::new(&m.faces);
-            topo.edges.iter().enumerate().filter(|&(e, _)| topo.valence(e) == 1).map(|(_, &e)| e).collect()
-        }
-        (Shape::TetMesh(m), _) => {
-            let (faces, _) = topology::tet_boundary(&m.tets);
-            let mut b: Vec<[u32; 2]> = faces
-                .iter()
-                .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
-                .map(|[a, b]| [a.min(b), a.max(b)])
-                .collect();
-            b.sort_unstable();
-            b.dedup();
-            b
-        }
-        _ => vec![],
+        _ => boundary_edges(shape),
     };
     fixed.resize(nv + edges.len(), false);
     for e in on_boundary {
