@@ -101,6 +101,7 @@ pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) 
         })
         .collect();
     let summary = json!({
+        "analysis": "compare",
         "descriptor": "shape-dna",
         "options": options,
         "metric": req.metric.name(),

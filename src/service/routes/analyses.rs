@@ -166,8 +166,11 @@ pub struct JobFilter {
 }
 
 /// List jobs, oldest first, with filters.
-#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobFilter), responses((status = 200, description = "a page of jobs")))]
-pub(crate) async fn list_jobs(State(st): State<AppState>, Query(f): Query<JobFilter>) -> Result<Json<Value>, ApiError> {
+#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobFilter), responses((status = 200, description = "a page of jobs", body = JobPage)))]
+pub(crate) async fn list_jobs(
+    State(st): State<AppState>,
+    Query(f): Query<JobFilter>,
+) -> Result<Json<JobPage>, ApiError> {
     let all: Vec<JobView> = st
         .jobs
         .list()?
@@ -179,7 +182,7 @@ pub(crate) async fn list_jobs(State(st): State<AppState>, Query(f): Query<JobFil
     let limit = f.limit.unwrap_or(100).min(1000);
     let offset = f.offset.unwrap_or(0);
     let items: Vec<Value> = all.iter().skip(offset).take(limit).map(job_json).collect();
-    Ok(Json(json!({ "total": all.len(), "offset": offset, "limit": limit, "items": items })))
+    Ok(Json(JobPage { total: all.len(), offset, limit, items }))
 }
 
 /// A job: status, progress, timestamps, error (problem detail) and result link.
@@ -265,7 +268,7 @@ pub struct AnalyzeQuery {
 /// job (202) otherwise, or the job's problem if it failed.
 #[utoipa::path(post, path = "/v1/analyze", tag = "jobs", params(AnalyzeQuery),
     request_body(content = Vec<u8>, description = "multipart/form-data with 'file' and 'analysis' parts, or the raw shape", content_type = "multipart/form-data"),
-    responses((status = 200, description = "the result"),
+    responses((status = 200, description = "the result", body = AnalysisResult),
               (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
               (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 409, description = "the job was canceled", body = crate::service::error::Problem, content_type = "application/problem+json"),

@@ -3,16 +3,16 @@
 use super::*;
 
 /// Liveness: the process serves requests.
-#[utoipa::path(get, path = "/livez", tag = "operations", responses((status = 200, description = "alive")))]
-pub(crate) async fn livez() -> Json<Value> {
-    Json(json!({ "status": "alive" }))
+#[utoipa::path(get, path = "/livez", tag = "operations", responses((status = 200, description = "alive", body = Liveness)))]
+pub(crate) async fn livez() -> Json<Liveness> {
+    Json(Liveness { status: "alive" })
 }
 
 /// Readiness: not ready while draining (after SIGTERM).
 #[utoipa::path(get, path = "/readyz", tag = "operations", responses(
-    (status = 200, description = "ready"),
+    (status = 200, description = "ready", body = Readiness),
     (status = 503, description = "draining", body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn readyz(State(st): State<AppState>) -> Result<Json<Value>, ApiError> {
+pub(crate) async fn readyz(State(st): State<AppState>) -> Result<Json<Readiness>, ApiError> {
     if st.draining.load(Ordering::SeqCst) {
         return Err(ApiError::NotReady { detail: "the service is shutting down".into() });
     }
@@ -20,7 +20,7 @@ pub(crate) async fn readyz(State(st): State<AppState>) -> Result<Json<Value>, Ap
         return Err(ApiError::NotReady { detail: "the store does not answer".into() });
     }
     let (enqueued, processing) = st.jobs.queue.depth().map_err(jobs::store_error)?;
-    Ok(Json(json!({ "status": "ready", "queue": enqueued + processing, "capacity": st.jobs.capacity })))
+    Ok(Json(Readiness { status: "ready", queue: enqueued + processing, capacity: st.jobs.capacity }))
 }
 
 /// Prometheus metrics: requests by route and status, latency histograms, queue depth, jobs by status, job
@@ -35,12 +35,14 @@ pub(crate) async fn metrics(State(st): State<AppState>) -> Response {
 /// What a problem `type` means.
 #[utoipa::path(get, path = "/problems/{code}", tag = "operations",
     params(("code" = String, Path, description = "problem code")),
-    responses((status = 200, description = "the code's description"),
+    responses((status = 200, description = "the code's description", body = ProblemType),
               (status = 404, description = "unknown code", body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn problem_doc(Path(code): Path<String>) -> Result<Json<Value>, ApiError> {
+pub(crate) async fn problem_doc(Path(code): Path<String>) -> Result<Json<ProblemType>, ApiError> {
     CODES
         .iter()
         .find(|(c, _)| *c == code)
-        .map(|(c, d)| Json(json!({ "type": format!("/problems/{c}"), "code": c, "description": d })))
+        .map(|(c, d)| {
+            Json(ProblemType { type_: format!("/problems/{c}"), code: (*c).into(), description: (*d).into() })
+        })
         .ok_or(ApiError::NotFound { what: "problem code", id: code })
 }

@@ -5,6 +5,7 @@
 mod analyses;
 mod health;
 mod registry;
+mod responses;
 mod results;
 mod retrieval;
 mod shapes;
@@ -13,6 +14,7 @@ mod viewer;
 pub(crate) use analyses::*;
 pub(crate) use health::*;
 pub(crate) use registry::*;
+pub use responses::*;
 pub(crate) use results::*;
 pub(crate) use retrieval::*;
 pub(crate) use shapes::*;

@@ -54,7 +54,7 @@ pub(crate) fn result_response(r: &Arc<StoredResult>, headers: &HeaderMap, values
 
 /// A finished result (immutable; strong ETag, `If-None-Match` → 304).
 #[utoipa::path(get, path = "/v1/results/{id}", tag = "results", params(("id" = String, Path), ResultQuery),
-    responses((status = 200, description = "the result JSON: every parameter used, the numbers, per-vertex arrays with .npy and .ply links"),
+    responses((status = 200, description = "the result JSON: every parameter used, the numbers, per-vertex arrays with .npy and .ply links", body = AnalysisResult),
               (status = 304, description = "not modified"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_result(
@@ -80,7 +80,10 @@ pub struct ArrayQuery {
 /// unknowns (`unknown_vertices` maps them to vertices).
 #[utoipa::path(get, path = "/v1/results/{id}/arrays/{file}", tag = "results",
     params(("id" = String, Path), ("file" = String, Path, description = "NAME.npy, NAME.json, NAME.ply; for matrices NAME.mtx or NAME.npz"), ArrayQuery),
-    responses((status = 200, description = "the array"), (status = 304, description = "not modified"),
+    responses((status = 200, description = "the array: .npy (float64), .json (rows of numbers, null for NaN), .ply, .mtx or .npz",
+               content((String = "application/octet-stream"), (Vec<Vec<Option<f64>>> = "application/json"),
+                       (String = "application/x-ply"), (String = "text/plain"), (String = "application/zip"))),
+              (status = 304, description = "not modified"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_array(
     State(st): State<AppState>,

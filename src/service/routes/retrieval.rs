@@ -13,7 +13,7 @@ pub struct CompareQuery {
 /// ready within `wait` seconds, the job (202) otherwise. A shape whose fingerprint fails is listed under
 /// `failures`; the others are compared.
 #[utoipa::path(post, path = "/v1/compare", tag = "jobs", params(CompareQuery), request_body = CompareRequest,
-    responses((status = 200, description = "the distance matrix, nearest neighbours and per-shape failures"),
+    responses((status = 200, description = "the distance matrix, nearest neighbours and per-shape failures", body = AnalysisResult),
               (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
               (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json"),
@@ -67,7 +67,7 @@ pub struct SearchQuery {
 /// jobs and comparisons. A `shape_id` without a stored fingerprint gets one first, as a `shape-dna` job (202 with
 /// the job when it is not done within `wait`).
 #[utoipa::path(post, path = "/v1/search", tag = "jobs", params(SearchQuery), request_body = SearchRequest,
-    responses((status = 200, description = "the nearest shapes, nearest first, and how many were searched"),
+    responses((status = 200, description = "the nearest shapes, nearest first, and how many were searched", body = SearchResult),
               (status = 202, description = "the query shape's fingerprint is being computed: the job", body = JobView, headers(("Location" = String))),
               (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json"),
@@ -162,17 +162,19 @@ pub(crate) async fn search(
         .index
         .nearest(&family, &query, req.metric, req.neighbours, req.shape_id.as_deref())
         .map_err(ApiError::invalid_request)?;
-    let neighbours: Vec<Value> = near.into_iter().map(|(id, d)| json!({ "shape_id": id, "distance": d })).collect();
-    Ok(Json(json!({
-        "descriptor": "shape-dna",
-        "family": family,
-        "options": req.options(),
-        "metric": req.metric.name(),
-        "operator": req.operator,
-        "shape_id": req.shape_id,
-        "fingerprint": query,
-        "searched": searched,
-        "neighbours": neighbours,
-    }))
+    let neighbours: Vec<Neighbour> =
+        near.into_iter().map(|(shape_id, distance)| Neighbour { shape_id, distance }).collect();
+    let operator = serde_json::to_value(&req.operator).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
+    Ok(Json(SearchResult {
+        descriptor: "shape-dna",
+        family,
+        options: req.options(),
+        metric: req.metric.name(),
+        operator,
+        shape_id: req.shape_id.clone(),
+        fingerprint: query,
+        searched,
+        neighbours,
+    })
     .into_response())
 }

@@ -213,13 +213,16 @@ pub struct Page {
 }
 
 /// List stored shapes (id order).
-#[utoipa::path(get, path = "/v1/shapes", tag = "shapes", params(Page), responses((status = 200, description = "a page of shapes")))]
-pub(crate) async fn list_shapes(State(st): State<AppState>, Query(p): Query<Page>) -> Result<Json<Value>, ApiError> {
+#[utoipa::path(get, path = "/v1/shapes", tag = "shapes", params(Page), responses((status = 200, description = "a page of shapes", body = ShapePage)))]
+pub(crate) async fn list_shapes(
+    State(st): State<AppState>,
+    Query(p): Query<Page>,
+) -> Result<Json<ShapePage>, ApiError> {
     let limit = p.limit.unwrap_or(100).min(1000);
     let offset = p.offset.unwrap_or(0);
     let (items, total) = st.shapes.list(offset, limit).map_err(store_error)?;
     let items: Vec<ShapeResource> = items.iter().map(shape_resource).collect();
-    Ok(Json(json!({ "total": total, "offset": offset, "limit": limit, "items": items })))
+    Ok(Json(ShapePage { total, offset, limit, items }))
 }
 
 /// A stored shape with its validation summary.
