@@ -18,6 +18,9 @@ ls /usr/lib/postgresql/*/bin/initdb > /dev/null 2>&1 || need+=(postgresql)
 # The viewer's browser tests drive Debian's chromium (headless, software WebGL) through its chromedriver.
 command -v chromium > /dev/null || need+=(chromium)
 command -v chromedriver > /dev/null || need+=(chromium-driver)
+# The generated clients' tests: node and npm (openapi-typescript, tsc), python3-venv (openapi-python-client).
+command -v node > /dev/null || need+=(nodejs)
+command -v npm > /dev/null || need+=(npm)
 if [ ${#need[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ]; then apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${need[@]}"
   else echo "please install: ${need[*]}"; exit 1; fi
@@ -46,3 +49,6 @@ bash scripts/peers.sh target/release/kac
 
 echo "== contract: schemathesis against openapi/openapi.json on the real server"
 bash scripts/contract.sh target/release/kac
+
+echo "== clients: Python and TypeScript clients generated from openapi/openapi.json run the walkthrough"
+bash scripts/clients.sh target/release/kac

@@ -181,6 +181,52 @@ fn type_raw_bodies(doc: &mut serde_json::Value) {
     for item in paths.values_mut() {
         let Value::Object(ops) = item else { continue };
         for op in ops.values_mut() {
+            // Request bodies of bytes (utoipa writes `Vec<u8>` as an array of integers): a raw shape is a binary
+            // string; the one-request analysis' form is its parts, the shape file and the analysis' JSON.
+            // Every request body is required (utoipa leaves it unsaid where an operation takes two media types,
+            // which openapi-python-client then types as optional with a name it does not import).
+            if let Some(Value::Object(body)) = op.get_mut("requestBody") {
+                body.insert("required".into(), Value::Bool(true));
+                // One media type per operation: openapi-python-client 0.29 generates code that does not import a
+                // name it uses for an operation with two (its issue #1451). The JSON form is the one described;
+                // the multipart form (`JobForm`) stays in the components and is named here.
+                if let Some(Value::Object(content)) = body.get_mut("content") {
+                    if content.len() > 1 && content.contains_key("application/json") {
+                        let others: Vec<String> =
+                            content.keys().filter(|k| *k != "application/json").cloned().collect();
+                        let named: Vec<String> = others
+                            .iter()
+                            .map(|k| {
+                                let schema = content[k].pointer("/schema/$ref").and_then(Value::as_str).unwrap_or("");
+                                format!("{k} ({})", schema.trim_start_matches("#/components/schemas/"))
+                            })
+                            .collect();
+                        content.retain(|k, _| k == "application/json");
+                        let d = format!("JSON; also accepted as {}.", named.join(", "));
+                        body.insert("description".into(), Value::String(d));
+                    }
+                }
+            }
+            if let Some(Value::Object(content)) = op.pointer_mut("/requestBody/content") {
+                for (ct, media) in content.iter_mut() {
+                    let bytes = media.pointer("/schema/items/format").and_then(Value::as_str) == Some("u-int8");
+                    if !bytes {
+                        continue;
+                    }
+                    media["schema"] = match ct.as_str() {
+                        "multipart/form-data" => serde_json::json!({
+                            "type": "object",
+                            "required": ["file", "analysis"],
+                            "properties": {
+                                "file": { "type": "string", "format": "binary", "description": "the shape file (format from its name or `format`)" },
+                                "analysis": { "type": "string", "description": "the analysis as JSON, as for POST /v1/jobs without shape_id" },
+                                "format": { "type": "string", "description": "the shape's format, overriding the file name" }
+                            }
+                        }),
+                        _ => serde_json::json!({ "type": "string", "format": "binary" }),
+                    };
+                }
+            }
             let Some(Value::Object(responses)) = op.get_mut("responses") else { continue };
             for (code, r) in responses.iter_mut() {
                 if !code.starts_with('2') {
