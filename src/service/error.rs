@@ -4,24 +4,9 @@
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use kac_core::ShapeError;
-use serde::Serialize;
 use serde_json::{Map, Value};
 
-/// An RFC 9457 problem document.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, utoipa::ToSchema)]
-pub struct Problem {
-    /// `/problems/{code}`: stable, documented at that path.
-    #[serde(rename = "type")]
-    pub type_: String,
-    pub title: String,
-    pub status: u16,
-    pub detail: String,
-    /// The stable code (the last segment of `type`).
-    pub code: String,
-    #[serde(flatten)]
-    #[schema(value_type = Object)]
-    pub extra: Map<String, Value>,
-}
+pub use super::problem::Problem;
 
 /// Everything a handler can fail with.
 #[derive(Debug)]
@@ -155,7 +140,7 @@ impl ApiError {
                 };
                 (status, e.code(), "The analysis cannot be computed", e.to_string())
             }
-            ApiError::Canceled => (StatusCode::CONFLICT, "canceled", "Canceled", "the job was canceled".into()),
+            ApiError::Canceled => return (StatusCode::CONFLICT, Problem::canceled()),
             ApiError::JobTimeout { seconds } => (
                 StatusCode::INTERNAL_SERVER_ERROR,
                 "job-timeout",

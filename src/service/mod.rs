@@ -12,6 +12,7 @@ pub mod limits;
 pub mod listener;
 pub mod openapi;
 pub mod ops;
+pub mod problem;
 pub mod routes;
 pub mod search;
 pub mod store;

@@ -10,9 +10,9 @@
 //! other tasks go on).
 
 use super::*;
-use crate::service::error::Problem;
 use crate::service::ids::JobId;
 use crate::service::jobs::{now, JobProgress, Status};
+use crate::service::problem::Problem;
 use deadpool_postgres::{Manager, ManagerConfig, Pool, RecyclingMethod};
 use std::future::Future;
 use std::time::Duration;

@@ -4,9 +4,9 @@
 //! that lost its lease (it stalled, or another replica took the job after it expired) writes nothing. Every
 //! change is announced to the job's subscribers on every replica.
 
-use super::super::error::Problem;
 use super::super::ids::JobId;
 use super::super::jobs::{JobProgress, JobView};
+use super::super::problem::Problem;
 use std::io::Result;
 use std::time::Duration;
 use tokio::sync::broadcast;
@@ -74,7 +74,7 @@ pub(crate) fn release(view: &mut JobView, cancel_requested: bool) -> super::supe
     if cancel_requested {
         view.status = Status::Canceled;
         view.finished_at = Some(now());
-        view.error = Some(super::super::error::ApiError::Canceled.problem().1);
+        view.error = Some(Problem::canceled());
     } else {
         view.status = Status::Enqueued;
         view.started_at = None;

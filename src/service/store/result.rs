@@ -5,7 +5,7 @@
 //! little-endian float64, one after another, so reading a result back is a copy of its numbers, not a parse.
 
 use super::*;
-use axum::body::Bytes;
+use bytes::Bytes;
 use serde_json::json;
 
 /// Bodies up to this size are kept whole in memory.

@@ -2,9 +2,9 @@
 //! the job queue; uploads and results as content-addressed files in the data directory, written atomically.
 
 use super::*;
-use crate::service::error::Problem;
 use crate::service::ids::{file_in, JobId};
 use crate::service::jobs::{now, JobProgress, Status};
+use crate::service::problem::Problem;
 use rusqlite::OptionalExtension;
 use std::io::Write;
 use std::time::Duration;
