@@ -3,6 +3,8 @@
 //! and every accepted job still succeeds once with the result a single process computes; a cancel or an event
 //! stream on one replica reaches a job running on another.
 
+#[path = "support/faults.rs"]
+mod faults;
 #[path = "support/pg.rs"]
 mod pg;
 
@@ -25,8 +27,15 @@ impl Replica {
         if let Some(url) = store {
             cmd.args(["--store", url]);
         }
-        let mut child =
-            cmd.args(extra).env("RUST_LOG", "error").stdout(Stdio::piped()).stderr(Stdio::inherit()).spawn().unwrap();
+        let (extra, faults) = faults::split(extra);
+        let mut child = cmd
+            .args(extra)
+            .envs(faults)
+            .env("RUST_LOG", "error")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
         let mut line = String::new();
         BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
         let v: Value = serde_json::from_str(&line).unwrap_or_else(|_| panic!("first line: {line}"));

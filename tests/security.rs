@@ -5,6 +5,8 @@
 //! at the rate floor, bodies in flight share a memory budget; settings no solve could honour are refused at
 //! submission; the default Krylov basis counts against the output limit; and the smaller items of the issue.
 
+#[path = "support/faults.rs"]
+mod faults;
 #[allow(dead_code)]
 #[path = "support/pg.rs"]
 mod pg;

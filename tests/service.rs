@@ -5,6 +5,8 @@
 
 #[path = "../crates/kac-core/tests/common/mod.rs"]
 mod common;
+#[path = "support/faults.rs"]
+mod faults;
 
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader};
@@ -24,10 +26,12 @@ impl Server {
     }
     /// Starts on a given data directory; also returns the first line the server printed.
     fn start_in(dir: tempfile::TempDir, extra: &[&str]) -> (Server, Value) {
+        let (extra, faults) = faults::split(extra);
         let mut child = Command::new(env!("CARGO_BIN_EXE_kac"))
             .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
             .arg(dir.path())
             .args(extra)
+            .envs(faults)
             .env("RUST_LOG", "warn")
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())

@@ -101,12 +101,6 @@ pub struct Config {
     /// Requests per minute each API key may make (0: unlimited); beyond it, 429 with Retry-After.
     #[arg(long, env = "KAC_RATE_LIMIT_PER_MINUTE", default_value_t = 0)]
     pub rate_limit_per_minute: u32,
-    /// Testing only: jobs of this analysis panic inside the worker (checks that a panic fails one job).
-    #[arg(long, hide = true)]
-    pub test_panic_analysis: Option<String>,
-    /// Testing only: every job sleeps this many milliseconds before it starts computing (fills the queue).
-    #[arg(long, hide = true, default_value_t = 0)]
-    pub test_job_delay_ms: u64,
 }
 
 /// The longest duration any setting may name: a day (a larger one is a mistake, and `Duration` from seconds

@@ -6,6 +6,7 @@ pub mod bodies;
 pub mod compare;
 pub mod config;
 pub mod error;
+pub mod faults;
 pub mod ids;
 pub mod jobs;
 pub mod limits;
@@ -39,6 +40,8 @@ pub struct Inner {
     pub draining: AtomicBool,
     /// Jobs enqueued when this process started (those a dead process held included).
     pub recovered: usize,
+    /// Faults the tests inject (debug builds only; see [`faults`]).
+    pub faults: faults::Faults,
 }
 
 pub type AppState = Arc<Inner>;
@@ -50,6 +53,8 @@ impl Inner {
         // Fail closed: a configuration that does not check stops the start, before any store is opened.
         config.check().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
         let keys = config.api_keys().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
+        let faults =
+            faults::Faults::from_env().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
         let workers = if config.workers == 0 {
             std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
         } else {
@@ -72,6 +77,7 @@ impl Inner {
             access: ops::Access::new(&keys, config.rate_limit_per_minute, config.auth_failures_per_minute),
             draining: AtomicBool::new(false),
             recovered,
+            faults,
             config,
         });
         let st = state.clone();

@@ -19,10 +19,12 @@ pub struct Server {
 
 /// `kac serve` on a free loopback port and `data_dir` with `extra` flags, its standard output piped.
 pub fn serve(data_dir: &Path, extra: &[&str]) -> Command {
+    let (extra, faults) = super::faults::split(extra);
     let mut c = Command::new(env!("CARGO_BIN_EXE_kac"));
     c.args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
         .arg(data_dir)
         .args(extra)
+        .envs(faults)
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped());
     c

@@ -149,8 +149,8 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
     if job.stop.load(Ordering::SeqCst) {
         return stopped(state, job);
     }
-    // Testing only: a wait before computing, in short steps that see the stop flag.
-    let delay = std::time::Instant::now() + Duration::from_millis(state.config.test_job_delay_ms);
+    // Testing only (debug builds, `service::faults`): a wait before computing, in short steps that see the stop flag.
+    let delay = std::time::Instant::now() + Duration::from_millis(state.faults.job_delay_ms);
     while std::time::Instant::now() < delay {
         std::thread::sleep(Duration::from_millis(20).min(delay.saturating_duration_since(std::time::Instant::now())));
         if job.stop.load(Ordering::SeqCst) {
@@ -183,7 +183,7 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
         threads: state.config.solver_threads,
         limits: analysis::SolverLimits { max_pairs: state.config.max_k, max_values: state.config.max_output_values },
     };
-    let panic_on = state.config.test_panic_analysis.as_deref() == Some(job.name);
+    let panic_on = state.faults.panic_analysis.as_deref() == Some(job.name);
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         if panic_on {
             panic!("test hook: the '{}' analysis panics", job.name);
