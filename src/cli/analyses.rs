@@ -189,8 +189,8 @@ fn parse_metric(s: &str) -> Result<Metric, String> {
 /// Shape-DNA flags, shared by `shape-dna` and `compare`.
 #[derive(Args, Debug, Clone)]
 pub struct DnaArgs {
-    /// Values in the fingerprint.
-    #[arg(short = 'k', long = "k", default_value_t = 50)]
+    /// Values in the fingerprint (the default is the service's too: `ShapeDnaOptions::default`).
+    #[arg(short = 'k', long = "k", default_value_t = kac_core::descriptors::shape_dna::ShapeDnaOptions::default().k)]
     pub k: usize,
     /// Keep the zero modes (default: start at the first non-zero eigenvalue).
     #[arg(long)]

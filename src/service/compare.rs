@@ -39,8 +39,9 @@ pub struct CompareRequest {
     pub operator: OperatorSpec,
 }
 
+/// The shape-DNA length: the one default (`ShapeDnaOptions::default`) every request and flag uses.
 fn default_dna_k() -> usize {
-    50
+    ShapeDnaOptions::default().k
 }
 fn default_neighbours() -> usize {
     5

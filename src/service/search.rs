@@ -38,8 +38,9 @@ pub struct SearchRequest {
     pub operator: OperatorSpec,
 }
 
+/// The shape-DNA length: the one default (`ShapeDnaOptions::default`) every request and flag uses.
 fn default_k() -> usize {
-    50
+    ShapeDnaOptions::default().k
 }
 fn default_neighbours() -> usize {
     10
