@@ -33,6 +33,18 @@ fn the_stores_import_nothing_from_the_http_layer() {
     }
 }
 
+/// The job engine's interface (`src/service/jobs/mod.rs`: submit, cancel, views) answers with its own error type,
+/// `JobError`, which the HTTP layer maps to problems; only the runner still names the HTTP errors, to record how a
+/// job failed as the problem the service answers with.
+#[test]
+fn the_job_engine_answers_with_its_own_errors() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("src/service/jobs/mod.rs")).unwrap();
+    for needle in ["axum", "ApiError::", "service::error", "super::error", "StatusCode"] {
+        assert!(!uses(&text, needle), "src/service/jobs/mod.rs uses {needle}");
+    }
+}
+
 #[test]
 fn the_core_has_no_http() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));

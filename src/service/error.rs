@@ -284,6 +284,27 @@ impl ApiError {
     }
 }
 
+/// A store that cannot be reached: 503 `not-ready` (the client may retry).
+pub fn store_error(e: std::io::Error) -> ApiError {
+    ApiError::NotReady { detail: format!("the store cannot be reached: {e}") }
+}
+
+/// The job engine's errors as problems: the same codes and statuses as before the engine had its own type.
+impl From<super::jobs::JobError> for ApiError {
+    fn from(e: super::jobs::JobError) -> Self {
+        use super::jobs::{JobError, Limit};
+        match e {
+            JobError::Analysis(a) => ApiError::Analysis(a),
+            JobError::Limit(Limit::Pairs(detail)) => ApiError::KTooLarge { detail },
+            JobError::Limit(Limit::Samples(detail)) => ApiError::TooManySamples { detail },
+            JobError::Limit(Limit::Values(detail)) => ApiError::OutputTooLarge { detail },
+            JobError::QueueFull { capacity } => ApiError::QueueFull { capacity, retry_after_s: 2 },
+            JobError::Store(e) => store_error(e),
+            JobError::Internal(detail) => ApiError::Internal { detail },
+        }
+    }
+}
+
 pub fn problem_response(status: StatusCode, p: &Problem) -> Response {
     let mut r = (status, serde_json::to_string(p).unwrap_or_default()).into_response();
     r.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static("application/problem+json"));

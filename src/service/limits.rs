@@ -3,7 +3,7 @@
 //! `solver.subspace` or `solver.block` ask for a wide one) against --max-output-values. What only the operator's
 //! size decides (a forced dense solve, a band's pairs) is checked by the runner through `Hooks::limits`.
 
-use super::error::ApiError;
+use super::jobs::{JobError, Limit};
 use super::AppState;
 use crate::analysis::Analysis;
 
@@ -42,8 +42,8 @@ fn eigenpairs(a: &Analysis) -> Option<usize> {
     asked(a).map(|(what, k)| if what == "dimensions" { k + 1 } else { k })
 }
 
-pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
-    a.check_options().map_err(ApiError::Analysis)?;
+pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), JobError> {
+    a.check_options().map_err(JobError::Analysis)?;
     let asked = asked(a);
     // Solver settings no solve could honour (a tolerance below double precision, a shift at 0 or ±1e308, a block
     // or subspace out of range) are refused here, naming the setting, rather than holding a worker until its
@@ -51,19 +51,20 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), ApiError> {
     if let Some(s) = a.solver() {
         s.eigen_options(asked.map_or(1, |(_, k)| k.max(1)), 0)
             .check()
-            .map_err(|e| ApiError::Analysis(crate::analysis::AnalysisError::Eigen(e)))?;
+            .map_err(|e| JobError::Analysis(crate::analysis::AnalysisError::Eigen(e)))?;
     }
     let Some((what, k)) = asked else { return Ok(()) };
     if k == 0 {
         // Refused at submission: the same answer on every path (a job, /v1/analyze, a cached spectrum).
-        return Err(ApiError::Analysis(crate::analysis::AnalysisError::invalid_k(format!(
+        return Err(JobError::Analysis(crate::analysis::AnalysisError::invalid_k(format!(
             "{what} = 0: ask for at least one eigenpair (1 ≤ {what} ≤ the number of unknowns)"
         ))));
     }
     if k > state.config.max_k {
-        return Err(ApiError::KTooLarge {
-            detail: format!("k = {k} is above the limit of {} (--max-k)", state.config.max_k),
-        });
+        return Err(JobError::Limit(Limit::Pairs(format!(
+            "k = {k} is above the limit of {} (--max-k)",
+            state.config.max_k
+        ))));
     }
     Ok(())
 }
@@ -84,7 +85,7 @@ pub fn unknowns(a: &Analysis, shape: &kac_core::Shape) -> usize {
 
 /// Bounded work: every list or grid of the request against `--max-samples`, and the widest per-vertex array the
 /// analysis will hold (eigenvectors included) against `--max-output-values`, before anything is allocated.
-pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(), ApiError> {
+pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(), JobError> {
     let len = |v: &Option<Vec<f64>>| v.as_ref().map(Vec::len);
     // (name of the field, its count) for every list or grid; and the columns of the widest per-vertex array.
     let (counts, columns): (Vec<(&str, usize)>, usize) = match a {
@@ -142,9 +143,9 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
     };
     let max = state.config.max_samples;
     if let Some((name, n)) = counts.into_iter().find(|&(_, n)| n > max) {
-        return Err(ApiError::TooManySamples {
-            detail: format!("{name} = {n} is above the limit of {max} (--max-samples, KAC_MAX_SAMPLES)"),
-        });
+        return Err(JobError::Limit(Limit::Samples(format!(
+            "{name} = {n} is above the limit of {max} (--max-samples, KAC_MAX_SAMPLES)"
+        ))));
     }
     // The sparse solver's Krylov basis, as the solver will size it (its default included: about 3k columns for
     // small k, 2k for large), and the block vectors beside it.
@@ -165,12 +166,10 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
         // With quadratic elements the rows are the unknowns: the vertices and the edges.
         let rows =
             if a.operator_spec().is_some_and(|o| o.order == 2) { "unknowns (vertices and edges)" } else { "vertices" };
-        return Err(ApiError::OutputTooLarge {
-            detail: format!(
-                "this analysis holds an array of {vertices} {rows} × {columns} columns = {values} values, \
+        return Err(JobError::Limit(Limit::Values(format!(
+            "this analysis holds an array of {vertices} {rows} × {columns} columns = {values} values, \
                  above the limit of {max} (--max-output-values, KAC_MAX_OUTPUT_VALUES)"
-            ),
-        });
+        ))));
     }
     Ok(())
 }

@@ -3,8 +3,8 @@
 //! cancellation goes through its stop flag, a timer stops jobs that run too long, and a panic inside a job fails
 //! that job only.
 
-use super::error::{ApiError, Problem};
 use super::ids::{JobId, ShapeId};
+use super::problem::Problem;
 use super::store::{Enqueued, JobQueue, Lease, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis, Hooks};
@@ -55,6 +55,37 @@ pub struct JobProgress {
     /// Converged eigenpairs so far, of `wanted` (spectral analyses).
     pub converged: usize,
     pub wanted: usize,
+}
+
+/// Why a job cannot be submitted, read or canceled: the engine's own errors, which the HTTP layer maps to problems
+/// (`impl From<JobError> for ApiError`).
+#[derive(Debug)]
+pub enum JobError {
+    /// The analysis refuses the request (the truth table, its options, k).
+    Analysis(crate::analysis::AnalysisError),
+    /// A limit of the service refuses it.
+    Limit(Limit),
+    /// The queue holds its capacity (queued + running).
+    QueueFull { capacity: usize },
+    /// The store cannot be reached.
+    Store(std::io::Error),
+    /// The request cannot be recorded (it does not serialize).
+    Internal(String),
+}
+
+/// Which limit: the eigenpairs asked for (--max-k), the samples of a list or grid (--max-samples), the values an
+/// array or the solver's basis would hold (--max-output-values). Each with its sentence.
+#[derive(Debug)]
+pub enum Limit {
+    Pairs(String),
+    Samples(String),
+    Values(String),
+}
+
+impl From<std::io::Error> for JobError {
+    fn from(e: std::io::Error) -> Self {
+        JobError::Store(e)
+    }
 }
 
 /// What clients see of a job.
@@ -192,19 +223,19 @@ impl Jobs {
         self.running.lock().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
     }
     /// A job's view: live if it runs here, else as the queue has it.
-    pub fn view(&self, id: &JobId) -> Result<Option<JobView>, ApiError> {
+    pub fn view(&self, id: &JobId) -> Result<Option<JobView>, JobError> {
         if let Some(j) = self.local(&id.hex()) {
             return Ok(Some(j.snapshot()));
         }
-        self.queue.get(id).map_err(store_error)
+        Ok(self.queue.get(id)?)
     }
     /// Jobs processing on this replica now.
     pub fn running(&self) -> usize {
         self.running.lock().unwrap_or_else(|e| e.into_inner()).len()
     }
     /// Every job, oldest first (live views for the ones running here).
-    pub fn list(&self) -> Result<Vec<JobView>, ApiError> {
-        let mut all = self.queue.list().map_err(store_error)?;
+    pub fn list(&self) -> Result<Vec<JobView>, JobError> {
+        let mut all = self.queue.list()?;
         for v in &mut all {
             if let Some(j) = self.local(&v.id) {
                 *v = j.snapshot();
@@ -235,11 +266,6 @@ impl Jobs {
     }
 }
 
-/// A storage failure as the client sees it: the store is not ready (503).
-pub fn store_error(e: std::io::Error) -> ApiError {
-    ApiError::NotReady { detail: format!("the store cannot be reached: {e}") }
-}
-
 /// A job's changes, wherever it runs: the live view of a job running here, else the queue's announcements (a
 /// heartbeat of the replica that runs it, or any transition), with a poll every second besides.
 pub struct Watch {
@@ -251,7 +277,7 @@ pub struct Watch {
 
 impl Watch {
     /// The job's view now (None: no such job).
-    pub fn current(&mut self) -> Result<Option<JobView>, ApiError> {
+    pub fn current(&mut self) -> Result<Option<JobView>, JobError> {
         if self.local.is_none() {
             self.local = self.jobs.local(&self.id.hex()).map(|j| j.view.subscribe());
         }
@@ -259,7 +285,7 @@ impl Watch {
             Some(rx) if rx.has_changed().is_ok() => Ok(Some(rx.borrow_and_update().clone())),
             _ => {
                 self.local = None;
-                self.jobs.queue.get(&self.id).map_err(store_error)
+                Ok(self.jobs.queue.get(&self.id)?)
             }
         }
     }
@@ -298,11 +324,11 @@ impl Watch {
 }
 
 /// Submits a job, or returns the existing one for the same request (true: newly enqueued).
-pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(JobView, bool), ApiError> {
-    analysis.supported(&shape.validated.shape).map_err(ApiError::Analysis)?;
+pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(JobView, bool), JobError> {
+    analysis.supported(&shape.validated.shape).map_err(JobError::Analysis)?;
     super::limits::check_limits(state, &analysis)?;
     super::limits::check_work(state, &analysis, super::limits::unknowns(&analysis, &shape.validated.shape))?;
-    let canonical = serde_json::to_value(&analysis).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
+    let canonical = serde_json::to_value(&analysis).map_err(|e| JobError::Internal(e.to_string()))?;
     let id = job_id(&shape.id, &canonical);
     let shape_id = shape.id.clone();
     enqueue(state, id, shape_id, analysis.name(), canonical)
@@ -314,16 +340,17 @@ pub fn submit_compare(
     state: &AppState,
     mut request: super::compare::CompareRequest,
     shapes: Vec<Arc<StoredShape>>,
-) -> Result<(JobView, bool), ApiError> {
+) -> Result<(JobView, bool), JobError> {
     if request.k == 0 {
-        return Err(ApiError::Analysis(crate::analysis::AnalysisError::invalid_k(
+        return Err(JobError::Analysis(crate::analysis::AnalysisError::invalid_k(
             "k = 0: ask for at least one eigenpair",
         )));
     }
     if request.k > state.config.max_k {
-        return Err(ApiError::KTooLarge {
-            detail: format!("k = {} is above --max-k {}", request.k, state.config.max_k),
-        });
+        return Err(JobError::Limit(Limit::Pairs(format!(
+            "k = {} is above --max-k {}",
+            request.k, state.config.max_k
+        ))));
     }
     // Each shape's shape-DNA within the limits a shape-dna job of it would have (the largest decides).
     let dna = Analysis::ShapeDna {
@@ -335,7 +362,7 @@ pub fn submit_compare(
         super::limits::check_work(state, &dna, largest)?;
     }
     request.shape_ids = Some(shapes.iter().map(|s| s.id.clone()).collect());
-    let canonical = serde_json::to_value(&request).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
+    let canonical = serde_json::to_value(&request).map_err(|e| JobError::Internal(e.to_string()))?;
     let id = job_id("compare", &canonical);
     enqueue(state, id, String::new(), "compare", canonical)
 }
@@ -347,7 +374,7 @@ fn enqueue(
     shape_id: String,
     analysis: &str,
     canonical: serde_json::Value,
-) -> Result<(JobView, bool), ApiError> {
+) -> Result<(JobView, bool), JobError> {
     let jobs = &state.jobs;
     let view = JobView {
         id,
@@ -362,9 +389,9 @@ fn enqueue(
         result: None,
         request: canonical,
     };
-    match jobs.queue.enqueue(view, jobs.capacity).map_err(store_error)? {
+    match jobs.queue.enqueue(view, jobs.capacity)? {
         Enqueued::Existing(v) => Ok((v, false)),
-        Enqueued::Full => Err(ApiError::QueueFull { capacity: jobs.capacity, retry_after_s: 2 }),
+        Enqueued::Full => Err(JobError::QueueFull { capacity: jobs.capacity }),
         Enqueued::New(v) => {
             state.metrics.jobs_submitted.fetch_add(1, Ordering::Relaxed);
             jobs.notify();
@@ -375,8 +402,8 @@ fn enqueue(
 
 /// Cancels a job: an enqueued one at once, a running one at its next stop-flag check (here at once; on another
 /// replica when its heartbeat sees the request, at once on the announcement). None: no such job.
-pub fn cancel(state: &AppState, id: &JobId) -> Result<Option<JobView>, ApiError> {
-    let view = state.jobs.queue.cancel(id, &canceled()).map_err(store_error)?;
+pub fn cancel(state: &AppState, id: &JobId) -> Result<Option<JobView>, JobError> {
+    let view = state.jobs.queue.cancel(id, &canceled())?;
     if let Some(j) = state.jobs.local(&id.hex()) {
         j.stop.store(true, Ordering::SeqCst);
         return Ok(Some(j.snapshot()));

@@ -2,7 +2,9 @@
 //! problem (a panic fails that job only; a stop flag set by the timer fails it with `job-timeout`, by a cancel
 //! cancels it).
 
+// The runner records how a job failed as the problem the service answers with (the HTTP error mapping).
 use super::*;
+use crate::service::error::ApiError;
 
 /// Starts a claimed job on the pool.
 pub(super) fn start(state: &AppState, view: JobView, owner: String) {

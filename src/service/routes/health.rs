@@ -19,7 +19,7 @@ pub(crate) async fn readyz(State(st): State<AppState>) -> Result<Json<Readiness>
     if !st.shapes.healthy() {
         return Err(ApiError::NotReady { detail: "the store does not answer".into() });
     }
-    let (enqueued, processing) = st.jobs.queue.depth().map_err(jobs::store_error)?;
+    let (enqueued, processing) = st.jobs.queue.depth().map_err(store_error)?;
     Ok(Json(Readiness { status: "ready", queue: enqueued + processing, capacity: st.jobs.capacity }))
 }
 

@@ -21,9 +21,10 @@ pub(crate) use shapes::*;
 pub(crate) use viewer::*;
 
 use super::compare::CompareRequest;
+use super::error::store_error;
 use super::error::{problem_response, ApiError, CODES};
 use super::ids::{JobPath, ResultPath, ShapePath};
-use super::jobs::{self, store_error, JobView, Status};
+use super::jobs::{self, JobView, Status};
 use super::search::SearchRequest;
 use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;
