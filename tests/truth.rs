@@ -60,6 +60,16 @@ fn dirichlet_poisson_without_values_is_not_made_neumann() {
     );
 }
 
+/// A regular n × n grid on the flat torus (cos u, sin u, cos v, sin v) in R⁴, as XYZ text.
+fn torus_grid(n: usize) -> String {
+    (0..n * n)
+        .map(|k| {
+            let (x, y) = (2.0 * PI * (k / n) as f64 / n as f64, 2.0 * PI * (k % n) as f64 / n as f64);
+            format!("{} {} {} {}\n", x.cos(), x.sin(), y.cos(), y.sin())
+        })
+        .collect()
+}
+
 fn load(bytes: &[u8], format: kac_core::Format) -> kac_core::Validated {
     kac_core::load_bytes(bytes, format, &Default::default(), &Default::default()).unwrap()
 }
@@ -139,12 +149,7 @@ fn the_intrinsic_dimension_is_two_in_r3_and_never_a_rounded_doubt() {
     assert!((l[1].as_f64().unwrap() - 2.0).abs() < 0.05, "{l:?}");
 
     let n = 70;
-    let grid: String = (0..n * n)
-        .map(|k| {
-            let (x, y) = (2.0 * PI * (k / n) as f64 / n as f64, 2.0 * PI * (k % n) as f64 / n as f64);
-            format!("{} {} {} {}\n", x.cos(), x.sin(), y.cos(), y.sin())
-        })
-        .collect();
+    let grid = torus_grid(n);
     let torus = load(grid.as_bytes(), kac_core::Format::Xyz);
     let e = refusal(&torus, json!({"analysis": "spectrum", "k": 10}));
     assert!(e.to_string().contains("intrinsic_dimension") && e.to_string().contains("2.7"), "{e}");
@@ -344,12 +349,7 @@ fn a_curvature_window_below_its_resolution_warns() {
 fn doubtful_cloud_estimates_warn() {
     // The regular 70 × 70 grid on the flat torus reads 2.73 (see above): given m = 2, the result warns.
     let n = 70;
-    let grid: String = (0..n * n)
-        .map(|k| {
-            let (x, y) = (2.0 * PI * (k / n) as f64 / n as f64, 2.0 * PI * (k % n) as f64 / n as f64);
-            format!("{} {} {} {}\n", x.cos(), x.sin(), y.cos(), y.sin())
-        })
-        .collect();
+    let grid = torus_grid(n);
     let torus = load(grid.as_bytes(), kac_core::Format::Xyz);
     let out = run(&torus, json!({"analysis": "spectrum", "k": 6, "operator": {"intrinsic_dimension": 2}}));
     assert!(codes(&out).contains(&"intrinsic-dimension-disagrees".to_string()), "{}", out.summary["parameters"]);

@@ -344,13 +344,14 @@ type FixtureKey = (ShapeClass, Condition, u8, bool);
 
 /// Each fixture built once for the whole walk (built outside the lock; a race builds one twice, harmlessly).
 fn fixture_once(class: ShapeClass, condition: Condition, order: u8, flat: bool) -> Arc<Fixture> {
-    static BUILT: Mutex<Option<HashMap<FixtureKey, Arc<Fixture>>>> = Mutex::new(None);
+    static BUILT: std::sync::LazyLock<Mutex<HashMap<FixtureKey, Arc<Fixture>>>> =
+        std::sync::LazyLock::new(Default::default);
     let key = (class, condition, order, flat);
-    if let Some(f) = BUILT.lock().unwrap().get_or_insert_with(HashMap::new).get(&key) {
+    if let Some(f) = BUILT.lock().unwrap().get(&key) {
         return f.clone();
     }
     let f = Arc::new(fixture(class, condition, order, flat));
-    BUILT.lock().unwrap().get_or_insert_with(HashMap::new).insert(key, f.clone());
+    BUILT.lock().unwrap().insert(key, f.clone());
     f
 }
 

@@ -437,10 +437,16 @@ pub fn cells() -> impl Iterator<Item = Cell> {
 }
 
 impl Analysis {
+    /// Whether the operator eliminates vertices (homogeneous Dirichlet on the boundary or on given vertices), as
+    /// `operator_options` builds it.
+    fn eliminates_vertices(&self) -> bool {
+        self.operator_spec().is_some_and(|s| s.boundary == BoundarySpec::Dirichlet || s.dirichlet_vertices.is_some())
+    }
+
     /// The cell of the truth table this request asks for on this shape.
     pub fn cell(&self, shape: &Shape) -> Cell {
         let spec = self.operator_spec();
-        let dirichlet = spec.is_some_and(|s| s.boundary == BoundarySpec::Dirichlet || s.dirichlet_vertices.is_some());
+        let dirichlet = self.eliminates_vertices();
         let condition = match self {
             Analysis::Poisson { dirichlet_values: Some(_), .. } => Condition::DirichletValues,
             _ if dirichlet => Condition::Dirichlet,
@@ -465,9 +471,7 @@ impl Analysis {
             return Ok(());
         }
         // Given values on top of eliminated vertices (Poisson with both) need the Dirichlet cell too.
-        let spec = self.operator_spec();
-        let eliminated = spec.is_some_and(|s| s.boundary == BoundarySpec::Dirichlet || s.dirichlet_vertices.is_some());
-        if cell.condition == Condition::DirichletValues && eliminated {
+        if cell.condition == Condition::DirichletValues && self.eliminates_vertices() {
             if let Status::Refused(why) = status(&Cell { condition: Condition::Dirichlet, ..cell }) {
                 return Err(AnalysisError::Unsupported(why));
             }

@@ -46,17 +46,8 @@ pub fn boundary_edges(shape: &Shape) -> Vec<[u32; 2]> {
             b.sort_unstable();
             b
         }
-        Shape::TetMesh(m) => {
-            let (faces, _) = topology::tet_boundary(&m.tets);
-            let mut b: Vec<[u32; 2]> = faces
-                .iter()
-                .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
-                .map(|[a, b]| [a.min(b), a.max(b)])
-                .collect();
-            b.sort_unstable();
-            b.dedup();
-            b
-        }
+        // The edges of the boundary faces.
+        Shape::TetMesh(m) => topology::triangle_edges(&topology::tet_boundary(&m.tets).0),
         _ => vec![],
     }
 }
