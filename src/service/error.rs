@@ -543,8 +543,9 @@ mod tests {
     }
 
     /// Every problem the service can build has a documented code: listed in `CODES` (so served at
-    /// `/problems/{code}`), in the OpenAPI document's `Problem.code` enum, and in the README; and every listed code
-    /// is one some error produces (plus the connection limit's, written by the listener).
+    /// `/problems/{code}`), in the OpenAPI document's `Problem.code` enum, and in the problem-code table of
+    /// docs/service.md; and every listed code is one some error produces (plus the connection limit's, written by
+    /// the listener).
     #[test]
     fn every_code_is_served_documented_and_in_the_openapi_document() {
         let listed: std::collections::BTreeSet<&str> = CODES.iter().map(|(c, _)| *c).collect();
@@ -568,10 +569,20 @@ mod tests {
             .flatten()
             .filter_map(Value::as_str)
             .collect();
-        let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+        let reference = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/service.md")).unwrap();
+        let section = reference.split("## Errors and problem codes").nth(1).expect("docs/service.md lists the codes");
+        let rows: Vec<&str> = section
+            .split("\n## ")
+            .next()
+            .unwrap()
+            .lines()
+            .filter_map(|l| l.strip_prefix("| `")?.split_once("` |").map(|(code, _)| code))
+            .collect();
         for c in &listed {
             assert!(in_doc.contains(c), "{c} is not in the OpenAPI document's Problem.code");
-            assert!(readme.contains(&format!("`{c}`")), "{c} has no README line");
+            assert!(rows.contains(c), "{c} has no row in the problem-code table of docs/service.md");
         }
+        let stale: Vec<_> = rows.iter().filter(|c| !listed.contains(*c)).collect();
+        assert!(stale.is_empty(), "docs/service.md's problem-code table has codes that are not in CODES: {stale:?}");
     }
 }
