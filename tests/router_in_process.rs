@@ -991,3 +991,88 @@ async fn quad_meshes_keep_their_polygons_for_the_polygon_laplacian() {
     assert_eq!(status, StatusCode::OK, "{t}");
     assert!(t["parameters"]["polygons"].as_str().unwrap().contains("cotan"), "{}", t["parameters"]);
 }
+
+#[path = "support/schema.rs"]
+mod schema;
+
+/// Every analysis' actual result over HTTP (with the id and array links the service adds, values inline) matches
+/// its schema in the committed OpenAPI document, closed: a field the schema does not name fails, and so does a
+/// field of the wrong type or a required one missing. Options that add optional blocks (counting, extrapolation,
+/// the property report, both heat and diffusion methods, values and labels) are each asked once.
+#[tokio::test]
+async fn every_analysis_result_matches_its_schema() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let schemas = schema::ResultSchemas::committed();
+    let sphere = kac_core::geometry::generate::icosphere(2);
+    let x: Vec<f64> = sphere.vertices.iter().map(|p| p[0]).collect();
+    let field: Vec<[f64; 3]> = vec![[1.0, 0.0, 0.0]; sphere.faces.len()];
+    let square = kac_core::geometry::generate::unit_square(6);
+    let upload = |mesh: &kac_core::geometry::TriangleMesh| kac_core::io::write::off(mesh);
+    let requests: Vec<(String, Value)> = vec![
+        (upload(&sphere), json!({ "analysis": "spectrum", "k": 10, "eigenvectors": true, "counting": true })),
+        (upload(&square), json!({ "analysis": "spectrum", "k": 4, "extrapolate": true, "refinements": 1 })),
+        (upload(&sphere), json!({ "analysis": "operator", "report": true })),
+        (upload(&sphere), json!({ "analysis": "hks", "k": 20 })),
+        (upload(&sphere), json!({ "analysis": "si-hks", "k": 20 })),
+        (upload(&sphere), json!({ "analysis": "wks", "k": 20 })),
+        (upload(&sphere), json!({ "analysis": "gps", "k": 10 })),
+        (upload(&sphere), json!({ "analysis": "shape-dna", "options": { "k": 10 } })),
+        (upload(&sphere), json!({ "analysis": "heat", "k": 20, "sources": [0] })),
+        (
+            upload(&square),
+            json!({ "analysis": "heat", "k": 20, "sources": [24], "operator": { "boundary": "dirichlet" } }),
+        ),
+        (upload(&sphere), json!({ "analysis": "heat", "method": "implicit", "times": [0.1], "sources": [0] })),
+        (upload(&sphere), json!({ "analysis": "geodesic", "sources": [0], "options": { "varadhan_factor": 1.0 } })),
+        (upload(&sphere), json!({ "analysis": "gradient", "function": x })),
+        (upload(&sphere), json!({ "analysis": "divergence", "field": field })),
+        (upload(&sphere), json!({ "analysis": "trees" })),
+        (upload(&sphere), json!({ "analysis": "mean-curvature" })),
+        (upload(&sphere), json!({ "analysis": "heat-curvature", "k": 60 })),
+        (upload(&square), json!({ "analysis": "heat-curvature", "k": 30 })),
+        (upload(&sphere), json!({ "analysis": "wave", "k": 20, "times": [0.1], "source": 0 })),
+        (upload(&sphere), json!({ "analysis": "schrodinger", "k": 20, "times": [0.1], "initial": x })),
+        (upload(&sphere), json!({ "analysis": "poisson", "g": x })),
+        (
+            upload(&square),
+            json!({ "analysis": "poisson", "g": vec![1.0; 49], "dirichlet_values": [[0, 0.0], [6, 1.0]] }),
+        ),
+        (upload(&sphere), json!({ "analysis": "diffuse", "times": [0.1], "source": 0, "k": 20 })),
+        (upload(&sphere), json!({ "analysis": "diffuse", "times": [0.1], "initial": x, "method": "implicit" })),
+        (upload(&sphere), json!({ "analysis": "dirichlet-energy" })),
+        (upload(&sphere), json!({ "analysis": "embed", "dimensions": 3 })),
+        (upload(&sphere), json!({ "analysis": "smooth", "alpha": 0.01, "function": x })),
+        (upload(&square), json!({ "analysis": "smooth", "alpha": 0.01, "fixed_boundary": true })),
+        (upload(&sphere), json!({ "analysis": "interpolate", "values": [[0, 1.0], [5, 0.0]] })),
+        (upload(&sphere), json!({ "analysis": "interpolate", "labels": [[0, 1], [5, 2]] })),
+    ];
+    let mut seen = std::collections::BTreeSet::new();
+    let mut failures = vec![];
+    for (off, request) in &requests {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        let (status, r) = call(&app, Request::post(uri).body(Body::from(off.clone())).unwrap()).await;
+        assert_eq!(status, StatusCode::OK, "{request}: {r}");
+        seen.insert(r["analysis"].as_str().unwrap().to_string());
+        if let Err(e) = schemas.check(&r) {
+            failures.push(format!("{request}: {e}"));
+        }
+    }
+    // A comparison: between the two shapes, through its own route.
+    let mut ids = vec![];
+    for off in [upload(&sphere), upload(&square)] {
+        let (_, shape) = call(&app, Request::post("/v1/shapes?format=off").body(Body::from(off)).unwrap()).await;
+        ids.push(shape["id"].as_str().unwrap().to_string());
+    }
+    let (status, r) = call(&app, post_json("/v1/compare?wait=60", json!({ "shape_ids": ids, "k": 5 }))).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    seen.insert(r["analysis"].as_str().unwrap().to_string());
+    if let Err(e) = schemas.check(&r) {
+        failures.push(format!("compare: {e}"));
+    }
+    assert!(failures.is_empty(), "{} results do not match their schemas:\n{}", failures.len(), failures.join("\n"));
+    let mut all: Vec<String> = kac::analysis::registry::REGISTRY.iter().map(|e| e.name.to_string()).collect();
+    all.push("compare".into());
+    all.sort();
+    assert_eq!(seen.into_iter().collect::<Vec<_>>(), all, "every analysis is checked");
+}

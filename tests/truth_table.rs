@@ -492,10 +492,20 @@ fn values_fixture(class: ShapeClass, order: u8) -> ValuesFixture {
 // ---------------------------------------------------------------------------------------------------------------
 // Running and reading results.
 
+/// Runs a request; every result is held to its schema in the committed OpenAPI document (with the id the
+/// service would add), so each supported cell also checks that its result says only what its type says.
 fn run(v: &kac_core::Validated, cache: &Cache, request: Value) -> Result<analysis::Output, String> {
     let a: Analysis = serde_json::from_value(request.clone()).map_err(|e| format!("{}: {e}", short(&request)))?;
-    analysis::run(v, &a, Hooks { cache: Some(cache), ..Default::default() }).map_err(|e| format!("{e}"))
+    let out = analysis::run(v, &a, Hooks { cache: Some(cache), ..Default::default() }).map_err(|e| format!("{e}"))?;
+    let mut stored = out.summary.clone();
+    stored["result_id"] = "0".repeat(64).into();
+    SCHEMAS.check(&stored).map_err(|e| format!("{}: the result does not match its schema: {e}", short(&request)))?;
+    Ok(out)
 }
+
+#[path = "support/schema.rs"]
+mod schema;
+static SCHEMAS: std::sync::LazyLock<schema::ResultSchemas> = std::sync::LazyLock::new(schema::ResultSchemas::committed);
 
 /// A request for a message: its first 160 characters.
 fn short(request: &Value) -> String {

@@ -20,7 +20,7 @@ pub(crate) fn extrapolation(
     refinements: usize,
     grading: bool,
     hooks: Hooks<'_>,
-) -> Result<Value, AnalysisError> {
+) -> Result<Extrapolation, AnalysisError> {
     if !(1..=3).contains(&refinements) {
         return Err(AnalysisError::invalid_parameter(format!("refinements = {refinements}: give 1, 2 or 3")));
     }
@@ -66,33 +66,24 @@ pub(crate) fn extrapolation(
         )));
     }
     // The corners to grade toward (flat triangle meshes), in the validated numbering; reported in the input's.
+    let report = |reason: &str| GradingReport { graded: false, reason: Some(reason.into()), corners: None };
     let (corners, mut grading_report) = match (&v.shape, grading) {
         (Shape::TriangleMesh(m), true) => match grading::order_limiting_corners(m, u32::from(spec.order)) {
-            Ok(c) if c.is_empty() => (c, json!({ "graded": false, "reason": "no corner limits the order" })),
+            Ok(c) if c.is_empty() => (c, report("no corner limits the order")),
             Ok(c) => {
                 let input_vertex = |shape_vertex: u32| v.vertex_map.iter().position(|&x| x == shape_vertex);
-                let listed: Vec<Value> = c
-                    .iter()
-                    .map(|x| {
-                        let mut j = json!(x);
-                        j["vertex"] = json!(input_vertex(x.vertex));
-                        j
-                    })
-                    .collect();
-                (c, json!({ "graded": true, "corners": listed }))
+                let listed: Vec<GradedCorner> = c.iter().map(|x| GradedCorner::of(x, input_vertex(x.vertex))).collect();
+                (c, GradingReport { graded: true, reason: None, corners: Some(listed) })
             }
-            Err(why) => (vec![], json!({ "graded": false, "reason": why })),
+            Err(why) => (vec![], report(&why.to_string())),
         },
-        (Shape::TriangleMesh(_), false) => (vec![], json!({ "graded": false, "reason": "grading: false" })),
-        _ => (
-            vec![],
-            json!({ "graded": false, "reason": "tet meshes are refined uniformly (re-entrant edges are not graded)" }),
-        ),
+        (Shape::TriangleMesh(_), false) => (vec![], report("grading: false")),
+        _ => (vec![], report("tet meshes are refined uniformly (re-entrant edges are not graded)")),
     };
     // The levels: uniform refinements of the input, each graded by the same map (so the size parameter still
     // halves), built one at a time. Should the map fold a triangle on some level, every level is solved again
     // uniform: the levels must be one family.
-    type Levels = (Vec<Value>, Vec<Vec<f64>>, bool);
+    type Levels = (Vec<ExtrapolationLevel>, Vec<Vec<f64>>, bool);
     let solve_levels = |graded: bool| -> Result<Levels, AnalysisError> {
         let (mut levels, mut values) = (vec![], vec![]);
         let mut plain = v.shape.clone();
@@ -117,41 +108,40 @@ pub(crate) fn extrapolation(
             let options =
                 EigenOptions { max_factor_values: hooks.limits.max_values, ..solver.eigen_options(k, hooks.threads) };
             let s = spectrum::eigs(&op.pair, &options, None, hooks.control)?;
-            levels.push(json!({
-                "unknowns": op.pair.n(),
-                "eigenvalues": s.values,
-                "completeness": s.stats.completeness,
-                "seconds": t.elapsed().as_secs_f64(),
-            }));
+            levels.push(ExtrapolationLevel {
+                unknowns: op.pair.n(),
+                eigenvalues: s.values.clone(),
+                completeness: s.stats.completeness.clone(),
+                seconds: t.elapsed().as_secs_f64(),
+            });
             values.push(s.values);
         }
         Ok((levels, values, false))
     };
     let (mut levels, mut values, folded) = solve_levels(!corners.is_empty())?;
     if folded {
-        grading_report["graded"] = json!(false);
-        grading_report["reason"] = json!(
-            "the grading map would fold a triangle near a corner (the input is too coarse there): levels left uniform"
+        grading_report = report(
+            "the grading map would fold a triangle near a corner (the input is too coarse there): levels left uniform",
         );
         (levels, values, _) = solve_levels(false)?;
     }
     let nominal = 2.0 * f64::from(spec.order);
     let e = richardson(&values, nominal);
-    Ok(json!({
-        "refinements": refinements,
-        "domain": domain,
-        "nominal_order": nominal,
-        "eigenvalues": e.iter().map(|x| x.value).collect::<Vec<_>>(),
-        "error_estimate": e.iter().map(|x| x.error_estimate).collect::<Vec<_>>(),
-        "observed_order": e.iter().map(|x| x.observed_order).collect::<Vec<_>>(),
-        "order_used": e.iter().map(|x| x.order_used).collect::<Vec<_>>(),
-        "levels": levels,
-        "grading": grading_report,
-        "curved_edges_ignored": curved,
-        "method": "Richardson extrapolation at the order observed on the last three levels (mesh sizes h, h/2, h/4), \
+    Ok(Extrapolation {
+        refinements,
+        domain,
+        nominal_order: nominal,
+        eigenvalues: e.iter().map(|x| x.value).collect(),
+        error_estimate: e.iter().map(|x| x.error_estimate).collect(),
+        observed_order: e.iter().map(|x| x.observed_order).collect(),
+        order_used: e.iter().map(|x| x.order_used).collect(),
+        levels,
+        grading: grading_report,
+        curved_edges_ignored: curved,
+        method: "Richardson extrapolation at the order observed on the last three levels (mesh sizes h, h/2, h/4), \
                    clamped to [0.5, 2 × nominal]; the nominal order with two levels or where the differences do not \
                    shrink monotonically. error_estimate: the larger of the gap to the extrapolation at the nominal \
                    order and a tenth of the correction; where no order was observed, at least the whole correction \
                    and the last level's change",
-    }))
+    })
 }

@@ -45,26 +45,25 @@ pub(crate) fn operator_output(
     report: bool,
     matrices: bool,
     hooks: Hooks<'_>,
-) -> Result<Output, AnalysisError> {
+) -> Result<Part, AnalysisError> {
     let t = std::time::Instant::now();
     let op = build_operator(v, spec)?;
     let assembly_s = t.elapsed().as_secs_f64();
-    let mut summary = merge(
-        json!({
-            "kind": v.shape.kind(),
-            "vertices": op.full_size,
-            "unknowns": op.pair.n(),
-            "nonzeros": op.pair.nnz(),
-            "mass_is_diagonal": op.pair.mass_is_diagonal,
-            "sign": "L is positive semidefinite (stiffness); the eigenproblem is L φ = λ M φ",
-            "timings": { "assembly_s": assembly_s },
-        }),
-        operator_json(&op),
-    );
+    let mut summary = OperatorSummary {
+        kind: v.shape.kind(),
+        vertices: op.full_size,
+        unknowns: op.pair.n(),
+        nonzeros: op.pair.nnz(),
+        mass_is_diagonal: op.pair.mass_is_diagonal,
+        sign: "L is positive semidefinite (stiffness); the eigenproblem is L φ = λ M φ",
+        timings: AssemblyTimings { assembly_s },
+        properties: None,
+        matrices: None,
+        operator: OperatorUsed::of(&op),
+    };
     if report {
         hooks.control.check()?;
-        summary["properties"] = serde_json::to_value(properties::report(&v.shape, &op))
-            .map_err(|e| AnalysisError::invalid_parameter(e.to_string()))?;
+        summary.properties = Some(properties::report(&v.shape, &op));
     }
     let mut arrays = vec![];
     if matrices {
@@ -83,20 +82,20 @@ pub(crate) fn operator_output(
         let cols = if op.edge_unknowns.is_some() { 2 } else { 1 };
         let map: Vec<f64> =
             unknown_vertices(v, &op).iter().flat_map(|p| p[..cols].to_vec()).map(|i| i as f64).collect();
-        summary["matrices"] = json!({
-            "numbering": "rows and columns are the operator's unknowns, 0-based; unknown_vertices gives each \
-                          unknown's vertex in the upload's numbering (the interior map under Dirichlet conditions; \
-                          with order 2 two columns: a vertex twice, or an edge unknown's endpoints)",
-            "stiffness": { "name": "L", "nonzeros_upper": l.len() / 3 },
-            "mass": { "name": "M", "nonzeros_upper": m.len() / 3 },
-            "triplets": "row, column, value of the upper triangle (row ≤ column), explicit zeros left out",
+        summary.matrices = Some(MatricesInfo {
+            numbering: "rows and columns are the operator's unknowns, 0-based; unknown_vertices gives each \
+                        unknown's vertex in the upload's numbering (the interior map under Dirichlet conditions; \
+                        with order 2 two columns: a vertex twice, or an edge unknown's endpoints)",
+            stiffness: MatrixInfo { name: "L", nonzeros_upper: l.len() / 3 },
+            mass: MatrixInfo { name: "M", nonzeros_upper: m.len() / 3 },
+            triplets: "row, column, value of the upper triangle (row ≤ column), explicit zeros left out",
         });
         for (name, data) in [("stiffness", l), ("mass", m)] {
             arrays.push(VertexArray { name, rows: data.len() / 3, cols: 3, data, columns: None });
         }
         arrays.push(VertexArray { name: "unknown_vertices", rows: map.len() / cols, cols, data: map, columns: None });
     }
-    Ok(Output { fingerprints: vec![], summary, arrays })
+    Ok(Part::new(Summary::Operator(summary), arrays))
 }
 
 /// N(λ) at each returned eigenvalue (the number of eigenvalues at or below it, counting those a band left out)
@@ -107,7 +106,7 @@ pub(crate) fn operator_output(
 /// far below any separation a mesh gives two distinct eigenvalues.
 pub const CLUSTER_REL: f64 = 1e-8;
 
-pub(crate) fn counting_json(v: &Validated, e: &Eigen, values: &[f64], spec: &OperatorSpec) -> Value {
+pub(crate) fn counting(v: &Validated, e: &Eigen, values: &[f64], spec: &OperatorSpec) -> Counting {
     let offset = e.spectrum.stats.below_band.unwrap_or(0);
     // N(λ_i) counts a cluster together: values within the solver's accuracy of λ_i (relative CLUSTER_REL, with a
     // floor for the zero modes) are one eigenvalue of multiplicity, not a staircase of rounding (K4's triple 4 came
@@ -134,20 +133,22 @@ pub(crate) fn counting_json(v: &Validated, e: &Eigen, values: &[f64], spec: &Ope
         }
         _ => None,
     };
-    json!({
-        "lambda": values,
-        "count": count,
-        "cluster_tolerance": CLUSTER_REL,
-        "weyl": weyl,
-        "dimension": dimension,
-        "measure": measure,
-        "boundary_measure": boundary,
-        "terms": match (&weyl, boundary) {
+    Counting {
+        lambda: values.to_vec(),
+        count,
+        cluster_tolerance: CLUSTER_REL,
+        dimension,
+        measure,
+        boundary_measure: boundary,
+        terms: match (&weyl, boundary) {
             (None, _) if matches!(v.shape, Shape::Graph(_)) => "none: a graph has no Weyl law",
             (None, _) => "none: the operator's intrinsic dimension is above 3 (Weyl's law is written here for 1 to 3)",
-            (Some(_), Some(_)) if dirichlet => "two: ω_d|Ω|λ^{d/2}/(2π)^d − ω_{d−1}|∂Ω|λ^{(d−1)/2}/(4(2π)^{d−1}) (Dirichlet)",
+            (Some(_), Some(_)) if dirichlet => {
+                "two: ω_d|Ω|λ^{d/2}/(2π)^d − ω_{d−1}|∂Ω|λ^{(d−1)/2}/(4(2π)^{d−1}) (Dirichlet)"
+            }
             (Some(_), Some(_)) => "two: ω_d|Ω|λ^{d/2}/(2π)^d + ω_{d−1}|∂Ω|λ^{(d−1)/2}/(4(2π)^{d−1}) (Neumann)",
             (Some(_), None) => "one: ω_d|Ω|λ^{d/2}/(2π)^d",
         },
-    })
+        weyl,
+    }
 }

@@ -49,14 +49,19 @@ pub(crate) fn basis_of(e: &Eigen, k: usize) -> Basis<'_> {
     )
 }
 
-pub(crate) fn operator_json(op: &Operator) -> Value {
-    json!({
-        "operator": op.kind.name(),
-        "mass": op.mass.name(),
-        "boundary": op.boundary,
-        "size": op.pair.n(),
-        "parameters": op.parameters,
-    })
+/// What one analysis computed, before the head every result has: its own numbers, its arrays, the fingerprints
+/// it found (shape-DNA, for the search index) and its warnings.
+pub(crate) struct Part {
+    pub body: Summary,
+    pub arrays: Vec<VertexArray>,
+    pub fingerprints: Vec<Fingerprint>,
+    pub warnings: Vec<Warning>,
+}
+
+impl Part {
+    pub fn new(body: Summary, arrays: Vec<VertexArray>) -> Self {
+        Self { body, arrays, fingerprints: vec![], warnings: vec![] }
+    }
 }
 
 /// The output of a `spectrum` request, one schema for the CLI and the service: the pairs, the operator, the
@@ -71,7 +76,7 @@ pub(crate) fn spectrum_output(
     eigenvectors: bool,
     solver: &SolverSpec,
     threads: usize,
-) -> Output {
+) -> (SpectrumSummary, Vec<VertexArray>) {
     let s = &e.spectrum;
     let k = k.min(s.values.len());
     let st = &s.stats;
@@ -82,42 +87,55 @@ pub(crate) fn spectrum_output(
         a.columns = Some(s.values[..k].to_vec());
         arrays.push(a);
     }
-    let summary = merge(
-        json!({
-            "k": k,
-            "band": band,
-            "residual_norm": "‖Lφ − λMφ‖₂ / (max(|λ|, |σ|)·‖Mφ‖₂)",
-            "sign_convention": signatures::SIGN_CONVENTION,
-            "eigenvalues": &s.values[..k],
-            "residuals": &s.residuals[..k.min(s.residuals.len())],
-            "eigenvectors": eigenvectors.then_some("eigenvectors"),
-            "solver": {
-                "method": st.method, "sigma": st.sigma, "block": st.block, "subspace": st.subspace,
-                "restarts": st.restarts, "block_steps": st.block_steps, "solves": st.solves,
-                "factor_nonzeros": st.factor_nnz, "factorization": st.factorization,
-                "below_sigma": st.below_sigma, "components": st.components, "zero_modes": st.zero_modes,
-                "completeness": st.completeness, "tol": solver.tol,
-                "threads": if threads == 0 { rayon::current_num_threads() } else { threads },
-            },
-            "timings": {
-                "read_s": null, "assembly_s": e.assembly_s, "symbolic_s": t.symbolic_s, "numeric_s": t.numeric_s,
-                "factorization_s": t.numeric_s, "iteration_s": t.iteration_s, "solve_s": t.solve_s,
-                "orthogonalize_s": t.orthogonalize_s, "rayleigh_ritz_s": t.rayleigh_ritz_s,
-                "restart_s": t.restart_s, "verify_s": t.verify_s, "total_s": e.assembly_s + t.total_s,
-            },
-            // Also at the top level, where results before the check was on by default carried it.
-            "completeness": st.completeness,
-        }),
-        operator_json(&e.operator),
-    );
-    Output { fingerprints: vec![], summary, arrays }
-}
-
-pub(crate) fn merge(mut a: Value, b: Value) -> Value {
-    if let (Some(a), Value::Object(b)) = (a.as_object_mut(), b) {
-        a.extend(b);
-    }
-    a
+    let summary = SpectrumSummary {
+        k,
+        band,
+        residual_norm: "‖Lφ − λMφ‖₂ / (max(|λ|, |σ|)·‖Mφ‖₂)",
+        sign_convention: signatures::SIGN_CONVENTION,
+        eigenvalues: s.values[..k].to_vec(),
+        residuals: s.residuals[..k.min(s.residuals.len())].to_vec(),
+        eigenvectors: eigenvectors.then(|| "eigenvectors".to_string()),
+        solver: SolverReport {
+            method: st.method,
+            sigma: st.sigma,
+            block: st.block,
+            subspace: st.subspace,
+            restarts: st.restarts,
+            block_steps: st.block_steps,
+            solves: st.solves,
+            factor_nonzeros: st.factor_nnz,
+            factorization: st.factorization,
+            below_sigma: st.below_sigma,
+            components: st.components,
+            zero_modes: st.zero_modes,
+            completeness: st.completeness.clone(),
+            tol: solver.tol,
+            threads: if threads == 0 { rayon::current_num_threads() } else { threads },
+        },
+        timings: SpectrumTimings {
+            read_s: None,
+            assembly_s: e.assembly_s,
+            symbolic_s: t.symbolic_s,
+            numeric_s: t.numeric_s,
+            factorization_s: t.numeric_s,
+            iteration_s: t.iteration_s,
+            solve_s: t.solve_s,
+            orthogonalize_s: t.orthogonalize_s,
+            rayleigh_ritz_s: t.rayleigh_ritz_s,
+            restart_s: t.restart_s,
+            verify_s: t.verify_s,
+            total_s: e.assembly_s + t.total_s,
+        },
+        // Also at the top level, where results before the check was on by default carried it.
+        completeness: st.completeness.clone(),
+        eigenvalues_source: "mesh",
+        mesh_eigenvalues: None,
+        error_estimate: None,
+        extrapolation: None,
+        counting: None,
+        operator: OperatorUsed::of(&e.operator),
+    };
+    (summary, arrays)
 }
 
 pub fn measures(v: &Validated, op: Option<&Operator>) -> Measures {
@@ -150,7 +168,7 @@ pub(crate) fn weyl_warnings(
     w: Option<&kac_core::descriptors::weyl::WeylEstimate>,
     m: &Measures,
     n: usize,
-) -> Vec<Value> {
+) -> Vec<Warning> {
     let (Some(w), Some(measure)) = (w, m.measure()) else { return vec![] };
     let Some(lk) = w.highest_eigenvalue.filter(|l| *l > 0.0) else { return vec![] };
     let h = (measure / n.max(1) as f64).powf(1.0 / f64::from(w.dimension.max(1)));
@@ -158,14 +176,14 @@ pub(crate) fn weyl_warnings(
     if per >= WEYL_MIN_SPACINGS_PER_WAVELENGTH {
         return vec![];
     }
-    vec![json!({
-        "code": "weyl-underresolved",
-        "message": format!(
+    vec![Warning::new(
+        "weyl-underresolved",
+        format!(
             "λ_k = {lk:.4e} has a wavelength of {per:.1} mesh spacings (under {WEYL_MIN_SPACINGS_PER_WAVELENGTH}): \
              the highest eigenvalues, on which Weyl's estimates rest, are several percent too high and the \
              measure and boundary estimates are biased low; refine the mesh or lower k"
         ),
-    })]
+    )]
 }
 
 /// The shape-DNA of a shape, typed (for `shape-dna` jobs and comparisons), with the eigenpairs it came from and
@@ -217,10 +235,62 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
 }
 
 fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
-    let head = json!({ "shape_id": v.id.hex(), "analysis": analysis.name(), "algorithm_version": ALGORITHM_VERSION });
     // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
     let reused = std::cell::Cell::new(false);
-    let out = match analysis {
+    let part = compute(v, analysis, hooks, &reused)?;
+    // Every result has `warnings` (the one place it says a number is outside its domain of validity), with what
+    // the operator's parameters tell (a point cloud's dimension and noise) after the analysis' own.
+    let mut warnings = part.warnings;
+    if let Some(parameters) = parameters_of(&part.body) {
+        warnings.extend(operator_warnings(parameters));
+    }
+    let head = ResultHead {
+        shape_id: v.id.hex(),
+        algorithm_version: ALGORITHM_VERSION,
+        eigenpairs_reused: reused.get(),
+        warnings,
+    };
+    let summary = serde_json::to_value(Typed { head, body: part.body })
+        .map_err(|e| AnalysisError::invalid_parameter(format!("the result could not be written as JSON: {e}")))?;
+    Ok(Output { fingerprints: part.fingerprints, summary, arrays: part.arrays })
+}
+
+/// The parameters of the operator a result used, where it names one.
+fn parameters_of(body: &Summary) -> Option<&serde_json::Map<String, Value>> {
+    Some(match body {
+        Summary::Spectrum(s) => &s.operator.parameters,
+        Summary::Operator(s) => &s.operator.parameters,
+        Summary::Hks(s) => &s.operator.parameters,
+        Summary::SiHks(s) => &s.operator.parameters,
+        Summary::Wks(s) => &s.operator.parameters,
+        Summary::Gps(s) => &s.operator.parameters,
+        Summary::ShapeDna(s) => &s.operator.parameters,
+        Summary::Heat(s) => &s.operator.parameters,
+        Summary::HeatCurvature(s) => &s.operator.parameters,
+        Summary::Wave(s) => &s.operator.parameters,
+        Summary::Schrodinger(s) => &s.operator.parameters,
+        Summary::Poisson(s) => &s.parameters,
+        Summary::Diffuse(s) => &s.operator.parameters,
+        Summary::DirichletEnergy(s) => &s.operator.parameters,
+        Summary::Embed(s) => &s.operator.parameters,
+        Summary::Smooth(s) => &s.operator.parameters,
+        Summary::Interpolate(s) => &s.operator.parameters,
+        Summary::Geodesic(_)
+        | Summary::Gradient(_)
+        | Summary::Divergence(_)
+        | Summary::Trees(_)
+        | Summary::MeanCurvature(_)
+        | Summary::Compare(_) => return None,
+    })
+}
+
+fn compute(
+    v: &Validated,
+    analysis: &Analysis,
+    hooks: Hooks<'_>,
+    reused: &std::cell::Cell<bool>,
+) -> Result<Part, AnalysisError> {
+    Ok(match analysis {
         Analysis::Spectrum { k, band, eigenvectors, counting, extrapolate, refinements, grading, operator, solver } => {
             analysis.check_options()?;
             let (e, k) = match band {
@@ -229,12 +299,12 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                     let k = e.spectrum.values.len();
                     (e, k)
                 }
-                None => (eigenpairs(v, operator, solver, *k, hooks, &reused)?, *k),
+                None => (eigenpairs(v, operator, solver, *k, hooks, reused)?, *k),
             };
-            let mut out = spectrum_output(v, &e, k, *band, *eigenvectors, solver, hooks.threads);
+            let (mut summary, arrays) = spectrum_output(v, &e, k, *band, *eigenvectors, solver, hooks.threads);
             if *counting {
                 let values = &e.spectrum.values[..k.min(e.spectrum.values.len())];
-                out.summary["counting"] = operator::counting_json(v, &e, values, operator);
+                summary.counting = Some(operator::counting(v, &e, values, operator));
             }
             if *extrapolate {
                 hooks.control.phase("extrapolating", 0, 0)?;
@@ -242,68 +312,73 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                 // The answer asked for is the headline: `eigenvalues` are the extrapolated values, with their error
                 // estimate beside them; the input mesh's own discrete values move to `mesh_eigenvalues` (they are
                 // also the first level's).
-                out.summary["mesh_eigenvalues"] = out.summary["eigenvalues"].take();
-                out.summary["eigenvalues"] = x["eigenvalues"].clone();
-                out.summary["error_estimate"] = x["error_estimate"].clone();
-                out.summary["eigenvalues_source"] = "extrapolation".into();
-                out.summary["extrapolation"] = x;
-            } else if let Some(o) = out.summary.as_object_mut() {
-                o.insert("eigenvalues_source".into(), "mesh".into());
+                summary.mesh_eigenvalues = Some(std::mem::replace(&mut summary.eigenvalues, x.eigenvalues.clone()));
+                summary.error_estimate = Some(x.error_estimate.clone());
+                summary.eigenvalues_source = "extrapolation";
+                summary.extrapolation = Some(x);
             }
-            out
+            Part::new(Summary::Spectrum(Box::new(summary)), arrays)
         }
         Analysis::Operator { report, matrices, operator } => {
             operator::operator_output(v, operator, *report, *matrices, hooks)?
         }
         Analysis::Hks { k, options, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
             hooks.control.phase("descriptor", 0, 0)?;
             let h = by_rows(&basis_of(&e, *k), &hooks.control, |b| signatures::hks(b, options), |h| &mut h.values)?;
-            let summary = json!({ "k": k, "hks": h, "options": options });
-            signature(v, &e, h.values.as_ref(), "hks", h.times.clone(), summary)
+            let a = signature(v, &e, h.values.as_ref(), "hks", h.times.clone());
+            let body = HksSummary { k: *k, hks: h, options: options.clone(), operator: OperatorUsed::of(&e.operator) };
+            Part::new(Summary::Hks(body), vec![a])
         }
         Analysis::SiHks { k, options, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
             hooks.control.phase("descriptor", 0, 0)?;
             let h = by_rows(&basis_of(&e, *k), &hooks.control, |b| signatures::si_hks(b, options), |h| &mut h.values)?;
             let columns = h.frequencies.iter().map(|&f| f as f64).collect();
-            let summary = json!({ "k": k, "si_hks": h, "options": options });
-            signature(v, &e, h.values.as_ref(), "si_hks", columns, summary)
+            let a = signature(v, &e, h.values.as_ref(), "si_hks", columns);
+            let body =
+                SiHksSummary { k: *k, si_hks: h, options: options.clone(), operator: OperatorUsed::of(&e.operator) };
+            Part::new(Summary::SiHks(body), vec![a])
         }
         Analysis::Wks { k, options, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
             hooks.control.phase("descriptor", 0, 0)?;
             let w = by_rows(&basis_of(&e, *k), &hooks.control, |b| signatures::wks(b, options), |w| &mut w.values)?;
-            let summary = json!({ "k": k, "wks": w, "options": options });
-            signature(v, &e, w.values.as_ref(), "wks", w.energies.clone(), summary)
+            let a = signature(v, &e, w.values.as_ref(), "wks", w.energies.clone());
+            let body = WksSummary { k: *k, wks: w, options: options.clone(), operator: OperatorUsed::of(&e.operator) };
+            Part::new(Summary::Wks(body), vec![a])
         }
         Analysis::Gps { k, dimensions, operator, solver } => {
-            let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
+            let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
             // Not by rows: each eigenvector's sign is fixed by its largest entry over all vertices.
             hooks.control.phase("descriptor", 0, 0)?;
             let g = signatures::gps(&basis_of(&e, *k), *dimensions)?;
-            let summary = json!({ "k": k, "gps": g });
-            signature(v, &e, g.values.as_ref(), "gps", g.eigenvalues.clone(), summary)
+            let a = signature(v, &e, g.values.as_ref(), "gps", g.eigenvalues.clone());
+            Part::new(Summary::Gps(GpsSummary { k: *k, gps: g, operator: OperatorUsed::of(&e.operator) }), vec![a])
         }
         Analysis::ShapeDna { options, operator, solver } => {
-            let (e, dna, want) = shape_dna_of(v, options, operator, solver, hooks, &reused)?;
+            let (e, dna, want) = shape_dna_of(v, options, operator, solver, hooks, reused)?;
             let b = basis_of(&e, want);
             let m = measures(v, Some(&e.operator));
             let weyl = weyl_estimate(b.values, b.zero_tol, &m).ok();
             let warnings = weyl_warnings(weyl.as_ref(), &m, e.operator.pair.n());
-            let summary = merge(
-                json!({ "shape_dna": dna, "weyl": weyl, "measures": m, "options": options, "residuals": &e.spectrum.residuals[..want.min(e.spectrum.residuals.len())], "warnings": warnings }),
-                operator_json(&e.operator),
-            );
             let family = fingerprint_family(options, operator);
             let fingerprints = vec![Fingerprint { family, shape_id: v.id.hex(), values: dna.values.clone() }];
-            Output { fingerprints, summary, arrays: vec![] }
+            let body = ShapeDnaSummary {
+                shape_dna: dna,
+                weyl,
+                measures: m,
+                options: options.clone(),
+                residuals: e.spectrum.residuals[..want.min(e.spectrum.residuals.len())].to_vec(),
+                operator: OperatorUsed::of(&e.operator),
+            };
+            Part { body: Summary::ShapeDna(body), arrays: vec![], fingerprints, warnings }
         }
         Analysis::Heat { k, times, sources, method, steps, operator, solver } => {
             let src = map_vertices(v, sources, "sources")?;
             match method {
                 HeatMethod::Spectral => {
-                    let e = eigenpairs(v, operator, solver, *k, hooks, &reused)?;
+                    let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
                     let b = basis_of(&e, *k);
                     let times = match times {
                         Some(t) => t.clone(),
@@ -314,7 +389,7 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                     let tail: Vec<f64> = times.iter().map(|&t| heat_trace_tail_bound(b.values, b.n(), t)).collect();
                     let mut arrays = vec![];
                     let src_op = to_operator_rows(&e.operator, &src)?;
-                    let mut rows_json = vec![];
+                    let mut reports = vec![];
                     for (s_in, &s) in sources.iter().zip(&src_op) {
                         hooks.control.check()?;
                         // k_t(s, ·) for every t, and what truncation can miss of the flow of the hat function at s.
@@ -322,7 +397,7 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                         let mut u0 = vec![0.0; b.n()];
                         u0[s] = 1.0;
                         let d = diffuse_spectral(&b, &e.operator.pair, &u0, &times)?;
-                        rows_json.push(json!({ "source": s_in, "hat_function_truncation_bound": d.truncation_bound }));
+                        reports.push(HeatSource { source: *s_in, hat_function_truncation_bound: d.truncation_bound });
                         let mut a = to_input_rows(v, &e.operator, kt.as_ref(), "heat_kernel");
                         a.columns = Some(times.clone());
                         arrays.push(a);
@@ -332,11 +407,19 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                         true => Some(kac_core::descriptors::heat::heat_content(&b, &e.operator.pair, &times)?),
                         false => None,
                     };
-                    let summary = merge(
-                        json!({ "method": "spectral", "k": k, "times": times, "heat_content": content, "heat_trace": trace, "heat_trace_tail_bound": tail, "sources": rows_json, "arrays": "one per source: the heat kernel k_t(source, ·), a column per time" }),
-                        operator_json(&e.operator),
-                    );
-                    Output { fingerprints: vec![], summary, arrays }
+                    let body = HeatSummary {
+                        method: HeatMethod::Spectral,
+                        times,
+                        sources: HeatSources::Spectral(reports),
+                        kernel_arrays: "one per source: the heat kernel k_t(source, ·), a column per time",
+                        k: Some(*k),
+                        steps: None,
+                        heat_trace: Some(trace),
+                        heat_trace_tail_bound: Some(tail),
+                        heat_content: content,
+                        operator: OperatorUsed::of(&e.operator),
+                    };
+                    Part::new(Summary::Heat(body), arrays)
                 }
                 HeatMethod::Implicit => {
                     let op = build_operator(v, operator)?;
@@ -355,11 +438,21 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                         a.columns = Some(times.clone());
                         arrays.push(a);
                     }
-                    let summary = merge(
-                        json!({ "method": "implicit", "steps": steps, "times": times, "sources": sources, "arrays": "one per source: the heat kernel k_t(source, ·) by backward Euler from the discrete delta M⁻¹e_source, a column per time" }),
-                        operator_json(&op),
-                    );
-                    Output { fingerprints: vec![], summary, arrays }
+                    let body = HeatSummary {
+                        method: HeatMethod::Implicit,
+                        times,
+                        sources: HeatSources::Implicit(sources.clone()),
+                        kernel_arrays:
+                            "one per source: the heat kernel k_t(source, ·) by backward Euler from the discrete \
+                                 delta M⁻¹e_source, a column per time",
+                        k: None,
+                        steps: Some(*steps),
+                        heat_trace: None,
+                        heat_trace_tail_bound: None,
+                        heat_content: None,
+                        operator: OperatorUsed::of(&op),
+                    };
+                    Part::new(Summary::Heat(body), arrays)
                 }
             }
         }
@@ -381,14 +474,17 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                 }
             }
             let a = validated_to_input(v, m.as_ref(), "distance");
-            let finite: Vec<f64> = g.distance.iter().copied().filter(|d| d.is_finite()).collect();
-            let max = finite.iter().copied().fold(0.0, f64::max);
-            let summary = json!({
-                "geodesic": g, "options": options, "max_distance": max,
-                "columns": if g.varadhan.is_some() { vec!["heat_method", "varadhan"] } else { vec!["heat_method"] },
-                "operator": "cotan", "mass": "lumped",
-            });
-            Output { fingerprints: vec![], summary, arrays: vec![a] }
+            let max = g.distance.iter().copied().filter(|d| d.is_finite()).fold(0.0, f64::max);
+            let columns = if g.varadhan.is_some() { vec!["heat_method", "varadhan"] } else { vec!["heat_method"] };
+            let body = GeodesicSummary {
+                geodesic: g,
+                options: options.clone(),
+                max_distance: max,
+                columns,
+                operator: "cotan",
+                mass: "lumped",
+            };
+            Part::new(Summary::Geodesic(body), vec![a])
         }
         Analysis::Gradient { function } => {
             let u = from_input_rows(v, function, "function")?;
@@ -397,12 +493,13 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
             let data: Vec<f64> = g.iter().flatten().copied().collect();
             let a = VertexArray { name: "gradient", rows: g.len(), cols: 3, data, columns: None };
             let norms: Vec<f64> = g.iter().map(|x| (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()).collect();
-            let summary = json!({
-                "elements": g.len(), "gradient_norm": super::tools::finite_stats(&norms),
-                "rows": "the validated mesh's elements (triangles or tetrahedra) in order; columns x, y, z",
-                "definition": "∇u = Σ u_i ∇φ_i, constant on each element (P1)",
-            });
-            Output { fingerprints: vec![], summary, arrays: vec![a] }
+            let body = GradientSummary {
+                elements: g.len(),
+                gradient_norm: FiniteStats::of(&norms),
+                rows: "the validated mesh's elements (triangles or tetrahedra) in order; columns x, y, z",
+                definition: "∇u = Σ u_i ∇φ_i, constant on each element (P1)",
+            };
+            Part::new(Summary::Gradient(body), vec![a])
         }
         Analysis::Divergence { field } => {
             hooks.control.check()?;
@@ -414,17 +511,17 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
             let pointwise: Vec<f64> = d.iter().zip(&m).map(|(x, w)| x / w).collect();
             let mat = faer::Mat::from_fn(d.len(), 2, |i, j| if j == 0 { d[i] } else { pointwise[i] });
             let a = validated_to_input(v, mat.as_ref(), "divergence");
-            let summary = json!({
-                "columns": ["integrated", "pointwise"],
-                "definition": "(div X)_i = −Σ_f |f| X_f·∇φ_i (so div ∇u = −L u); pointwise: over the lumped mass",
-            });
-            Output { fingerprints: vec![], summary, arrays: vec![a] }
+            let body = DivergenceSummary {
+                columns: vec!["integrated", "pointwise"],
+                definition: "(div X)_i = −Σ_f |f| X_f·∇φ_i (so div ∇u = −L u); pointwise: over the lumped mass",
+            };
+            Part::new(Summary::Divergence(body), vec![a])
         }
         Analysis::Trees {} => {
             let (edges, weights) = operators::edge_graph(&v.shape)
                 .ok_or_else(|| AnalysisError::not_applicable("a point cloud has no edges; build a graph first"))?;
             let t = spanning_trees(v.shape.vertex_count(), &edges, &weights)?;
-            Output { fingerprints: vec![], summary: json!({ "trees": t }), arrays: vec![] }
+            Part::new(Summary::Trees(TreesSummary { trees: t }), vec![])
         }
         tool @ (Analysis::MeanCurvature { .. }
         | Analysis::HeatCurvature { .. }
@@ -432,12 +529,12 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
         | Analysis::Schrodinger { .. }
         | Analysis::Poisson { .. }
         | Analysis::Diffuse { .. }
-        | Analysis::DirichletEnergy { .. }) => tools::run(v, tool, hooks, &reused)?,
+        | Analysis::DirichletEnergy { .. }) => tools::run(v, tool, hooks, reused)?,
         Analysis::Embed { dimensions, scaling, operator, solver } => {
             let op = build_operator(v, operator)?;
             let zeros = expected_zero_modes(&op);
             let want = (dimensions + zeros).min(op.pair.n());
-            let e = eigenpairs(v, operator, solver, want, hooks, &reused)?;
+            let e = eigenpairs(v, operator, solver, want, hooks, reused)?;
             let b = basis_of(&e, want);
             let (coords, vals) = eigenmap(&b, *dimensions, *scaling == EmbedScaling::Gps)?;
             let f = fiedler(&b, &e.operator.pair, false).ok();
@@ -448,11 +545,16 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                 let fm = faer::Mat::from_fn(f.vector.len(), 1, |i, _| f.vector[i]);
                 arrays.push(to_input_rows(v, &e.operator, fm.as_ref(), "fiedler"));
             }
-            let summary = merge(
-                json!({ "dimensions": dimensions, "scaling": scaling, "eigenvalues": vals, "fiedler": f, "components": components(&e.operator.pair).1, "sign_convention": signatures::SIGN_CONVENTION }),
-                operator_json(&e.operator),
-            );
-            Output { fingerprints: vec![], summary, arrays }
+            let body = EmbedSummary {
+                dimensions: *dimensions,
+                scaling: *scaling,
+                eigenvalues: vals,
+                fiedler: f,
+                components: components(&e.operator.pair).1,
+                sign_convention: signatures::SIGN_CONVENTION,
+                operator: OperatorUsed::of(&e.operator),
+            };
+            Part::new(Summary::Embed(body), arrays)
         }
         Analysis::Smooth { alpha, function, fixed_boundary, operator } => {
             let op = build_operator(v, operator)?;
@@ -484,11 +586,14 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
             });
             let u = pde::smooth(&op.pair, ubar.as_ref(), *alpha, fixed.as_deref())?;
             let a = to_input_rows(v, &op, u.as_ref(), "smoothed");
-            let summary = merge(
-                json!({ "alpha": alpha, "smoothed": what, "fixed_boundary": fixed_boundary, "equation": "(M + αL) u = M ū" }),
-                operator_json(&op),
-            );
-            Output { fingerprints: vec![], summary, arrays: vec![a] }
+            let body = SmoothSummary {
+                alpha: *alpha,
+                smoothed: what,
+                fixed_boundary: *fixed_boundary,
+                equation: "(M + αL) u = M ū",
+                operator: OperatorUsed::of(&op),
+            };
+            Part::new(Summary::Smooth(body), vec![a])
         }
         Analysis::Interpolate { values, labels, operator } => {
             let op = build_operator(v, operator)?;
@@ -505,11 +610,13 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                     let u = pde::harmonic(&op.pair, &known)?;
                     let um = faer::Mat::from_fn(u.len(), 1, |i, _| u[i]);
                     let a = to_input_rows(v, &op, um.as_ref(), "interpolated");
-                    Output {
-                        fingerprints: vec![],
-                        summary: merge(json!({ "known": values.len(), "method": "harmonic" }), operator_json(&op)),
-                        arrays: vec![a],
-                    }
+                    let body = InterpolateSummary {
+                        method: "harmonic",
+                        known: Some(values.len()),
+                        labels: None,
+                        operator: OperatorUsed::of(&op),
+                    };
+                    Part::new(Summary::Interpolate(body), vec![a])
                 }
                 (true, false) => {
                     let idx = map_vertices(v, &labels.iter().map(|x| x.0).collect::<Vec<_>>(), "labels")?;
@@ -521,14 +628,13 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                     a.columns = None;
                     let mut s = to_input_rows(v, &op, r.scores.as_ref(), "scores");
                     s.columns = Some(r.classes.iter().map(|&c| c as f64).collect());
-                    Output {
-                        fingerprints: vec![],
-                        summary: merge(
-                            json!({ "labels": r, "method": "harmonic (Zhu et al. 2003)" }),
-                            operator_json(&op),
-                        ),
-                        arrays: vec![a, s],
-                    }
+                    let body = InterpolateSummary {
+                        method: "harmonic (Zhu et al. 2003)",
+                        known: None,
+                        labels: Some(r),
+                        operator: OperatorUsed::of(&op),
+                    };
+                    Part::new(Summary::Interpolate(body), vec![a, s])
                 }
                 _ => {
                     return Err(AnalysisError::invalid_parameter(
@@ -537,22 +643,12 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
                 }
             }
         }
-    };
-    let mut summary = merge(head, out.summary);
-    // Every result has `warnings` (the one place it says a number is outside its domain of validity), with what
-    // the operator's parameters tell (a point cloud's dimension and noise) after the analysis' own.
-    let mut warnings = summary.get("warnings").and_then(Value::as_array).cloned().unwrap_or_default();
-    warnings.extend(operator_warnings(&summary["parameters"]));
-    if let Some(o) = summary.as_object_mut() {
-        o.insert("eigenpairs_reused".into(), reused.get().into());
-        o.insert("warnings".into(), Value::Array(warnings));
-    }
-    Ok(Output { fingerprints: out.fingerprints, summary, arrays: out.arrays })
+    })
 }
 
 /// A warning: a code (stable, documented in the README) and a sentence.
-pub(crate) fn warning(code: &str, message: String) -> Value {
-    json!({ "code": code, "message": message })
+pub(crate) fn warning(code: &str, message: String) -> Warning {
+    Warning::new(code, message)
 }
 
 /// How far a point cloud's noise level (after denoising) may reach relative to its spacing before the operator is
@@ -566,7 +662,8 @@ pub const NOISE_WARN_SPACINGS: f64 = 1.0;
 ///   operator is built on points still scattered about their surface;
 /// - `cloud-clumps-kept`: small separate pieces were kept (they hold more than the share that may be dropped);
 /// - `cloud-normalization-chapter`: the chapter's uniform-weight normalization, whose spectra are biased.
-pub(crate) fn operator_warnings(parameters: &Value) -> Vec<Value> {
+pub(crate) fn operator_warnings(parameters: &serde_json::Map<String, Value>) -> Vec<Warning> {
+    let parameters = &Value::Object(parameters.clone());
     let mut w = vec![];
     let (given, m, estimate) = (
         parameters["intrinsic_dimension_given"].as_bool(),
@@ -620,18 +717,17 @@ pub(crate) fn operator_warnings(parameters: &Value) -> Vec<Value> {
     w
 }
 
-/// The output of a per-vertex signature: its summary with the operator's, and its values as one array.
+/// A per-vertex signature's values as one array, a column per time, energy or frequency.
 pub(crate) fn signature(
     v: &Validated,
     e: &Eigen,
     values: faer::MatRef<'_, f64>,
     name: &'static str,
     columns: Vec<f64>,
-    summary: Value,
-) -> Output {
+) -> VertexArray {
     let mut a = to_input_rows(v, &e.operator, values, name);
     a.columns = Some(columns);
-    Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays: vec![a] }
+    a
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ pub(crate) fn run(
     analysis: &Analysis,
     hooks: Hooks<'_>,
     reused: &std::cell::Cell<bool>,
-) -> Result<Output, AnalysisError> {
+) -> Result<Part, AnalysisError> {
     Ok(match analysis {
         Analysis::MeanCurvature {} => {
             let Shape::TriangleMesh(mesh) = &v.shape else {
@@ -24,18 +24,18 @@ pub(crate) fn run(
             let k = curvature::angle_defect(mesh)?;
             let column = |x: &[f64]| faer::Mat::from_fn(x.len(), 1, |i, _| x[i]);
             let normals = faer::Mat::from_fn(h.normals.len(), 3, |i, j| h.normals[i][j]);
-            let summary = json!({
-                "mean_curvature": finite_stats(&h.h),
-                "gaussian_curvature": finite_stats(&k),
-                "method": h,
-                "convention": "M⁻¹LX = 2Hn with Δ = −∇·∇ and n outward: H = 1/r on a sphere of radius r",
-            });
             let arrays = vec![
                 validated_to_input(v, column(&h.h).as_ref(), "mean_curvature"),
                 validated_to_input(v, normals.as_ref(), "normals"),
                 validated_to_input(v, column(&k).as_ref(), "gaussian_curvature"),
             ];
-            Output { fingerprints: vec![], summary, arrays }
+            let body = MeanCurvatureSummary {
+                mean_curvature: FiniteStats::of(&h.h),
+                gaussian_curvature: FiniteStats::of(&k),
+                method: h,
+                convention: "M⁻¹LX = 2Hn with Δ = −∇·∇ and n outward: H = 1/r on a sphere of radius r",
+            };
+            Part::new(Summary::MeanCurvature(body), arrays)
         }
         Analysis::HeatCurvature { k, times, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
@@ -83,21 +83,28 @@ pub(crate) fn run(
                     ),
                 ));
             }
-            let mut summary = json!({
-                "k": k, "heat_curvature": finite_stats(&hc.k), "fit": hc, "boundary_vertices": on_boundary,
-                "resolved_time": resolved, "warnings": warnings,
-            });
+            let mut summary = HeatCurvatureSummary {
+                k: *k,
+                heat_curvature: FiniteStats::of(&hc.k),
+                fit: hc,
+                boundary_vertices: on_boundary,
+                resolved_time: resolved,
+                boundary_note: None,
+                gaussian_curvature: None,
+                operator: OperatorUsed::of(&e.operator),
+            };
             if on_boundary > 0 || e.operator.dirichlet() {
-                summary["boundary_note"] = json!(
-                    "the shape has a boundary: boundary vertices get no value, and within about √t of it the heat kernel's boundary term biases the estimate"
+                summary.boundary_note = Some(
+                    "the shape has a boundary: boundary vertices get no value, and within about √t of it the heat \
+                     kernel's boundary term biases the estimate",
                 );
             }
             if let Shape::TriangleMesh(mesh) = &v.shape {
                 let ad = curvature::angle_defect(mesh)?;
-                summary["gaussian_curvature"] = finite_stats(&ad);
+                summary.gaussian_curvature = Some(FiniteStats::of(&ad));
                 arrays.push(validated_to_input(v, column(&ad).as_ref(), "gaussian_curvature"));
             }
-            Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays }
+            Part { body: Summary::HeatCurvature(summary), arrays, fingerprints: vec![], warnings }
         }
         Analysis::Wave { k, times, start, velocity, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
@@ -111,12 +118,18 @@ pub(crate) fn run(
             let drift = energy.iter().map(|x| (x - e0).abs()).fold(0.0, f64::max) / e0.abs().max(f64::MIN_POSITIVE);
             let mut a = to_input_rows(v, &e.operator, u.as_ref(), "wave");
             a.columns = Some(times.clone());
-            let summary = json!({
-                "k": k, "times": times, "initial": how, "dropped_m_norm": dropped, "velocity": velocity.is_some(),
-                "energy": energy, "energy_relative_drift": drift,
-                "equation": "∂²u/∂t² = −Δu, u(t) = Σ (a cos √λt + b sin √λt/√λ) φ; energy ½(u̇ᵀMu̇ + uᵀLu), conserved",
-            });
-            Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays: vec![a] }
+            let body = WaveSummary {
+                k: *k,
+                times: times.clone(),
+                initial: how,
+                dropped_m_norm: dropped,
+                velocity: velocity.is_some(),
+                energy,
+                energy_relative_drift: drift,
+                equation: "∂²u/∂t² = −Δu, u(t) = Σ (a cos √λt + b sin √λt/√λ) φ; energy ½(u̇ᵀMu̇ + uᵀLu), conserved",
+                operator: OperatorUsed::of(&e.operator),
+            };
+            Part::new(Summary::Wave(body), vec![a])
         }
         Analysis::Schrodinger { k, times, start, initial_imag, operator, solver } => {
             let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
@@ -129,11 +142,16 @@ pub(crate) fn run(
             let mut b = to_input_rows(v, &e.operator, im.as_ref(), "schrodinger_im");
             a.columns = Some(times.clone());
             b.columns = Some(times.clone());
-            let summary = json!({
-                "k": k, "times": times, "initial": how, "m_norm": norms, "dropped_m_norm": dropped,
-                "equation": "∂ψ/∂t = −iΔψ, ψ(t) = Σ e^{−iλt}⟨ψ₀, φ⟩_M φ",
-            });
-            Output { fingerprints: vec![], summary: merge(summary, operator_json(&e.operator)), arrays: vec![a, b] }
+            let body = SchrodingerSummary {
+                k: *k,
+                times: times.clone(),
+                initial: how,
+                m_norm: norms,
+                dropped_m_norm: dropped,
+                equation: "∂ψ/∂t = −iΔψ, ψ(t) = Σ e^{−iλt}⟨ψ₀, φ⟩_M φ",
+                operator: OperatorUsed::of(&e.operator),
+            };
+            Part::new(Summary::Schrodinger(body), vec![a, b])
         }
         Analysis::Poisson { g, dirichlet_values, operator } => {
             let op = build_operator(v, operator)?;
@@ -161,13 +179,19 @@ pub(crate) fn run(
             };
             let f = pde::poisson_with(&op.pair, &g_op, condition)?;
             let column = faer::Mat::from_fn(f.values.len(), 1, |i, _| f.values[i]);
-            let solved = f.boundary;
-            let summary = json!({ "poisson": f, "equation": "Δf = g, L f = M g (Δ = −∇·∇)" });
             let arrays = vec![to_input_rows(v, &op, column.as_ref(), "solution")];
-            let mut summary = merge(summary, operator_json(&op));
-            summary["operator_boundary"] = summary["boundary"].clone();
-            summary["boundary"] = solved.into();
-            Output { fingerprints: vec![], summary, arrays }
+            let used = OperatorUsed::of(&op);
+            let body = PoissonSummary {
+                boundary: f.boundary,
+                poisson: f,
+                equation: "Δf = g, L f = M g (Δ = −∇·∇)",
+                operator_boundary: used.boundary,
+                operator: used.operator,
+                mass: used.mass,
+                size: used.size,
+                parameters: used.parameters,
+            };
+            Part::new(Summary::Poisson(body), arrays)
         }
         Analysis::Diffuse { times, start, diffusivity, method, k, steps, operator, solver } => {
             if !(*diffusivity > 0.0 && diffusivity.is_finite()) {
@@ -177,7 +201,7 @@ pub(crate) fn run(
             }
             // ∂u/∂t = −αΔu: the unit-diffusivity solution at αt.
             let scaled: Vec<f64> = times.iter().map(|t| diffusivity * t).collect();
-            let (mut a, op_json, detail) = match method {
+            let (mut a, used, how, spectral, steps) = match method {
                 HeatMethod::Spectral => {
                     let e = eigenpairs(v, operator, solver, *k, hooks, reused)?;
                     hooks.control.phase("descriptor", 0, 0)?;
@@ -185,19 +209,29 @@ pub(crate) fn run(
                     let d = diffuse_spectral(&basis_of(&e, *k), &e.operator.pair, &u0, &scaled)?;
                     let a = to_input_rows(v, &e.operator, d.values.as_ref(), "diffused");
                     // `spectral.times` are the scaled times αt the unit-diffusivity solution was taken at.
-                    (a, operator_json(&e.operator), json!({ "initial": how, "spectral": d, "scaled_times": scaled }))
+                    (a, OperatorUsed::of(&e.operator), how, Some((d, scaled)), None)
                 }
                 HeatMethod::Implicit => {
                     let op = build_operator(v, operator)?;
                     let (u0, how) = initial_function(v, &op, start)?;
                     let u = pde::heat_implicit(&op.pair, &u0, &scaled, *steps)?;
                     let a = to_input_rows(v, &op, u.as_ref(), "diffused");
-                    (a, operator_json(&op), json!({ "initial": how, "steps": steps }))
+                    (a, OperatorUsed::of(&op), how, None, Some(*steps))
                 }
             };
             a.columns = Some(times.clone());
-            let summary = merge(json!({ "times": times, "diffusivity": diffusivity, "method": method }), detail);
-            Output { fingerprints: vec![], summary: merge(summary, op_json), arrays: vec![a] }
+            let (spectral, scaled_times) = spectral.unzip();
+            let body = DiffuseSummary {
+                times: times.clone(),
+                diffusivity: *diffusivity,
+                method: *method,
+                initial: how,
+                spectral,
+                scaled_times,
+                steps,
+                operator: used,
+            };
+            Part::new(Summary::Diffuse(body), vec![a])
         }
         Analysis::DirichletEnergy { function, operator } => {
             let op = build_operator(v, operator)?;
@@ -217,17 +251,22 @@ pub(crate) fn run(
             let n = op.pair.n();
             let mut lu = vec![0.0; n];
             let mut mu = vec![0.0; n];
-            let energies: Vec<Value> = columns
+            let energies: Vec<Energy> = columns
                 .iter()
                 .map(|(name, u)| {
                     operators::sparse::matvec(&op.pair.pattern, &op.pair.stiffness, u, &mut lu);
                     operators::sparse::matvec(&op.pair.pattern, &op.pair.mass, u, &mut mu);
                     let (ulu, umu) = (dot(u, &lu), dot(u, &mu));
-                    json!({ "of": name, "energy": 0.5 * ulu, "u_m_u": umu, "rayleigh_quotient": ulu / umu })
+                    let rayleigh_quotient = (umu > 0.0).then(|| ulu / umu);
+                    Energy { of: name.clone(), energy: 0.5 * ulu, u_m_u: umu, rayleigh_quotient }
                 })
                 .collect();
-            let summary = json!({ "dirichlet_energy": energies, "definition": "E(u) = ½ uᵀLu = ½ ∫ |∇u|²" });
-            Output { fingerprints: vec![], summary: merge(summary, operator_json(&op)), arrays: vec![] }
+            let body = DirichletEnergySummary {
+                dirichlet_energy: energies,
+                definition: "E(u) = ½ uᵀLu = ½ ∫ |∇u|²",
+                operator: OperatorUsed::of(&op),
+            };
+            Part::new(Summary::DirichletEnergy(body), vec![])
         }
         other => unreachable!("the runner passes only the tools here, not {}", other.name()),
     })
@@ -246,9 +285,12 @@ pub(crate) fn initial_function(
     v: &Validated,
     op: &Operator,
     start: &InitialData,
-) -> Result<(Vec<f64>, Value), AnalysisError> {
+) -> Result<(Vec<f64>, InitialGiven), AnalysisError> {
     match (&start.initial, start.source) {
-        (Some(f), None) => Ok((input_function(v, op, f, "initial")?, json!({ "given": "per vertex" }))),
+        (Some(f), None) => Ok((
+            input_function(v, op, f, "initial")?,
+            InitialGiven { given: Some("per vertex"), source: None, width: None },
+        )),
         (None, Some(s)) => {
             let pos = v
                 .shape
@@ -268,7 +310,7 @@ pub(crate) fn initial_function(
                 .iter()
                 .map(|p| (-(0..3).map(|k| (p[k] - c[k]).powi(2)).sum::<f64>() / (2.0 * w * w)).exp())
                 .collect();
-            Ok((op.restrict(&bump), json!({ "source": s, "width": w })))
+            Ok((op.restrict(&bump), InitialGiven { given: None, source: Some(s), width: Some(w) }))
         }
         _ => Err(AnalysisError::invalid_parameter(
             "give either `initial` (per vertex) or `source` (with an optional `width`)",
@@ -278,16 +320,4 @@ pub(crate) fn initial_function(
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-/// Minimum, maximum, mean and count of the finite values (NaN marks vertices without one).
-pub(crate) fn finite_stats(x: &[f64]) -> Value {
-    let f: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
-    let n = f.len();
-    json!({
-        "min": f.iter().copied().fold(f64::INFINITY, f64::min),
-        "max": f.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-        "mean": if n > 0 { f.iter().sum::<f64>() / n as f64 } else { f64::NAN },
-        "vertices": n,
-    })
 }

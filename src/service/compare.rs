@@ -5,10 +5,12 @@
 
 use super::error::ApiError;
 use super::store::StoredShape;
-use crate::analysis::{self, AnalysisError, Fingerprint, Hooks, OperatorSpec, Output, SolverSpec};
+use crate::analysis::{
+    self, AnalysisError, CompareFailure, CompareNearest, CompareNeighbour, CompareSummary, Fingerprint, Hooks,
+    OperatorSpec, Output, SolverSpec, Summary,
+};
 use kac_core::descriptors::shape_dna::{self, Metric, Normalization, Reweighting, ShapeDnaOptions};
 use serde::{Deserialize, Serialize};
-use serde_json::json;
 use std::sync::Arc;
 
 /// The most shapes one comparison takes.
@@ -81,7 +83,12 @@ pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) 
             Err(e) if e.is_stop() => return Err(e),
             Err(e) => {
                 let (_, p) = ApiError::Analysis(e).problem();
-                failures.push(json!({ "shape_id": s.id, "code": p.code, "status": p.status, "detail": p.detail }));
+                failures.push(CompareFailure {
+                    shape_id: s.id.clone(),
+                    code: p.code.to_string(),
+                    status: p.status,
+                    detail: p.detail,
+                });
             }
         }
     }
@@ -96,22 +103,24 @@ pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) 
         .map(|i| {
             let near: Vec<_> = shape_dna::nearest(&distances, i, req.neighbours)
                 .into_iter()
-                .map(|(j, d)| json!({ "shape_id": ids[j], "distance": d }))
+                .map(|(j, d)| CompareNeighbour { shape_id: ids[j].clone(), distance: d })
                 .collect();
-            json!({ "shape_id": ids[i], "nearest": near })
+            CompareNearest { shape_id: ids[i].clone(), nearest: near }
         })
         .collect();
-    let summary = json!({
-        "analysis": "compare",
-        "descriptor": "shape-dna",
-        "options": options,
-        "metric": req.metric.name(),
-        "operator": req.operator,
-        "shape_ids": ids,
-        "fingerprints": fingerprints,
-        "distances": distances,
-        "nearest": nearest,
-        "failures": failures,
+    let summary = Summary::Compare(CompareSummary {
+        descriptor: "shape-dna",
+        options,
+        metric: req.metric.name(),
+        operator: req.operator.clone(),
+        shape_ids: ids,
+        fingerprints,
+        distances,
+        nearest,
+        failures,
+        algorithm_version: analysis::ALGORITHM_VERSION,
+        warnings: vec![],
     });
+    let summary = serde_json::to_value(summary).map_err(|e| AnalysisError::invalid_parameter(e.to_string()))?;
     Ok(Output { fingerprints: found, summary, arrays: vec![] })
 }

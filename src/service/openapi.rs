@@ -43,6 +43,7 @@ problem+json with a stable `type` (`/problems/{code}`).",
         super::compare::CompareRequest,
         super::search::SearchRequest,
         super::jobs::JobView,
+        super::routes::JobResource,
         super::jobs::Status,
         super::jobs::JobProgress,
         crate::analysis::Analysis,
@@ -55,8 +56,11 @@ problem+json with a stable `type` (`/problems/{code}`).",
         super::routes::SearchResult,
         super::routes::Neighbour,
         super::routes::AnalysisResult,
+        super::routes::ResultEnvelope,
         super::routes::ArrayLinks,
-        super::routes::Warning,
+        crate::analysis::Summary,
+        crate::analysis::ResultHead,
+        crate::analysis::Warning,
         crate::analysis::registry::AnalysisSupport,
         crate::analysis::registry::ShapeClass,
         kac_core::io::Format,
@@ -76,6 +80,7 @@ pub fn document() -> String {
     let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
     close_request_schemas(&mut doc);
     name_analysis_variants(&mut doc);
+    name_result_variants(&mut doc);
     type_raw_bodies(&mut doc);
     list_problem_codes(&mut doc);
     serde_json::to_string_pretty(&doc).unwrap_or_default()
@@ -97,36 +102,12 @@ fn name_analysis_variants(doc: &mut serde_json::Value) {
     for v in variants {
         let mut flat = Map::new();
         let (mut props, mut required) = (Map::new(), Vec::<Value>::new());
-        let parts: Vec<Value> = match v.get("allOf").and_then(Value::as_array) {
-            Some(parts) => parts.clone(),
-            None => vec![v.clone()],
-        };
-        for part in parts {
-            let part = match part.get("$ref").and_then(Value::as_str) {
-                Some(r) => doc.pointer(&r.replacen('#', "", 1)).cloned().unwrap_or(Value::Null),
-                None => part,
-            };
-            if let Some(p) = part.get("properties").and_then(Value::as_object) {
-                props.extend(p.clone());
-            }
-            for r in part.get("required").and_then(Value::as_array).into_iter().flatten() {
-                if !required.contains(r) {
-                    required.push(r.clone());
-                }
-            }
-        }
+        flatten_into(doc, &v, &mut props, &mut required);
         let Some(name) = props.get("analysis").and_then(|a| a.pointer("/enum/0")).and_then(Value::as_str) else {
             return;
         };
         let name = name.to_string();
-        let pascal: String = name
-            .split('-')
-            .map(|w| {
-                let mut c = w.chars();
-                c.next().map(|f| f.to_ascii_uppercase().to_string() + c.as_str()).unwrap_or_default()
-            })
-            .collect();
-        let component = format!("{pascal}Analysis");
+        let component = format!("{}Analysis", pascal(&name));
         if let Some(d) = v.get("description") {
             flat.insert("description".into(), d.clone());
         }
@@ -169,6 +150,138 @@ fn name_analysis_variants(doc: &mut serde_json::Value) {
     if let Some(Value::Object(a)) = doc.pointer_mut("/components/schemas/Analysis") {
         a.insert("oneOf".into(), Value::Array(refs));
         a.insert("discriminator".into(), serde_json::json!({ "propertyName": "analysis", "mapping": mapping }));
+    }
+}
+
+/// `spectrum` → `Spectrum`, `si-hks` → `SiHks`.
+fn pascal(name: &str) -> String {
+    name.split('-')
+        .map(|w| {
+            let mut c = w.chars();
+            c.next().map(|f| f.to_ascii_uppercase().to_string() + c.as_str()).unwrap_or_default()
+        })
+        .collect()
+}
+
+/// The properties and required fields of an object schema, following `$ref` and `allOf` at its top (the way
+/// serde's `flatten` and an internally tagged enum compose a schema).
+fn flatten_into(
+    doc: &serde_json::Value,
+    schema: &serde_json::Value,
+    props: &mut serde_json::Map<String, serde_json::Value>,
+    required: &mut Vec<serde_json::Value>,
+) {
+    use serde_json::Value;
+    if let Some(r) = schema.get("$ref").and_then(Value::as_str) {
+        if let Some(target) = doc.pointer(&r.replacen('#', "", 1)) {
+            flatten_into(doc, &target.clone(), props, required);
+        }
+        return;
+    }
+    for part in schema.get("allOf").and_then(Value::as_array).into_iter().flatten() {
+        flatten_into(doc, part, props, required);
+    }
+    if let Some(p) = schema.get("properties").and_then(Value::as_object) {
+        props.extend(p.clone());
+    }
+    for r in schema.get("required").and_then(Value::as_array).into_iter().flatten() {
+        if !required.contains(r) {
+            required.push(r.clone());
+        }
+    }
+}
+
+/// The results as named, flat schemas under a discriminator, as the analyses are ([`name_analysis_variants`]):
+/// each variant of `Summary` (an analysis' own fields, tagged by `analysis`) with the fields every result has
+/// (`ResultHead`; a comparison names no one shape and has its own) and those the service adds
+/// (`ResultEnvelope`: `result_id`, `arrays`) becomes `{Name}Result`, and `AnalysisResult` is their union. The
+/// pieces composed are then dropped from the components: only the flat schemas name a result.
+fn name_result_variants(doc: &mut serde_json::Value) {
+    use serde_json::{Map, Value};
+    let Some(variants) = doc.pointer("/components/schemas/Summary/oneOf").and_then(Value::as_array).cloned() else {
+        return;
+    };
+    let head = doc.pointer("/components/schemas/ResultHead").cloned().unwrap_or(Value::Null);
+    let envelope = doc.pointer("/components/schemas/ResultEnvelope").cloned().unwrap_or(Value::Null);
+    let (mut refs, mut mapping, mut composed) =
+        (vec![], Map::new(), vec!["Summary", "ResultHead", "ResultEnvelope", "OperatorUsed"]);
+    let mut composed_names = vec![];
+    let mut flats = vec![];
+    for v in &variants {
+        let (mut props, mut required) = (Map::new(), Vec::<Value>::new());
+        flatten_into(doc, v, &mut props, &mut required);
+        let Some(name) = props.get("analysis").and_then(|a| a.pointer("/enum/0")).and_then(Value::as_str) else {
+            return;
+        };
+        let name = name.to_string();
+        // The variant's own schema (its description, and to drop it afterwards).
+        let own = v
+            .get("allOf")
+            .and_then(Value::as_array)
+            .and_then(|parts| parts.iter().find_map(|p| p.get("$ref").and_then(Value::as_str)))
+            .map(|r| r.trim_start_matches("#/components/schemas/").to_string());
+        let description =
+            own.as_ref().and_then(|o| doc.pointer(&format!("/components/schemas/{o}/description"))).cloned();
+        let mut all = Map::new();
+        let mut req = vec![];
+        let parts: Vec<&Value> = if name == "compare" { vec![&envelope] } else { vec![&head, &envelope] };
+        for part in parts {
+            flatten_into(doc, part, &mut all, &mut req);
+        }
+        // A field of the analysis' own under a name the head or the service uses would be overwritten in the
+        // stored result (a `heat` result once had a string `arrays`).
+        if let Some(clash) = all.keys().find(|k| props.contains_key(*k)) {
+            panic!("the {name} result's field `{clash}` is also a field every result has");
+        }
+        // `analysis` first, then the analysis' own fields, then the head's and the envelope's.
+        let mut ordered = Map::new();
+        if let Some(a) = props.remove("analysis") {
+            ordered.insert("analysis".into(), a);
+        }
+        ordered.extend(props);
+        ordered.extend(all);
+        for r in req {
+            if !required.contains(&r) {
+                required.push(r);
+            }
+        }
+        let component = format!("{}Result", pascal(&name));
+        let mut flat = Map::new();
+        if let Some(d) = description {
+            flat.insert("description".into(), d);
+        }
+        flat.insert("type".into(), "object".into());
+        flat.insert("properties".into(), Value::Object(ordered));
+        flat.insert("required".into(), Value::Array(required));
+        let reference = format!("#/components/schemas/{component}");
+        mapping.insert(name, reference.clone().into());
+        refs.push(serde_json::json!({ "$ref": reference }));
+        flats.push((component, Value::Object(flat)));
+        if let Some(o) = own {
+            composed_names.push(o);
+        }
+    }
+    composed.extend(composed_names.iter().map(String::as_str));
+    let Some(Value::Object(schemas)) = doc.pointer_mut("/components/schemas") else { return };
+    for (component, flat) in flats {
+        schemas.insert(component, flat);
+    }
+    schemas.insert(
+        "AnalysisResult".into(),
+        serde_json::json!({
+            "description": "A finished result: one schema per analysis, chosen by `analysis`.",
+            "oneOf": refs,
+            "discriminator": { "propertyName": "analysis", "mapping": mapping },
+        }),
+    );
+    // Drop the pieces no schema refers to any more.
+    for name in composed {
+        let reference = format!("\"#/components/schemas/{name}\"");
+        let text = serde_json::to_string(&*schemas).unwrap_or_default();
+        let elsewhere = text.matches(&reference).count();
+        if elsewhere == 0 {
+            schemas.remove(name);
+        }
     }
 }
 
@@ -244,7 +357,7 @@ fn type_raw_bodies(doc: &mut serde_json::Value) {
                         // fields (not reproduced by hand: every event the service writes carries them).
                         serde_json::json!({
                             "type": "object",
-                            "description": "a `job` event's data: the job as GET /v1/jobs/{id} shows it (JobView)"
+                            "description": "a `job` event's data: the job as GET /v1/jobs/{id} shows it (JobResource)"
                         })
                     } else if ct.starts_with("text/") {
                         serde_json::json!({ "type": "string" })

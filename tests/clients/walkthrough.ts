@@ -63,7 +63,11 @@ async function main(base: string, sphere: string, torus: string): Promise<void> 
   const spectrum: Schemas["SpectrumJobRequest"] = { analysis: "spectrum", shape_id: shape.id, k: 10, eigenvectors: true };
   const job = await finished(base, await call<Job>(base, "POST", "/v1/jobs", spectrum));
   const result = await call<Result>(base, "GET", `/v1/results/${job.id}`);
-  check(result.analysis === "spectrum" && result.shape_id === shape.id, `result ${result.analysis}`);
+  // The union of results narrows on `analysis`: past this line `result` is a SpectrumResult, every field typed.
+  if (result.analysis !== "spectrum") throw new Error(`result ${result.analysis}`);
+  check(result.shape_id === shape.id && result.completeness?.complete === true, "a complete spectrum");
+  const exact = [0, 2, 2, 2, 6, 6, 6, 6, 6, 12];
+  check(result.eigenvalues.every((v, i) => Math.abs(v - exact[i]) <= 0.03 * Math.max(exact[i], 1)), "eigenvalues");
   const eigenvectors = result.arrays?.["eigenvectors"];
   check(eigenvectors !== undefined && eigenvectors.rows === 642 && eigenvectors.cols === 10, "the eigenvectors' links");
   const npy = await fetch(base + eigenvectors!.npy);

@@ -88,6 +88,29 @@ impl From<std::io::Error> for JobError {
     }
 }
 
+/// One array of a result: its shape, what its columns are, and where to fetch it.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct ArrayLinks {
+    pub rows: usize,
+    pub cols: usize,
+    /// What the columns are (times, energies, eigenvalues, …), where they are numbers.
+    pub columns: Option<Vec<f64>>,
+    /// float64 `.npy`, rows in the upload's vertex numbering.
+    pub npy: String,
+    /// The shape as binary PLY coloured by a column (per-vertex arrays).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ply: Option<String>,
+    /// A matrix as Matrix Market (`operator` results).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mtx: Option<String>,
+    /// A matrix as SciPy `.npz` (`operator` results).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub npz: Option<String>,
+    /// The values, rows of numbers (null for NaN), unless `values=false` (added to each response, not stored).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub values: Option<Vec<Vec<Option<f64>>>>,
+}
+
 /// What clients see of a job.
 #[derive(Debug, Clone, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct JobView {

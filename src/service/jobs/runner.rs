@@ -287,15 +287,24 @@ pub fn result_of(out: analysis::Output, id: &str) -> StoredResult {
     let mut arrays = serde_json::Map::new();
     for a in &out.arrays {
         let link = |ext: &str| format!("/v1/results/{id}/arrays/{}.{ext}", a.name);
-        let mut meta = serde_json::json!({ "rows": a.rows, "cols": a.cols, "columns": a.columns, "npy": link("npy") });
+        let mut meta = super::ArrayLinks {
+            rows: a.rows,
+            cols: a.cols,
+            columns: a.columns.clone(),
+            npy: link("npy"),
+            ply: None,
+            mtx: None,
+            npz: None,
+            values: None,
+        };
         if analysis::MATRIX_ARRAYS.contains(&a.name) {
             // A matrix: its triplets as .npy, the matrix itself as Matrix Market and SciPy .npz.
-            meta["mtx"] = link("mtx").into();
-            meta["npz"] = link("npz").into();
+            meta.mtx = Some(link("mtx"));
+            meta.npz = Some(link("npz"));
         } else if analysis::is_per_vertex(a.name) {
-            meta["ply"] = link("ply").into();
+            meta.ply = Some(link("ply"));
         }
-        arrays.insert(a.name.into(), meta);
+        arrays.insert(a.name.into(), serde_json::to_value(meta).unwrap_or_default());
     }
     if let Some(o) = summary.as_object_mut() {
         o.insert("result_id".into(), id.into());

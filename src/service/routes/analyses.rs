@@ -69,19 +69,39 @@ pub(crate) fn merge_arrays(value: &mut Value, arrays: &[(String, Bytes)]) -> Res
     Ok(())
 }
 
-pub(crate) fn job_response(status: StatusCode, v: &JobView) -> Response {
-    with_location((status, Json(job_json(v))).into_response(), &format!("/v1/jobs/{}", v.id))
+/// Where a job's related resources are.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct JobLinks {
+    /// `/v1/jobs/{id}`.
+    #[serde(rename = "self")]
+    pub self_: String,
+    /// `/v1/jobs/{id}/events`: its progress as server-sent events.
+    pub events: String,
+    /// `/v1/shapes/{shape_id}`.
+    pub shape: String,
 }
 
-pub(crate) fn job_json(v: &JobView) -> Value {
-    let mut j = serde_json::to_value(v).unwrap_or(Value::Null);
-    if let Some(o) = j.as_object_mut() {
-        o.insert(
-            "links".into(),
-            json!({ "self": format!("/v1/jobs/{}", v.id), "events": format!("/v1/jobs/{}/events", v.id), "shape": format!("/v1/shapes/{}", v.shape_id) }),
-        );
+/// A job as the routes answer it: its view and its links.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct JobResource {
+    #[serde(flatten)]
+    pub job: JobView,
+    pub links: JobLinks,
+}
+
+pub(crate) fn job_resource(v: &JobView) -> JobResource {
+    JobResource {
+        links: JobLinks {
+            self_: format!("/v1/jobs/{}", v.id),
+            events: format!("/v1/jobs/{}/events", v.id),
+            shape: format!("/v1/shapes/{}", v.shape_id),
+        },
+        job: v.clone(),
     }
-    j
+}
+
+pub(crate) fn job_response(status: StatusCode, v: &JobView) -> Response {
+    with_location((status, Json(job_resource(v))).into_response(), &format!("/v1/jobs/{}", v.id))
 }
 
 /// Submit an analysis of a stored shape: 202 with the job (a repeated request returns the existing job, 200).
@@ -90,8 +110,8 @@ pub(crate) fn job_json(v: &JobView) -> Value {
 #[utoipa::path(post, path = "/v1/jobs", tag = "jobs",
     request_body(content((JobRequest = "application/json"), (JobForm = "multipart/form-data"))),
     responses(
-        (status = 202, description = "enqueued", body = JobView, headers(("Location" = String))),
-        (status = 200, description = "the same request was already submitted", body = JobView, headers(("Location" = String))),
+        (status = 202, description = "enqueued", body = JobResource, headers(("Location" = String))),
+        (status = 200, description = "the same request was already submitted", body = JobResource, headers(("Location" = String))),
         (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 404, description = "no such shape", body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "k above --max-k", body = crate::service::error::Problem, content_type = "application/problem+json"),
@@ -181,22 +201,22 @@ pub(crate) async fn list_jobs(
         .collect();
     let limit = f.limit.unwrap_or(100).min(1000);
     let offset = f.offset.unwrap_or(0);
-    let items: Vec<Value> = all.iter().skip(offset).take(limit).map(job_json).collect();
+    let items: Vec<JobResource> = all.iter().skip(offset).take(limit).map(job_resource).collect();
     Ok(Json(JobPage { total: all.len(), offset, limit, items }))
 }
 
 /// A job: status, progress, timestamps, error (problem detail) and result link.
 #[utoipa::path(get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path)),
-    responses((status = 200, body = JobView), (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
-pub(crate) async fn get_job(State(st): State<AppState>, JobPath(id): JobPath) -> Result<Json<Value>, ApiError> {
-    st.jobs.view(&id)?.map(|j| Json(job_json(&j))).ok_or(ApiError::NotFound { what: "job", id: id.hex() })
+    responses((status = 200, body = JobResource), (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn get_job(State(st): State<AppState>, JobPath(id): JobPath) -> Result<Json<JobResource>, ApiError> {
+    st.jobs.view(&id)?.map(|j| Json(job_resource(&j))).ok_or(ApiError::NotFound { what: "job", id: id.hex() })
 }
 
 /// Cancel a job (POST `/v1/jobs/{id}/cancel` or DELETE `/v1/jobs/{id}`): an enqueued job never starts, a running
-/// one stops at its next stop-flag check (every phase makes one; see the README). Finished jobs are left as they are.
+/// one stops at its next stop-flag check (every phase makes one; see docs/service.md, "Cancel and timeouts"). Finished jobs are left as they are.
 #[utoipa::path(post, path = "/v1/jobs/{id}/cancel", tag = "jobs", params(("id" = String, Path)),
-    responses((status = 202, description = "cancellation requested", body = JobView),
-              (status = 200, description = "already finished", body = JobView),
+    responses((status = 202, description = "cancellation requested", body = JobResource),
+              (status = 200, description = "already finished", body = JobResource),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn cancel_job(State(st): State<AppState>, JobPath(id): JobPath) -> Result<Response, ApiError> {
     let view = st.jobs.view(&id)?.ok_or_else(|| ApiError::NotFound { what: "job", id: id.hex() })?;
@@ -209,8 +229,8 @@ pub(crate) async fn cancel_job(State(st): State<AppState>, JobPath(id): JobPath)
 
 /// Cancel a job (the same as POST `/v1/jobs/{id}/cancel`); the job record stays.
 #[utoipa::path(delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path)),
-    responses((status = 202, description = "cancellation requested", body = JobView),
-              (status = 200, description = "already finished", body = JobView),
+    responses((status = 202, description = "cancellation requested", body = JobResource),
+              (status = 200, description = "already finished", body = JobResource),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn delete_job(state: State<AppState>, id: JobPath) -> Result<Response, ApiError> {
     cancel_job(state, id).await
@@ -239,7 +259,7 @@ pub(crate) async fn job_events(State(st): State<AppState>, JobPath(id): JobPath)
                         w.current().ok().flatten()?
                     }
                 };
-                let json = job_json(&view);
+                let json = serde_json::to_value(job_resource(&view)).unwrap_or(Value::Null);
                 if last.as_ref() == Some(&json) {
                     continue;
                 }
@@ -269,7 +289,7 @@ pub struct AnalyzeQuery {
 #[utoipa::path(post, path = "/v1/analyze", tag = "jobs", params(AnalyzeQuery),
     request_body(content = Vec<u8>, description = "multipart/form-data with 'file' and 'analysis' parts, or the raw shape", content_type = "multipart/form-data"),
     responses((status = 200, description = "the result", body = AnalysisResult),
-              (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
+              (status = 202, description = "not ready within wait: the job", body = JobResource, headers(("Location" = String))),
               (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 409, description = "the job was canceled", body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 422, body = crate::service::error::Problem, content_type = "application/problem+json"),

@@ -41,8 +41,7 @@ pub struct JobPage {
     pub offset: usize,
     pub limit: usize,
     /// Each job as `GET /v1/jobs/{id}` shows it (with its `links`).
-    #[schema(value_type = Vec<JobView>)]
-    pub items: Vec<Value>,
+    pub items: Vec<super::JobResource>,
 }
 
 /// A page of shapes (`GET /v1/shapes`).
@@ -82,46 +81,22 @@ pub struct SearchResult {
     pub neighbours: Vec<Neighbour>,
 }
 
-/// A warning: a number outside its domain of validity.
-#[derive(Serialize, utoipa::ToSchema)]
-pub struct Warning {
-    pub code: String,
-    pub message: String,
-}
+pub use crate::service::jobs::ArrayLinks;
 
-/// One array of a result: its shape, what its columns are, and where to fetch it.
+/// What the service adds to every stored result: its id and its arrays' links. The OpenAPI document's
+/// `AnalysisResult` is this with each analysis' own fields ([`crate::analysis::Summary`]), one flat schema per
+/// analysis (`SpectrumResult`, `HksResult`, …, `CompareResult`) under a discriminator on `analysis`.
 #[derive(Serialize, utoipa::ToSchema)]
-pub struct ArrayLinks {
-    pub rows: usize,
-    pub cols: usize,
-    /// What the columns are (times, energies, eigenvalues, …), where they are numbers.
-    pub columns: Option<Vec<f64>>,
-    /// float64 `.npy`, rows in the upload's vertex numbering.
-    pub npy: String,
-    /// The shape as binary PLY coloured by a column (per-vertex arrays).
-    pub ply: Option<String>,
-    /// A matrix as Matrix Market (`operator` results).
-    pub mtx: Option<String>,
-    /// A matrix as SciPy `.npz` (`operator` results).
-    pub npz: Option<String>,
-    /// The values, rows of numbers (null for NaN), unless `values=false`.
-    pub values: Option<Vec<Vec<Option<f64>>>>,
-}
-
-/// A finished result (`GET /v1/results/{id}`, `POST /v1/analyze`, `POST /v1/compare`): the fields every result
-/// has, then the analysis' own numbers and echoed parameters (see the README's table of analyses and, per
-/// analysis, the CLI reference). A comparison (`compare`) has no `shape_id`.
-#[derive(Serialize, utoipa::ToSchema)]
-pub struct AnalysisResult {
-    /// The analysis' name (`spectrum`, `hks`, …, or `compare`).
-    pub analysis: String,
+pub struct ResultEnvelope {
+    /// The result's id: the hash of the shape, the analysis and its parameters.
     pub result_id: String,
-    pub shape_id: Option<String>,
-    pub algorithm_version: Option<String>,
-    /// Whether the eigenpairs came from the cache.
-    pub eigenpairs_reused: Option<bool>,
-    /// Numbers outside their domain of validity (empty when all is well).
-    pub warnings: Option<Vec<Warning>>,
-    /// The result's arrays by name.
+    /// The result's arrays by name (absent when it has none).
     pub arrays: Option<std::collections::BTreeMap<String, ArrayLinks>>,
+}
+
+/// A finished result (`GET /v1/results/{id}`, `POST /v1/analyze`, `POST /v1/compare`): the union of the
+/// analyses' results, named in the OpenAPI document by the post-processing of [`crate::service::openapi`].
+#[derive(utoipa::ToSchema)]
+pub struct AnalysisResult {
+    pub analysis: String,
 }

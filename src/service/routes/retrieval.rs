@@ -14,7 +14,7 @@ pub struct CompareQuery {
 /// `failures`; the others are compared.
 #[utoipa::path(post, path = "/v1/compare", tag = "jobs", params(CompareQuery), request_body = CompareRequest,
     responses((status = 200, description = "the distance matrix, nearest neighbours and per-shape failures", body = AnalysisResult),
-              (status = 202, description = "not ready within wait: the job", body = JobView, headers(("Location" = String))),
+              (status = 202, description = "not ready within wait: the job", body = JobResource, headers(("Location" = String))),
               (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 409, description = "the job was canceled", body = crate::service::error::Problem, content_type = "application/problem+json"),
@@ -68,7 +68,7 @@ pub struct SearchQuery {
 /// the job when it is not done within `wait`).
 #[utoipa::path(post, path = "/v1/search", tag = "jobs", params(SearchQuery), request_body = SearchRequest,
     responses((status = 200, description = "the nearest shapes, nearest first, and how many were searched", body = SearchResult),
-              (status = 202, description = "the query shape's fingerprint is being computed: the job", body = JobView, headers(("Location" = String))),
+              (status = 202, description = "the query shape's fingerprint is being computed: the job", body = JobResource, headers(("Location" = String))),
               (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json"),
               (status = 422, body = crate::service::error::Problem, content_type = "application/problem+json"),

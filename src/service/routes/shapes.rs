@@ -14,10 +14,19 @@ pub struct ShapeResource {
     /// Size of the upload in bytes.
     pub bytes: usize,
     /// The validation summary (kind, counts, area, volume, topology, repairs), as `kac inspect` prints it.
-    #[schema(value_type = Object)]
+    #[schema(value_type = kac_core::geometry::summary::Summary)]
     pub summary: Value,
-    #[schema(value_type = Object)]
-    pub links: Value,
+    pub links: ShapeLinks,
+}
+
+/// Where a shape's related resources are.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct ShapeLinks {
+    /// `/v1/shapes/{id}`.
+    #[serde(rename = "self")]
+    pub self_: String,
+    /// `/v1/jobs?shape_id={id}`: its jobs.
+    pub jobs: String,
 }
 
 pub(crate) fn shape_resource(s: &ShapeRecord) -> ShapeResource {
@@ -27,7 +36,7 @@ pub(crate) fn shape_resource(s: &ShapeRecord) -> ShapeResource {
         created_at: s.created_at.clone(),
         bytes: s.bytes,
         summary: s.summary.clone(),
-        links: json!({ "self": format!("/v1/shapes/{}", s.id), "jobs": format!("/v1/jobs?shape_id={}", s.id) }),
+        links: ShapeLinks { self_: format!("/v1/shapes/{}", s.id), jobs: format!("/v1/jobs?shape_id={}", s.id) },
     }
 }
 

@@ -23,6 +23,7 @@ use serde::Serialize;
 
 /// Per-vertex mean curvature with its normals.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct MeanCurvature {
     /// H per vertex (NaN on the boundary).
     #[serde(skip)]
@@ -145,6 +146,7 @@ pub fn angle_defect(mesh: &TriangleMesh) -> Result<Vec<f64>, OperatorError> {
 
 /// The Gaussian curvature estimated from the heat kernel's diagonal, with how it was fitted.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct HeatCurvature {
     #[serde(skip)]
     pub k: Vec<f64>,

@@ -20,6 +20,7 @@ pub fn components(pair: &SparsePair) -> (Vec<u32>, usize) {
 /// weights), by Kirchhoff's matrix-tree theorem: the determinant of the Laplacian with one row and column
 /// removed.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct TreeCount {
     pub vertices: usize,
     pub edges: usize,
@@ -128,6 +129,7 @@ fn bareiss_determinant(p: &Pattern, values: &[f64]) -> Option<i128> {
 /// The Fiedler vector (Fiedler 1973): the eigenvector of the first non-zero eigenvalue of a connected shape
 /// (λ₁, its algebraic connectivity), and the bisection by its sign.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Fiedler {
     pub algebraic_connectivity: f64,
     #[serde(skip)]

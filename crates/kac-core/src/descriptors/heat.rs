@@ -59,6 +59,7 @@ fn check_source(basis: &Basis<'_>, sources: &[usize]) -> Result<(), DescriptorEr
 
 /// Heat diffusion of u₀ by the spectrum.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct SpectralDiffusion {
     pub times: Vec<f64>,
     /// n × T: u(·, t_j) in column j.
@@ -105,6 +106,7 @@ pub fn diffuse_spectral(
 /// zero): Q(t) = Σ_i e^{−λ_i t} ⟨1, φ_i⟩_M², with the truncation bound e^{−λ_k t} ‖r‖²_M (r the part of 1
 /// outside the basis). `pair` is the Dirichlet-condensed operator the basis belongs to.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct HeatContent {
     pub times: Vec<f64>,
     pub content: Vec<f64>,

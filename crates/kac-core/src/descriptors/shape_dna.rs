@@ -79,6 +79,20 @@ impl Reweighting {
     }
 }
 
+/// A `(name, value)` pair's schema: an array of two items, a string then a number, or null. (utoipa writes a tuple
+/// with `items: false`, which openapi-python-client cannot read; this says the same with `items` both may be.)
+#[cfg(feature = "openapi")]
+fn name_and_value() -> utoipa::openapi::schema::Array {
+    use utoipa::openapi::schema::{ArrayBuilder, ObjectBuilder, SchemaType, Type};
+    ArrayBuilder::new()
+        .schema_type(SchemaType::from_iter([Type::Array, Type::Null]))
+        .items(ObjectBuilder::new().schema_type(SchemaType::from_iter([Type::String, Type::Number])))
+        .min_items(Some(2))
+        .max_items(Some(2))
+        .description(Some("The measure the normalization used: its name and value, as a pair [\"area\", 12.56]."))
+        .build()
+}
+
 /// The measures of a shape that normalizations use.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
@@ -139,6 +153,7 @@ impl Default for ShapeDnaOptions {
 }
 
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ShapeDna {
     /// The fingerprint: k values after normalization and reweighting.
     pub values: Vec<f64>,
@@ -151,7 +166,8 @@ pub struct ShapeDna {
     /// The factor every eigenvalue was multiplied by (`none`, `area`, `volume`, `geometry`, `first-nonzero`);
     /// absent for `weyl`, whose factor depends on n.
     pub factor: Option<f64>,
-    /// The measure the normalization used (name and value).
+    /// The measure the normalization used: its name and value, as a pair `["area", 12.56]`.
+    #[cfg_attr(feature = "openapi", schema(schema_with = name_and_value))]
     pub measure: Option<(String, f64)>,
     pub reweighting: Reweighting,
 }

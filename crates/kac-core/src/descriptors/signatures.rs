@@ -29,6 +29,7 @@ impl Default for HksOptions {
 }
 
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Hks {
     pub times: Vec<f64>,
     /// n × T.
@@ -116,6 +117,7 @@ impl Default for SiHksOptions {
 }
 
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct SiHks {
     pub alpha: f64,
     pub tau_start: f64,
@@ -213,6 +215,7 @@ impl Default for WksOptions {
 }
 
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Wks {
     pub energies: Vec<f64>,
     pub sigma: f64,
@@ -275,6 +278,7 @@ pub fn wks(basis: &Basis<'_>, opts: &WksOptions) -> Result<Wks, DescriptorError>
 /// magnitude positive, so the same input always gives the same GPS; two different meshes of one shape need not
 /// agree in sign, and no convention can make clusters agree.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Gps {
     /// Eigenvalues used (the non-zero ones, ascending).
     pub eigenvalues: Vec<f64>,

@@ -26,6 +26,7 @@ use serde::Serialize;
 use std::f64::consts::PI;
 
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct WeylEstimate {
     pub eigenvalues_used: usize,
     /// λ_k, the highest eigenvalue used (the estimates rest on it: callers judge its resolution).

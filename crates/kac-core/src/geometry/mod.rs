@@ -89,6 +89,7 @@ pub enum Shape {
 }
 
 /// The kind of a [`Shape`], as named in JSON.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ShapeKind {

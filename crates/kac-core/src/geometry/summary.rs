@@ -6,6 +6,7 @@ use super::validate::{Facts, Report, Validated};
 use super::ShapeKind;
 use serde::Serialize;
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema), schema(as = ShapeSummary))]
 #[derive(Debug, Clone, Serialize)]
 pub struct Summary {
     /// Content hash of the canonical geometry (see [`super::hash`]).

@@ -106,9 +106,12 @@ impl EdgeTopology {
 }
 
 /// Bounding box.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct BoundingBox {
+    #[cfg_attr(feature = "openapi", schema(value_type = [f64; 3]))]
     pub min: Point,
+    #[cfg_attr(feature = "openapi", schema(value_type = [f64; 3]))]
     pub max: Point,
 }
 
@@ -130,6 +133,7 @@ impl BoundingBox {
 }
 
 /// Orientation of a surface's faces.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Orientation {
@@ -140,6 +144,7 @@ pub enum Orientation {
 }
 
 /// Facts of a triangle surface.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SurfaceFacts {
     pub vertices: usize,

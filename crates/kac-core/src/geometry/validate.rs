@@ -43,6 +43,7 @@ impl Default for ValidateOptions {
 }
 
 /// A repair that was made, with up to [`MAX_EXAMPLES`] input element indices it touched.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Repair {
     /// Stable code: `welded_vertices`, `triangulated_polygons`, `repeated_index`, `zero_area_faces`,
@@ -59,6 +60,7 @@ pub struct Repair {
 pub const MAX_EXAMPLES: usize = 10;
 
 /// Facts of a tetrahedral mesh.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SolidFacts {
     pub vertices: usize,
@@ -75,6 +77,7 @@ pub struct SolidFacts {
 }
 
 /// Facts of a polyline.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CurveFacts {
     pub vertices: usize,
@@ -87,6 +90,7 @@ pub struct CurveFacts {
 }
 
 /// Facts of a graph.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct GraphFacts {
     pub vertices: usize,
@@ -99,6 +103,7 @@ pub struct GraphFacts {
 }
 
 /// Facts of a point cloud.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CloudFacts {
     pub points: usize,
@@ -108,6 +113,7 @@ pub struct CloudFacts {
 }
 
 /// Kind-specific facts.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Facts {
@@ -119,6 +125,7 @@ pub enum Facts {
 }
 
 /// Counts of the input as read.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Default)]
 pub struct InputCounts {
     pub vertices: usize,
@@ -133,6 +140,7 @@ pub struct InputCounts {
 }
 
 /// What validation found and did.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema), schema(as = ValidationReport))]
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Report {
     pub kind: ShapeKind,

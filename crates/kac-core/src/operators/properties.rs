@@ -19,6 +19,7 @@ use crate::spectrum::{self, factor::Symbolic};
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Check {
     pub holds: bool,
     /// The measured quantity behind the verdict.
@@ -27,6 +28,7 @@ pub struct Check {
 }
 
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct PropertyReport {
     pub symmetric: Check,
     pub local_support: Check,

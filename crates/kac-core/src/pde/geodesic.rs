@@ -44,6 +44,7 @@ impl Default for HeatMethodOptions {
 }
 
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Geodesic {
     pub sources: Vec<usize>,
     /// Distance per vertex (+∞ where no source is reachable).
@@ -64,6 +65,7 @@ pub struct Geodesic {
 
 /// See [`Geodesic::varadhan_discrepancy`].
 #[derive(Debug, Clone, Copy, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct VaradhanDiscrepancy {
     pub mean: f64,
     pub max: f64,

@@ -50,6 +50,7 @@ pub fn harmonic(pair: &SparsePair, known: &[(usize, f64)]) -> Result<Vec<f64>, D
 /// Semi-supervised labels (Zhu, Ghahramani & Lafferty 2003): one harmonic function per class, 1 on the class's
 /// labelled vertices and 0 on the others'; each vertex takes the class of largest value.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Labels {
     pub classes: Vec<u32>,
     #[serde(skip)]

@@ -4,6 +4,7 @@ use super::*;
 
 /// The solution of a Poisson problem Δf = g.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Poisson {
     #[serde(skip)]
     pub values: Vec<f64>,

@@ -64,6 +64,7 @@ pub struct Stats {
 /// found, the found pairs are deflated and the missing ones solved for (`repairs` times). `dense`: every
 /// eigenvalue was computed. `null-space`: every returned pair is a known zero mode.
 #[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Completeness {
     /// `inertia`, `dense` or `null-space`.
     pub method: &'static str,
