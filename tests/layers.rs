@@ -1,6 +1,7 @@
-//! The layers' boundaries, checked on the source: the stores (`src/service/store`) import nothing from the HTTP
-//! layer (axum, the routes, the HTTP errors), so that the job records and the queue can be used and tested without
-//! it; the numerical core has no HTTP in it at all.
+//! The layers' boundaries, checked on the source: the stores (`src/service/store`) and the job engine
+//! (`src/service/jobs`) import nothing from the HTTP layer (axum, the routes, the HTTP errors), so that the queue
+//! and the engine can be used and tested without it (their unit tests run in process on an in-memory queue and a
+//! manual clock); the numerical core has no HTTP in it at all.
 
 use std::path::Path;
 
@@ -33,15 +34,20 @@ fn the_stores_import_nothing_from_the_http_layer() {
     }
 }
 
-/// The job engine's interface (`src/service/jobs/mod.rs`: submit, cancel, views) answers with its own error type,
-/// `JobError`, which the HTTP layer maps to problems; only the runner still names the HTTP errors, to record how a
-/// job failed as the problem the service answers with.
+/// The job engine (`src/service/jobs`: submit, cancel, views, the dispatcher, the supervisor, the runner, its
+/// clock) answers with its own error type, `JobError`, which the HTTP layer maps to problems, and records how a job
+/// failed as a `Problem` (a data type of its own); it names no HTTP type.
 #[test]
-fn the_job_engine_answers_with_its_own_errors() {
+fn the_job_engine_imports_nothing_from_the_http_layer() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(root.join("src/service/jobs/mod.rs")).unwrap();
-    for needle in ["axum", "ApiError::", "service::error", "super::error", "StatusCode"] {
-        assert!(!uses(&text, needle), "src/service/jobs/mod.rs uses {needle}");
+    let mut files = sources(&root.join("src/service/jobs"));
+    files
+        .push(("src/service/compare.rs".into(), std::fs::read_to_string(root.join("src/service/compare.rs")).unwrap()));
+    assert!(files.len() >= 4, "the engine's sources");
+    for (path, text) in files {
+        for needle in ["axum", "ApiError", "service::error", "super::error", "StatusCode", "routes::"] {
+            assert!(!uses(&text, needle), "{path} uses {needle}");
+        }
     }
 }
 

@@ -663,32 +663,3 @@ pub struct CompareSummary {
     /// Always empty: a comparison's numbers are the shape-DNA's.
     pub warnings: Vec<Warning>,
 }
-
-/// Every result schema the OpenAPI document lists, by the analysis' name (the union's variants, in order).
-pub fn summary_variants() -> Vec<(&'static str, &'static str)> {
-    vec![
-        ("spectrum", "SpectrumSummary"),
-        ("operator", "OperatorSummary"),
-        ("hks", "HksSummary"),
-        ("si-hks", "SiHksSummary"),
-        ("wks", "WksSummary"),
-        ("gps", "GpsSummary"),
-        ("shape-dna", "ShapeDnaSummary"),
-        ("heat", "HeatSummary"),
-        ("geodesic", "GeodesicSummary"),
-        ("gradient", "GradientSummary"),
-        ("divergence", "DivergenceSummary"),
-        ("trees", "TreesSummary"),
-        ("mean-curvature", "MeanCurvatureSummary"),
-        ("heat-curvature", "HeatCurvatureSummary"),
-        ("wave", "WaveSummary"),
-        ("schrodinger", "SchrodingerSummary"),
-        ("poisson", "PoissonSummary"),
-        ("diffuse", "DiffuseSummary"),
-        ("dirichlet-energy", "DirichletEnergySummary"),
-        ("embed", "EmbedSummary"),
-        ("smooth", "SmoothSummary"),
-        ("interpolate", "InterpolateSummary"),
-        ("compare", "CompareSummary"),
-    ]
-}

@@ -3,7 +3,6 @@
 //! timeout and cancel. A shape whose fingerprint cannot be computed is reported with its problem, and the others
 //! are compared without it.
 
-use super::error::ApiError;
 use super::store::StoredShape;
 use crate::analysis::{
     self, AnalysisError, CompareFailure, CompareNearest, CompareNeighbour, CompareSummary, Fingerprint, Hooks,
@@ -82,7 +81,7 @@ pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) 
             }
             Err(e) if e.is_stop() => return Err(e),
             Err(e) => {
-                let (_, p) = ApiError::Analysis(e).problem();
+                let p = super::problem::Problem::of_analysis(&e);
                 failures.push(CompareFailure {
                     shape_id: s.id.clone(),
                     code: p.code.to_string(),

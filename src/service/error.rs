@@ -127,32 +127,11 @@ impl ApiError {
                 }
                 (status, e.code(), "The shape cannot be read", e.to_string())
             }
-            ApiError::Analysis(e) => {
-                let status = if e.is_stop() {
-                    StatusCode::CONFLICT
-                } else if matches!(e, crate::analysis::AnalysisError::TooLarge(_)) {
-                    // The same code and status as a limit checked at submission.
-                    StatusCode::PAYLOAD_TOO_LARGE
-                } else if e.caller_fault() {
-                    StatusCode::UNPROCESSABLE_ENTITY
-                } else {
-                    StatusCode::INTERNAL_SERVER_ERROR
-                };
-                (status, e.code(), "The analysis cannot be computed", e.to_string())
-            }
-            ApiError::Canceled => return (StatusCode::CONFLICT, Problem::canceled()),
-            ApiError::JobTimeout { seconds } => (
-                StatusCode::INTERNAL_SERVER_ERROR,
-                "job-timeout",
-                "Job time limit",
-                format!("the job ran longer than {seconds} s (--job-timeout-s)"),
-            ),
-            ApiError::JobPanicked { detail } => (
-                StatusCode::INTERNAL_SERVER_ERROR,
-                "job-panicked",
-                "Internal error",
-                format!("the computation panicked: {detail}"),
-            ),
+            // The errors a job can end with: one mapping, in the problem type (the job engine records them).
+            ApiError::Analysis(e) => return with_status(Problem::of_analysis(e)),
+            ApiError::Canceled => return with_status(Problem::canceled()),
+            ApiError::JobTimeout { seconds } => return with_status(Problem::job_timeout(*seconds)),
+            ApiError::JobPanicked { detail } => return with_status(Problem::job_panicked(detail)),
             ApiError::NotFound { what, id } => {
                 (StatusCode::NOT_FOUND, "not-found", "Not found", format!("no {what} with id '{id}'"))
             }
@@ -266,9 +245,7 @@ impl ApiError {
                 "Request body too slow",
                 format!("the request body paused for more than {seconds} s (--body-read-timeout-s)"),
             ),
-            ApiError::Internal { detail } => {
-                (StatusCode::INTERNAL_SERVER_ERROR, "internal-error", "Internal error", detail.clone())
-            }
+            ApiError::Internal { detail } => return with_status(Problem::internal(detail.clone())),
         };
         (
             status,
@@ -282,6 +259,11 @@ impl ApiError {
             },
         )
     }
+}
+
+/// A problem with its status as the HTTP type.
+fn with_status(p: Problem) -> (StatusCode, Problem) {
+    (StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR), p)
 }
 
 /// A store that cannot be reached: 503 `not-ready` (the client may retry).

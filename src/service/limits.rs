@@ -3,8 +3,8 @@
 //! `solver.subspace` or `solver.block` ask for a wide one) against --max-output-values. What only the operator's
 //! size decides (a forced dense solve, a band's pairs) is checked by the runner through `Hooks::limits`.
 
+use super::config::Config;
 use super::jobs::{JobError, Limit};
-use super::AppState;
 use crate::analysis::Analysis;
 
 /// The eigenpairs an analysis asks for, by the name of the field that asks (no default arm: a new analysis must
@@ -42,7 +42,7 @@ fn eigenpairs(a: &Analysis) -> Option<usize> {
     asked(a).map(|(what, k)| if what == "dimensions" { k + 1 } else { k })
 }
 
-pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), JobError> {
+pub fn check_limits(config: &Config, a: &Analysis) -> Result<(), JobError> {
     a.check_options().map_err(JobError::Analysis)?;
     let asked = asked(a);
     // Solver settings no solve could honour (a tolerance below double precision, a shift at 0 or ±1e308, a block
@@ -60,11 +60,8 @@ pub fn check_limits(state: &AppState, a: &Analysis) -> Result<(), JobError> {
             "{what} = 0: ask for at least one eigenpair (1 ≤ {what} ≤ the number of unknowns)"
         ))));
     }
-    if k > state.config.max_k {
-        return Err(JobError::Limit(Limit::Pairs(format!(
-            "k = {k} is above the limit of {} (--max-k)",
-            state.config.max_k
-        ))));
+    if k > config.max_k {
+        return Err(JobError::Limit(Limit::Pairs(format!("k = {k} is above the limit of {} (--max-k)", config.max_k))));
     }
     Ok(())
 }
@@ -85,7 +82,7 @@ pub fn unknowns(a: &Analysis, shape: &kac_core::Shape) -> usize {
 
 /// Bounded work: every list or grid of the request against `--max-samples`, and the widest per-vertex array the
 /// analysis will hold (eigenvectors included) against `--max-output-values`, before anything is allocated.
-pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(), JobError> {
+pub fn check_work(config: &Config, a: &Analysis, vertices: usize) -> Result<(), JobError> {
     let len = |v: &Option<Vec<f64>>| v.as_ref().map(Vec::len);
     // (name of the field, its count) for every list or grid; and the columns of the widest per-vertex array.
     let (counts, columns): (Vec<(&str, usize)>, usize) = match a {
@@ -141,7 +138,7 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
             (vec![("values", values.len()), ("labels", labels.len()), ("classes in labels", classes)], classes)
         }
     };
-    let max = state.config.max_samples;
+    let max = config.max_samples;
     if let Some((name, n)) = counts.into_iter().find(|&(_, n)| n > max) {
         return Err(JobError::Limit(Limit::Samples(format!(
             "{name} = {n} is above the limit of {max} (--max-samples, KAC_MAX_SAMPLES)"
@@ -161,7 +158,7 @@ pub fn check_work(state: &AppState, a: &Analysis, vertices: usize) -> Result<(),
         (None, _) => columns,
     };
     let values = vertices.saturating_mul(columns);
-    let max = state.config.max_output_values;
+    let max = config.max_output_values;
     if values > max {
         // With quadratic elements the rows are the unknowns: the vertices and the edges.
         let rows =

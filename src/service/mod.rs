@@ -63,7 +63,15 @@ impl Inner {
         let backend = store::open(&config)?;
         let index = search::Index::load(&*backend.fingerprints)?;
         let lease = std::time::Duration::from_secs_f64(config.lease_s.max(0.3));
-        let jobs = Arc::new(jobs::Jobs::new(workers, config.queue_capacity.max(1), backend.queue.clone(), lease));
+        let timeout = std::time::Duration::from_secs(config.job_timeout_s);
+        let jobs = Arc::new(jobs::Jobs::new(
+            workers,
+            config.queue_capacity.max(1),
+            backend.queue.clone(),
+            lease,
+            timeout,
+            Arc::new(jobs::SystemClock::default()),
+        ));
         let recovered = jobs::recover(&jobs)?;
         let state = Arc::new(Inner {
             shapes: backend.shapes,

@@ -3,6 +3,7 @@
 //! cancellation goes through its stop flag, a timer stops jobs that run too long, and a panic inside a job fails
 //! that job only.
 
+use super::config::Config;
 use super::ids::{JobId, ShapeId};
 use super::problem::Problem;
 use super::store::{Enqueued, JobQueue, Lease, StoredResult, StoredShape};
@@ -17,9 +18,11 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::time::Duration;
 use tokio::sync::{broadcast, watch};
 
+mod clock;
 mod runner;
+pub use clock::{Clock, ManualClock, SystemClock};
 use runner::canceled;
-pub use runner::{result_of, supervise};
+pub use runner::{result_of, supervise, Beats};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
@@ -58,7 +61,7 @@ pub struct JobProgress {
 }
 
 /// Why a job cannot be submitted, read or canceled: the engine's own errors, which the HTTP layer maps to problems
-/// (`impl From<JobError> for ApiError`).
+/// (`impl From<JobError> for ApiError` in `service::error`).
 #[derive(Debug)]
 pub enum JobError {
     /// The analysis refuses the request (the truth table, its options, k).
@@ -143,8 +146,8 @@ pub struct Job {
     pub owner: String,
     /// Set when the claim was lost (the job then stops and writes nothing).
     pub lost: AtomicBool,
-    /// When it started running here.
-    pub started: std::time::Instant,
+    /// When it started running here (the engine's clock).
+    pub started: Duration,
 }
 
 /// What a job computes, handed to the worker with its inputs.
@@ -209,6 +212,12 @@ pub struct Jobs {
     pub capacity: usize,
     /// How long a claim lasts without a heartbeat.
     pub lease: Duration,
+    /// How long a job may run (--job-timeout-s), from when it starts running.
+    pub timeout: Duration,
+    /// The clock of leases, timeouts and heartbeats.
+    pub clock: Arc<dyn Clock>,
+    /// Jobs this replica accepted into the queue.
+    pub submitted: AtomicU64,
     /// This replica's id (claims are `{replica}:{n}`).
     pub replica: String,
     claims: AtomicU64,
@@ -217,7 +226,14 @@ pub struct Jobs {
 }
 
 impl Jobs {
-    pub fn new(workers: usize, capacity: usize, queue: Arc<dyn JobQueue>, lease: Duration) -> Self {
+    pub fn new(
+        workers: usize,
+        capacity: usize,
+        queue: Arc<dyn JobQueue>,
+        lease: Duration,
+        timeout: Duration,
+        clock: Arc<dyn Clock>,
+    ) -> Self {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(workers)
             .thread_name(|i| format!("kac-worker-{i}"))
@@ -237,6 +253,9 @@ impl Jobs {
             running: Mutex::new(HashMap::new()),
             capacity,
             lease,
+            timeout,
+            clock,
+            submitted: AtomicU64::new(0),
             replica,
             claims: AtomicU64::new(0),
             wake: (Mutex::new(false), Condvar::new()),
@@ -346,21 +365,28 @@ impl Watch {
     }
 }
 
-/// Submits a job, or returns the existing one for the same request (true: newly enqueued).
-pub fn submit(state: &AppState, shape: Arc<StoredShape>, analysis: Analysis) -> Result<(JobView, bool), JobError> {
+/// Submits a job within the configured limits, or returns the existing one for the same request (true: newly
+/// enqueued).
+pub fn submit(
+    jobs: &Jobs,
+    config: &Config,
+    shape: Arc<StoredShape>,
+    analysis: Analysis,
+) -> Result<(JobView, bool), JobError> {
     analysis.supported(&shape.validated.shape).map_err(JobError::Analysis)?;
-    super::limits::check_limits(state, &analysis)?;
-    super::limits::check_work(state, &analysis, super::limits::unknowns(&analysis, &shape.validated.shape))?;
+    super::limits::check_limits(config, &analysis)?;
+    super::limits::check_work(config, &analysis, super::limits::unknowns(&analysis, &shape.validated.shape))?;
     let canonical = serde_json::to_value(&analysis).map_err(|e| JobError::Internal(e.to_string()))?;
     let id = job_id(&shape.id, &canonical);
     let shape_id = shape.id.clone();
-    enqueue(state, id, shape_id, analysis.name(), canonical)
+    jobs.enqueue(id, shape_id, analysis.name(), canonical)
 }
 
 /// Submits a comparison of stored shapes (the request's `shape_ids` resolved, in that order), or returns the
 /// existing job for the same request.
 pub fn submit_compare(
-    state: &AppState,
+    jobs: &Jobs,
+    config: &Config,
     mut request: super::compare::CompareRequest,
     shapes: Vec<Arc<StoredShape>>,
 ) -> Result<(JobView, bool), JobError> {
@@ -369,11 +395,8 @@ pub fn submit_compare(
             "k = 0: ask for at least one eigenpair",
         )));
     }
-    if request.k > state.config.max_k {
-        return Err(JobError::Limit(Limit::Pairs(format!(
-            "k = {} is above --max-k {}",
-            request.k, state.config.max_k
-        ))));
+    if request.k > config.max_k {
+        return Err(JobError::Limit(Limit::Pairs(format!("k = {} is above --max-k {}", request.k, config.max_k))));
     }
     // Each shape's shape-DNA within the limits a shape-dna job of it would have (the largest decides).
     let dna = Analysis::ShapeDna {
@@ -382,56 +405,58 @@ pub fn submit_compare(
         solver: crate::analysis::SolverSpec::default(),
     };
     if let Some(largest) = shapes.iter().map(|s| s.validated.shape.vertex_count()).max() {
-        super::limits::check_work(state, &dna, largest)?;
+        super::limits::check_work(config, &dna, largest)?;
     }
     request.shape_ids = Some(shapes.iter().map(|s| s.id.clone()).collect());
     let canonical = serde_json::to_value(&request).map_err(|e| JobError::Internal(e.to_string()))?;
     let id = job_id("compare", &canonical);
-    enqueue(state, id, String::new(), "compare", canonical)
+    jobs.enqueue(id, String::new(), "compare", canonical)
 }
 
-/// Enqueues a request under its id unless a job with that id is queued, running or done (true: newly enqueued).
-fn enqueue(
-    state: &AppState,
-    id: String,
-    shape_id: String,
-    analysis: &str,
-    canonical: serde_json::Value,
-) -> Result<(JobView, bool), JobError> {
-    let jobs = &state.jobs;
-    let view = JobView {
-        id,
-        shape_id,
-        analysis: analysis.into(),
-        status: Status::Enqueued,
-        progress: JobProgress { phase: "queued".into(), converged: 0, wanted: 0 },
-        created_at: now(),
-        started_at: None,
-        finished_at: None,
-        error: None,
-        result: None,
-        request: canonical,
-    };
-    match jobs.queue.enqueue(view, jobs.capacity)? {
-        Enqueued::Existing(v) => Ok((v, false)),
-        Enqueued::Full => Err(JobError::QueueFull { capacity: jobs.capacity }),
-        Enqueued::New(v) => {
-            state.metrics.jobs_submitted.fetch_add(1, Ordering::Relaxed);
-            jobs.notify();
-            Ok((v, true))
+impl Jobs {
+    /// Enqueues a request under its id unless a job with that id is queued, running or done (true: newly
+    /// enqueued).
+    fn enqueue(
+        &self,
+        id: String,
+        shape_id: String,
+        analysis: &str,
+        canonical: serde_json::Value,
+    ) -> Result<(JobView, bool), JobError> {
+        let view = JobView {
+            id,
+            shape_id,
+            analysis: analysis.into(),
+            status: Status::Enqueued,
+            progress: JobProgress { phase: "queued".into(), converged: 0, wanted: 0 },
+            created_at: now(),
+            started_at: None,
+            finished_at: None,
+            error: None,
+            result: None,
+            request: canonical,
+        };
+        match self.queue.enqueue(view, self.capacity)? {
+            Enqueued::Existing(v) => Ok((v, false)),
+            Enqueued::Full => Err(JobError::QueueFull { capacity: self.capacity }),
+            Enqueued::New(v) => {
+                self.submitted.fetch_add(1, Ordering::Relaxed);
+                self.notify();
+                Ok((v, true))
+            }
         }
     }
-}
 
-/// Cancels a job: an enqueued one at once, a running one at its next stop-flag check (here at once; on another
-/// replica when its heartbeat sees the request, at once on the announcement). None: no such job.
-pub fn cancel(state: &AppState, id: &JobId) -> Result<Option<JobView>, JobError> {
-    let view = state.jobs.queue.cancel(id, &canceled())?;
-    if let Some(j) = state.jobs.local(&id.hex()) {
-        j.stop.store(true, Ordering::SeqCst);
-        return Ok(Some(j.snapshot()));
+    /// Cancels a job: an enqueued one at once, a running one at its next stop-flag check (here at once; on another
+    /// replica when its heartbeat sees the request, at once on the announcement). None: no such job.
+    pub fn cancel(&self, id: &JobId) -> Result<Option<JobView>, JobError> {
+        let view = self.queue.cancel(id, &canceled())?;
+        if let Some(j) = self.local(&id.hex()) {
+            j.stop.store(true, Ordering::SeqCst);
+            return Ok(Some(j.snapshot()));
+        }
+        Ok(view)
     }
-    Ok(view)
 }
 
 /// After a start: the jobs a dead process held go back in the queue (see [`JobQueue::recover`]); the number
@@ -481,13 +506,14 @@ fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
 /// drains.
 pub fn dispatch(state: AppState) {
     let jobs = &state.jobs;
-    let mut last_sweep = std::time::Instant::now() - jobs.lease;
+    let mut last_sweep: Option<Duration> = None;
     loop {
         if state.draining.load(Ordering::SeqCst) {
             return;
         }
-        if last_sweep.elapsed() >= jobs.lease / 3 {
-            last_sweep = std::time::Instant::now();
+        let now = jobs.clock.elapsed();
+        if last_sweep.is_none_or(|at| now.saturating_sub(at) >= jobs.lease / 3) {
+            last_sweep = Some(now);
             match jobs.queue.requeue_expired() {
                 Ok(ids) if !ids.is_empty() => tracing::warn!(jobs = ?ids, "requeued jobs whose lease expired"),
                 Ok(_) => {}
@@ -509,3 +535,6 @@ pub fn dispatch(state: AppState) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -2,9 +2,7 @@
 //! problem (a panic fails that job only; a stop flag set by the timer fails it with `job-timeout`, by a cancel
 //! cancels it).
 
-// The runner records how a job failed as the problem the service answers with (the HTTP error mapping).
 use super::*;
-use crate::service::error::ApiError;
 
 /// Starts a claimed job on the pool.
 pub(super) fn start(state: &AppState, view: JobView, owner: String) {
@@ -21,7 +19,7 @@ pub(super) fn start(state: &AppState, view: JobView, owner: String) {
         lost: AtomicBool::new(false),
         name,
         owner,
-        started: std::time::Instant::now(),
+        started: state.jobs.clock.elapsed(),
     });
     state.jobs.running.lock().unwrap_or_else(|e| e.into_inner()).insert(id.clone(), job.clone());
     let st = state.clone();
@@ -36,16 +34,12 @@ pub(super) fn start(state: &AppState, view: JobView, owner: String) {
     });
 }
 
-/// The supervisor of this replica's running jobs, every 100 ms: renews each claim (every `lease / 3`, and within a
-/// second of a change of progress, which the beat carries to other replicas), stops a job whose cancel was asked
-/// for on any replica (at once on the queue's announcement) or whose claim was lost, and stops a job that has run
-/// longer than `--job-timeout-s` (the clock starts when it starts running, not when it was queued).
+/// The supervisor of this replica's running jobs, every 100 ms ([`Jobs::supervise_once`]), until the process
+/// drains.
 pub fn supervise(state: AppState) {
     let jobs = &state.jobs;
     let mut changes = jobs.queue.changes();
-    let timeout = Duration::from_secs(state.config.job_timeout_s);
-    // Per job: when it was last beaten, and the progress it carried.
-    let mut beats: HashMap<String, (std::time::Instant, JobProgress)> = HashMap::new();
+    let mut beats = Beats::new();
     loop {
         std::thread::sleep(Duration::from_millis(100));
         let mut announced = std::collections::HashSet::new();
@@ -58,7 +52,24 @@ pub fn supervise(state: AppState) {
                 Err(_) => break,
             }
         }
-        let running: Vec<Arc<Job>> = jobs.running.lock().unwrap_or_else(|e| e.into_inner()).values().cloned().collect();
+        jobs.supervise_once(&mut beats, &announced);
+        if state.draining.load(Ordering::SeqCst) && jobs.running() == 0 {
+            return;
+        }
+    }
+}
+
+/// Per running job: when the supervisor last renewed its claim (the engine's clock), and the progress it carried.
+pub type Beats = HashMap<String, (Duration, JobProgress)>;
+
+impl Jobs {
+    /// One round of the supervisor: renews each running job's claim (every `lease / 3`, and within a second of a
+    /// change of progress, which the beat carries to other replicas), stops a job whose cancel was asked for on
+    /// any replica (at once when `announced` names it) or whose claim was lost, and stops a job that has run longer
+    /// than the timeout (the clock starts when it starts running, not when it was queued).
+    pub fn supervise_once(&self, beats: &mut Beats, announced: &std::collections::HashSet<String>) {
+        let now = self.clock.elapsed();
+        let running: Vec<Arc<Job>> = self.running.lock().unwrap_or_else(|e| e.into_inner()).values().cloned().collect();
         beats.retain(|id, _| running.iter().any(|j| j.snapshot().id == *id));
         for job in running {
             let view = job.snapshot();
@@ -66,7 +77,7 @@ pub fn supervise(state: AppState) {
             if view.status.terminal() {
                 continue;
             }
-            if job.started.elapsed() >= timeout && !job.stop.load(Ordering::SeqCst) {
+            if now.saturating_sub(job.started) >= self.timeout && !job.stop.load(Ordering::SeqCst) {
                 // A job already told to stop (canceled) stays canceled: the timer only stops a job nobody stopped.
                 job.timed_out.store(true, Ordering::SeqCst);
                 job.stop.store(true, Ordering::SeqCst);
@@ -74,24 +85,25 @@ pub fn supervise(state: AppState) {
             let due = match beats.get(&view.id) {
                 // The claim itself set the lease: the first beat is due a third of a lease later.
                 None => {
-                    beats.insert(view.id.clone(), (std::time::Instant::now(), view.progress.clone()));
+                    beats.insert(view.id.clone(), (now, view.progress.clone()));
                     false
                 }
                 Some((at, progress)) => {
-                    at.elapsed() >= jobs.lease / 3
-                        || (at.elapsed() >= Duration::from_secs(1) && progress.phase != view.progress.phase)
-                        || (at.elapsed() >= Duration::from_secs(1) && progress.converged != view.progress.converged)
+                    let since = now.saturating_sub(*at);
+                    since >= self.lease / 3
+                        || (since >= Duration::from_secs(1) && progress.phase != view.progress.phase)
+                        || (since >= Duration::from_secs(1) && progress.converged != view.progress.converged)
                 }
             };
             if !due && !announced.contains(&view.id) {
                 continue;
             }
-            match jobs.queue.heartbeat(&view.id, &job.owner, &view.progress, jobs.lease) {
+            match self.queue.heartbeat(&view.id, &job.owner, &view.progress, self.lease) {
                 Ok(Lease::Held { cancel }) => {
                     if cancel {
                         job.stop.store(true, Ordering::SeqCst);
                     }
-                    beats.insert(view.id.clone(), (std::time::Instant::now(), view.progress.clone()));
+                    beats.insert(view.id.clone(), (now, view.progress.clone()));
                 }
                 // The job finished between the snapshot and the beat: its claim ended with its outcome.
                 Ok(Lease::Lost) if job.snapshot().status.terminal() => {}
@@ -103,9 +115,6 @@ pub fn supervise(state: AppState) {
                 // The store is away for a moment (a restart): the lease runs on, and the next beat tries again.
                 Err(e) => tracing::error!(job = %view.id, error = %e, "cannot renew the job's claim"),
             }
-        }
-        if state.draining.load(Ordering::SeqCst) && jobs.running() == 0 {
-            return;
         }
     }
 }
@@ -162,7 +171,7 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
     let work = match work_of(state, &job.snapshot()) {
         Ok(w) => w,
         Err(NoWork::Gone(why)) => {
-            let (_, p) = ApiError::Internal { detail: format!("the job cannot run: {why}") }.problem();
+            let p = Problem::internal(format!("the job cannot run: {why}"));
             finish(state, job, Status::Failed, Some(p), None);
             return Some(Status::Failed);
         }
@@ -202,13 +211,13 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
                 .cloned()
                 .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                 .unwrap_or_else(|| "unknown panic".into());
-            let (_, p) = ApiError::JobPanicked { detail: without_paths(&msg) }.problem();
+            let p = Problem::job_panicked(&without_paths(&msg));
             finish(state, job, Status::Failed, Some(p), None);
             Some(Status::Failed)
         }
         Ok(Err(e)) if e.is_stop() => stopped(state, job),
         Ok(Err(e)) => {
-            let (_, p) = ApiError::Analysis(e).problem();
+            let p = Problem::of_analysis(&e);
             finish(state, job, Status::Failed, Some(p), None);
             Some(Status::Failed)
         }
@@ -252,7 +261,7 @@ fn stopped(state: &AppState, job: &Job) -> Option<Status> {
     if job.lost.load(Ordering::SeqCst) {
         None
     } else if job.timed_out.load(Ordering::SeqCst) {
-        let (_, p) = ApiError::JobTimeout { seconds: state.config.job_timeout_s }.problem();
+        let p = Problem::job_timeout(state.jobs.timeout.as_secs());
         finish(state, job, Status::Failed, Some(p), None);
         Some(Status::Failed)
     } else {
@@ -277,7 +286,7 @@ pub(crate) fn without_paths(msg: &str) -> String {
 }
 
 pub(super) fn canceled() -> Problem {
-    ApiError::Canceled.problem().1
+    Problem::canceled()
 }
 
 /// A result to store: the summary with each array's shape and links (its values are written into the body per

@@ -27,7 +27,6 @@ impl Histogram {
 /// Counters the service keeps about itself, rendered at `/metrics`.
 #[derive(Default)]
 pub struct Metrics {
-    pub jobs_submitted: AtomicU64,
     /// (analysis, status) → (count, total seconds).
     jobs_finished: Mutex<BTreeMap<(String, String), (u64, f64)>>,
     /// (method, route, status) → count.
@@ -135,7 +134,7 @@ pub fn render(state: &AppState) -> String {
     }
     let _ = writeln!(out, "# HELP kac_jobs_submitted_total Jobs accepted into the queue.");
     let _ = writeln!(out, "# TYPE kac_jobs_submitted_total counter");
-    let _ = writeln!(out, "kac_jobs_submitted_total {}", m.jobs_submitted.load(Ordering::Relaxed));
+    let _ = writeln!(out, "kac_jobs_submitted_total {}", state.jobs.submitted.load(Ordering::Relaxed));
     let _ = writeln!(out, "# HELP kac_job_duration_seconds Time jobs spent on a worker, by analysis and outcome.");
     let _ = writeln!(out, "# TYPE kac_job_duration_seconds summary");
     for ((a, s), (n, sum)) in m.jobs_finished.lock().unwrap_or_else(|e| e.into_inner()).iter() {

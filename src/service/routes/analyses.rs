@@ -132,7 +132,7 @@ pub(crate) async fn create_job(State(st): State<AppState>, request: Request) -> 
         strict_body(&st, Json::<Value>::from_request(request, &st).await, "JobRequest")?
     };
     let shape = stored_shape(&st, &req.shape_id)?;
-    let (job, created) = jobs::submit(&st, shape, req.analysis)?;
+    let (job, created) = jobs::submit(&st.jobs, &st.config, shape, req.analysis)?;
     Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job))
 }
 
@@ -223,7 +223,7 @@ pub(crate) async fn cancel_job(State(st): State<AppState>, JobPath(id): JobPath)
     if view.status.terminal() {
         return Ok(job_response(StatusCode::OK, &view));
     }
-    let view = jobs::cancel(&st, &id)?.ok_or(ApiError::NotFound { what: "job", id: id.hex() })?;
+    let view = st.jobs.cancel(&id)?.ok_or(ApiError::NotFound { what: "job", id: id.hex() })?;
     Ok(job_response(StatusCode::ACCEPTED, &view))
 }
 
@@ -317,7 +317,7 @@ pub(crate) async fn analyze(
         serde_json::from_value(value).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
     up.fields.clear();
     let (_, shape) = ingest(&st, up).await?;
-    let (job, _) = jobs::submit(&st, shape, analysis)?;
+    let (job, _) = jobs::submit(&st.jobs, &st.config, shape, analysis)?;
     answer_within(&st, &job, q.wait, &headers).await
 }
 

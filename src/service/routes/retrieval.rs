@@ -48,7 +48,7 @@ pub(crate) async fn compare(
             shapes
         }
     };
-    let (job, _) = jobs::submit_compare(&st, req, shapes)?;
+    let (job, _) = jobs::submit_compare(&st.jobs, &st.config, req, shapes)?;
     answer_within(&st, &job, q.wait, &headers).await
 }
 
@@ -123,7 +123,7 @@ pub(crate) async fn search(
                     operator: req.operator.clone(),
                     solver: analysis::SolverSpec::default(),
                 };
-                let (job, _) = jobs::submit(&st, shape, dna)?;
+                let (job, _) = jobs::submit(&st.jobs, &st.config, shape, dna)?;
                 let view = wait_for(&st, &job, q.wait).await?;
                 match (st.index.get(&family, id), view.status) {
                     (Some(f), _) => f,

@@ -12,10 +12,12 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+mod memory;
 mod postgres;
 mod queue;
 mod result;
 mod sqlite;
+pub use memory::MemoryQueue;
 pub use postgres::Postgres;
 pub(crate) use result::result_size;
 pub use result::{StoredResult, SMALL_BODY};

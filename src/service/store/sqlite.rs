@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::service::ids::{file_in, JobId};
-use crate::service::jobs::{now, JobProgress, Status};
+use crate::service::jobs::{now, Clock, JobProgress, Status, SystemClock};
 use crate::service::problem::Problem;
 use rusqlite::OptionalExtension;
 use std::io::Write;
@@ -14,6 +14,8 @@ use std::time::Duration;
 /// restart.
 pub struct Database {
     conn: Mutex<rusqlite::Connection>,
+    /// Where leases are read from.
+    clock: Arc<dyn Clock>,
     shape_dir: PathBuf,
     /// Locks striped by shape id: an insert or removal of one id (its file and its record together) runs alone, so
     /// simultaneous uploads of one shape, in one format or several, store one file and one record that agree.
@@ -84,6 +86,15 @@ fn db_err(e: rusqlite::Error) -> std::io::Error {
 
 impl Database {
     pub fn open(data_dir: &Path, max_vertices: usize, cache_bytes: usize) -> std::io::Result<Self> {
+        Self::open_with_clock(data_dir, max_vertices, cache_bytes, Arc::new(SystemClock::default()))
+    }
+    /// [`Database::open`] with the clock its leases are read from (the tests' [`crate::service::jobs::ManualClock`]).
+    pub fn open_with_clock(
+        data_dir: &Path,
+        max_vertices: usize,
+        cache_bytes: usize,
+        clock: Arc<dyn Clock>,
+    ) -> std::io::Result<Self> {
         let shape_dir = data_dir.join("shapes");
         std::fs::create_dir_all(&shape_dir)?;
         let lock = lock_dir(data_dir)?;
@@ -107,6 +118,7 @@ impl Database {
         .map_err(db_err)?;
         migrate_jobs(&conn)?;
         Ok(Database {
+            clock,
             _lock: lock,
             changes: tokio::sync::broadcast::channel(1024).0,
             conn: Mutex::new(conn),
@@ -291,10 +303,6 @@ impl FingerprintStore for Database {
     }
 }
 
-fn now_ms() -> i64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis() as i64)
-}
-
 fn view_of(text: &str) -> std::io::Result<JobView> {
     serde_json::from_str(text).map_err(std::io::Error::other)
 }
@@ -353,7 +361,7 @@ impl JobQueue for Database {
         let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
         tx.execute(
             "UPDATE jobs SET status = 'processing', owner = ?2, lease_until = ?3, view = ?4 WHERE id = ?1",
-            rusqlite::params![id, owner, now_ms() + lease.as_millis() as i64, text],
+            rusqlite::params![id, owner, self.clock.wall_ms() + lease.as_millis() as i64, text],
         )
         .map_err(db_err)?;
         tx.commit().map_err(db_err)?;
@@ -377,7 +385,7 @@ impl JobQueue for Database {
         let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
         c.execute(
             "UPDATE jobs SET lease_until = ?3, view = ?4 WHERE id = ?1 AND owner = ?2",
-            rusqlite::params![id, owner, now_ms() + lease.as_millis() as i64, text],
+            rusqlite::params![id, owner, self.clock.wall_ms() + lease.as_millis() as i64, text],
         )
         .map_err(db_err)?;
         Ok(Lease::Held { cancel: cancel != 0 })
@@ -424,7 +432,7 @@ impl JobQueue for Database {
         Ok(Some(view))
     }
     fn requeue_expired(&self) -> std::io::Result<Vec<String>> {
-        self.requeue_where("lease_until < ?1", now_ms())
+        self.requeue_where("lease_until < ?1", self.clock.wall_ms())
     }
     fn recover(&self) -> std::io::Result<usize> {
         // The data directory belongs to this process: no other worker can hold a claim.
