@@ -1076,3 +1076,27 @@ async fn every_analysis_result_matches_its_schema() {
     all.sort();
     assert_eq!(seen.into_iter().collect::<Vec<_>>(), all, "every analysis is checked");
 }
+
+/// Compare and search take the shape-DNA's options at their top level (one type, flattened): a misspelt option is
+/// still refused by the request check, naming the field and its suggestion, and the options reach the fingerprint.
+#[tokio::test]
+async fn compare_and_search_refuse_unknown_options_of_the_flattened_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let compare = json!({ "shape_ids": [], "normalisation": "area" });
+    let search = json!({ "fingerprint": [1.0], "normalisation": "area" });
+    for (uri, body) in [("/v1/compare?wait=0", compare), ("/v1/search", search)] {
+        let (status, p) = call(&app, post_json(uri, body)).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{uri}: {p}");
+        assert_eq!((p["field"].as_str(), p["suggestion"].as_str()), (Some("normalisation"), Some("normalization")));
+    }
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(2));
+    let (_, shape) = call(&app, Request::post("/v1/shapes?format=off").body(Body::from(off)).unwrap()).await;
+    let id = shape["id"].as_str().unwrap();
+    let body = json!({ "shape_ids": [id], "k": 7, "normalization": "area", "include_zero": true });
+    let (status, r) = call(&app, post_json("/v1/compare?wait=60", body)).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    assert_eq!((r["options"]["k"].as_u64(), r["options"]["normalization"].as_str()), (Some(7), Some("area")));
+    assert_eq!(r["fingerprints"][0].as_array().unwrap().len(), 7);
+    assert_eq!(r["fingerprints"][0][0].as_f64(), Some(0.0), "the zero mode is kept with include_zero");
+}

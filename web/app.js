@@ -422,7 +422,7 @@ $('run').addEventListener('click', () => submit(request()));
 // Shape-DNA of every stored shape and the distances between them, as a job.
 $('compare').addEventListener('click', () =>
   guarded(async () => {
-    const r = await api('POST', '/v1/compare?wait=0', { k: 50, normalization: 'area' });
+    const r = await api('POST', '/v1/compare?wait=0', { normalization: 'area' });
     await follow(r.status && r.links ? r : { id: r.result_id, status: 'succeeded' });
   }),
 );
@@ -534,7 +534,7 @@ function pickVertex(v, link = true) {
 
 viewer.onpick = (v) => pickVertex(v);
 $('geodesic').addEventListener('click', () => submit({ shape_id: state.shape, analysis: 'geodesic', sources: [rowOf(state.vertex)] }));
-$('heat').addEventListener('click', () => submit({ shape_id: state.shape, analysis: 'heat', k: 100, sources: [rowOf(state.vertex)] }));
+$('heat').addEventListener('click', () => submit({ shape_id: state.shape, analysis: 'heat', sources: [rowOf(state.vertex)] }));
 // Evolutions from a bump at the picked vertex, over times scaled to the shape (its area: a wave crosses a
 // unit-area surface in about one time unit); the slider then plays them.
 const evolutionTimes = () => {

@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::sync::Arc;
 
+pub mod compare;
 mod eigen;
 mod error;
 mod extrapolate;

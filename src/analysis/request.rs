@@ -266,7 +266,7 @@ pub enum SolverMethod {
     Sparse,
 }
 
-#[derive(utoipa::ToSchema, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum HeatMethod {
     /// Σ e^{−λt} over the computed eigenpairs (with a truncation bound).
@@ -276,7 +276,7 @@ pub enum HeatMethod {
     Implicit,
 }
 
-#[derive(utoipa::ToSchema, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum EmbedScaling {
     /// Laplacian eigenmap: the eigenvectors themselves.
@@ -557,7 +557,7 @@ pub enum Analysis {
 pub fn k_default() -> usize {
     10
 }
-pub(crate) fn k_signature() -> usize {
+pub fn k_signature() -> usize {
     100
 }
 pub(crate) fn refinements_default() -> usize {
@@ -569,16 +569,16 @@ fn is_two(r: &usize) -> bool {
 pub(crate) fn yes() -> bool {
     true
 }
-pub(crate) fn one() -> f64 {
+pub fn one() -> f64 {
     1.0
 }
 pub fn k_curvature() -> usize {
     300
 }
-pub(crate) fn steps_default() -> usize {
+pub fn steps_default() -> usize {
     1
 }
-pub(crate) fn dimensions_default() -> usize {
+pub fn dimensions_default() -> usize {
     3
 }
 

@@ -5,9 +5,9 @@
 
 use super::{print_json, Failure, ShapeArgs};
 use crate::analysis::OperatorSpec;
-use crate::analysis::{self, Analysis, EmbedScaling, HeatMethod, Hooks, Output, SolverSpec};
+use crate::analysis::{self, compare, Analysis, EmbedScaling, HeatMethod, Hooks, Output, SolverSpec};
 use clap::Args;
-use kac_core::descriptors::shape_dna::{self, Metric, Normalization, Reweighting, ShapeDnaOptions};
+use kac_core::descriptors::shape_dna::{self, Metric, ShapeDnaOptions};
 use kac_core::descriptors::signatures::{HksOptions, SiHksOptions, WksOptions};
 use kac_core::pde::geodesic::HeatMethodOptions;
 use kac_core::Validated;
@@ -87,58 +87,23 @@ pub struct HksCmd {
     #[command(flatten)]
     pub out: OutArgs,
     /// Eigenpairs summed.
-    #[arg(short = 'k', long = "k", default_value_t = 100)]
+    #[arg(short = 'k', long = "k", default_value_t = analysis::k_signature())]
     pub k: usize,
-    /// Explicit times (comma-separated); default: --count times log-spaced in [4 ln10/λ_max, 4 ln10/λ₁].
-    #[arg(long, value_delimiter = ',')]
-    pub times: Option<Vec<f64>>,
-    #[arg(long, default_value_t = 100)]
-    pub count: usize,
-    /// Divide by the heat trace Z(t).
-    #[arg(long)]
-    pub scale: bool,
-    /// The scale-invariant HKS (Bronstein & Kokkinos 2010) instead.
+    #[command(flatten)]
+    pub hks: HksOptions,
+    /// The scale-invariant HKS (Bronstein & Kokkinos 2010) instead, with the SI-HKS flags.
     #[arg(long)]
     pub scale_invariant: bool,
-    /// SI-HKS: log-time base α.
-    #[arg(long, default_value_t = SiHksOptions::default().alpha)]
-    pub alpha: f64,
-    /// SI-HKS: first τ (default log_α(1/λ_max)).
-    #[arg(long, allow_hyphen_values = true)]
-    pub tau_start: Option<f64>,
-    /// SI-HKS: τ step.
-    #[arg(long, default_value_t = SiHksOptions::default().tau_step)]
-    pub tau_step: f64,
-    /// SI-HKS: τ samples.
-    #[arg(long, default_value_t = SiHksOptions::default().samples)]
-    pub samples: usize,
-    /// SI-HKS: Fourier moduli kept.
-    #[arg(long, default_value_t = SiHksOptions::default().frequencies)]
-    pub frequencies: usize,
+    #[command(flatten)]
+    pub si: SiHksOptions,
 }
 
 pub fn hks(a: HksCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
     let an = if a.scale_invariant {
-        Analysis::SiHks {
-            k: a.k,
-            options: SiHksOptions {
-                alpha: a.alpha,
-                tau_start: a.tau_start,
-                tau_step: a.tau_step,
-                samples: a.samples,
-                frequencies: a.frequencies,
-            },
-            operator: a.op.clone(),
-            solver: solver(&a.out),
-        }
+        Analysis::SiHks { k: a.k, options: a.si, operator: a.op.clone(), solver: solver(&a.out) }
     } else {
-        Analysis::Hks {
-            k: a.k,
-            options: HksOptions { times: a.times, count: a.count, scale: a.scale },
-            operator: a.op.clone(),
-            solver: solver(&a.out),
-        }
+        Analysis::Hks { k: a.k, options: a.hks, operator: a.op.clone(), solver: solver(&a.out) }
     };
     emit(run(&v, &an, &a.out)?, &a.out)
 }
@@ -151,67 +116,16 @@ pub struct WksCmd {
     pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
-    #[arg(short = 'k', long = "k", default_value_t = 100)]
+    #[arg(short = 'k', long = "k", default_value_t = analysis::k_signature())]
     pub k: usize,
-    /// Log-energies, evenly spaced in [log λ₁, log λ_max].
-    #[arg(long, default_value_t = WksOptions::default().count)]
-    pub count: usize,
-    /// σ as a multiple of the energy spacing.
-    #[arg(long, default_value_t = WksOptions::default().variance)]
-    pub variance: f64,
+    #[command(flatten)]
+    pub options: WksOptions,
 }
 
 pub fn wks(a: WksCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
-    let an = Analysis::Wks {
-        k: a.k,
-        options: WksOptions { count: a.count, variance: a.variance, energies: None },
-        operator: a.op.clone(),
-        solver: solver(&a.out),
-    };
+    let an = Analysis::Wks { k: a.k, options: a.options, operator: a.op.clone(), solver: solver(&a.out) };
     emit(run(&v, &an, &a.out)?, &a.out)
-}
-
-fn parse_normalization(s: &str) -> Result<Normalization, String> {
-    Normalization::from_name(s).ok_or_else(|| {
-        format!("unknown normalization '{s}'; one of: {}", Normalization::ALL.map(|n| n.name()).join(", "))
-    })
-}
-
-fn parse_reweighting(s: &str) -> Result<Reweighting, String> {
-    Reweighting::from_name(s).ok_or_else(|| format!("unknown reweighting '{s}'; one of: none, index"))
-}
-
-fn parse_metric(s: &str) -> Result<Metric, String> {
-    Metric::from_name(s).ok_or_else(|| format!("unknown metric '{s}'; one of: euclidean, manhattan, canberra"))
-}
-
-/// Shape-DNA flags, shared by `shape-dna` and `compare`.
-#[derive(Args, Debug, Clone)]
-pub struct DnaArgs {
-    /// Values in the fingerprint (the default is the service's too: `ShapeDnaOptions::default`).
-    #[arg(short = 'k', long = "k", default_value_t = kac_core::descriptors::shape_dna::ShapeDnaOptions::default().k)]
-    pub k: usize,
-    /// Keep the zero modes (default: start at the first non-zero eigenvalue).
-    #[arg(long)]
-    pub include_zero: bool,
-    /// none, area, volume, geometry, weyl, first-nonzero.
-    #[arg(long, default_value = "none", value_parser = parse_normalization)]
-    pub normalization: Normalization,
-    /// none or index (divide the i-th value by i).
-    #[arg(long, default_value = "none", value_parser = parse_reweighting)]
-    pub reweighting: Reweighting,
-}
-
-impl DnaArgs {
-    fn options(&self) -> ShapeDnaOptions {
-        ShapeDnaOptions {
-            k: self.k,
-            include_zero: self.include_zero,
-            normalization: self.normalization,
-            reweighting: self.reweighting,
-        }
-    }
 }
 
 #[derive(Args)]
@@ -221,7 +135,7 @@ pub struct ShapeDnaCmd {
     #[command(flatten)]
     pub op: OperatorSpec,
     #[command(flatten)]
-    pub dna: DnaArgs,
+    pub dna: ShapeDnaOptions,
     #[command(flatten)]
     pub out: OutArgs,
     /// Also write the raw eigenvalues as a lapy/ShapeDNA .ev file.
@@ -231,7 +145,7 @@ pub struct ShapeDnaCmd {
 
 pub fn shape_dna(a: ShapeDnaCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
-    let an = Analysis::ShapeDna { options: a.dna.options(), operator: a.op.clone(), solver: solver(&a.out) };
+    let an = Analysis::ShapeDna { options: a.dna.clone(), operator: a.op.clone(), solver: solver(&a.out) };
     let out = run(&v, &an, &a.out)?;
     if let Some(path) = &a.ev {
         let dna = &out.summary["shape_dna"];
@@ -264,7 +178,7 @@ pub struct HeatCmd {
     pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
-    #[arg(short = 'k', long = "k", default_value_t = 100)]
+    #[arg(short = 'k', long = "k", default_value_t = analysis::k_signature())]
     pub k: usize,
     /// Times (default: 10 on the HKS grid; required for --method implicit).
     #[arg(long, value_delimiter = ',')]
@@ -273,10 +187,10 @@ pub struct HeatCmd {
     #[arg(long, value_delimiter = ',')]
     pub source: Vec<u32>,
     /// spectral (eigenpairs) or implicit (backward Euler, no eigenpairs).
-    #[arg(long, default_value = "spectral", value_parser = ["spectral", "implicit"])]
-    pub method: String,
+    #[arg(long, value_enum, default_value_t = HeatMethod::default())]
+    pub method: HeatMethod,
     /// Backward-Euler steps per time.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = analysis::steps_default())]
     pub steps: usize,
 }
 
@@ -286,7 +200,7 @@ pub fn heat(a: HeatCmd) -> Result<(), Failure> {
         k: a.k,
         times: a.times,
         sources: a.source,
-        method: if a.method == "implicit" { HeatMethod::Implicit } else { HeatMethod::Spectral },
+        method: a.method,
         steps: a.steps,
         operator: a.op.clone(),
         solver: solver(&a.out),
@@ -303,25 +217,13 @@ pub struct GeodesicCmd {
     /// Source vertices (input numbering).
     #[arg(long, value_delimiter = ',', required = true)]
     pub source: Vec<u32>,
-    /// t = m·h² (h the mean edge length).
-    #[arg(long, default_value_t = 1.0)]
-    pub time_factor: f64,
-    /// Varadhan cross-check time t' = m'·h² (0: off; default: from the shape's size, max((D/9)², 10h²) with D
-    /// the bounding box's diagonal).
-    #[arg(long)]
-    pub varadhan_factor: Option<f64>,
+    #[command(flatten)]
+    pub options: HeatMethodOptions,
 }
 
 pub fn geodesic(a: GeodesicCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
-    let an = Analysis::Geodesic {
-        sources: a.source,
-        options: HeatMethodOptions {
-            time_factor: a.time_factor,
-            varadhan_factor: a.varadhan_factor,
-            ..Default::default()
-        },
-    };
+    let an = Analysis::Geodesic { sources: a.source, options: a.options };
     emit(run(&v, &an, &a.out)?, &a.out)
 }
 
@@ -345,18 +247,18 @@ pub struct EmbedCmd {
     pub op: OperatorSpec,
     #[command(flatten)]
     pub out: OutArgs,
-    #[arg(short = 'd', long, default_value_t = 3)]
+    #[arg(short = 'd', long, default_value_t = analysis::dimensions_default())]
     pub dimensions: usize,
     /// none (Laplacian eigenmap) or gps (φ/√λ).
-    #[arg(long, default_value = "none", value_parser = ["none", "gps"])]
-    pub scaling: String,
+    #[arg(long, value_enum, default_value_t = EmbedScaling::default())]
+    pub scaling: EmbedScaling,
 }
 
 pub fn embed(a: EmbedCmd) -> Result<(), Failure> {
     let (v, _) = a.shape.load()?;
     let an = Analysis::Embed {
         dimensions: a.dimensions,
-        scaling: if a.scaling == "gps" { EmbedScaling::Gps } else { EmbedScaling::None },
+        scaling: a.scaling,
         operator: a.op.clone(),
         solver: solver(&a.out),
     };
@@ -449,23 +351,26 @@ pub struct CompareCmd {
     #[arg(long, default_value = "shape-dna", value_parser = ["shape-dna"])]
     pub descriptor: String,
     #[command(flatten)]
-    pub dna: DnaArgs,
+    pub dna: ShapeDnaOptions,
     #[command(flatten)]
     pub op: OperatorSpec,
     /// euclidean, manhattan or canberra.
-    #[arg(long, default_value = "euclidean", value_parser = parse_metric)]
+    #[arg(long, default_value_t = Metric::default(), value_parser = Metric::parse)]
     pub metric: Metric,
     #[command(flatten)]
     pub solver: SolverSpec,
 }
 
+/// Two shapes (or `.ev` files) compared through the same code as the service's comparisons
+/// ([`analysis::compare`]): each one's fingerprint, then their distance.
 pub fn compare(a: CompareCmd) -> Result<(), Failure> {
-    let side = |path: &Path| -> Result<Value, Failure> {
+    let fail =
+        |path: &Path, e: &dyn std::fmt::Display| Failure { code: 2, message: format!("{}: {e}", path.display()) };
+    let side = |path: &Path| -> Result<(compare::Fingerprinted, Value), Failure> {
+        let source = path.display().to_string();
         if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ev")) {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
-            let ev = shape_dna::read_ev(&text)
-                .map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
+            let text = std::fs::read_to_string(path).map_err(|e| fail(path, &e))?;
+            let ev = shape_dna::read_ev(&text).map_err(|e| fail(path, &e))?;
             let field = |k: &str| ev.field(k).and_then(|x| x.parse::<f64>().ok());
             let dimension = if field("Volume").is_some() && field("Area").is_none() { 3 } else { 2 };
             let m = shape_dna::Measures {
@@ -475,33 +380,41 @@ pub fn compare(a: CompareCmd) -> Result<(), Failure> {
                 length: None,
                 has_boundary: None,
             };
-            let tol = 1e-9 * ev.eigenvalues.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-            let dna = shape_dna::shape_dna(&ev.eigenvalues, tol, &m, &a.dna.options())
-                .map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
-            return Ok(json!({ "source": path.display().to_string(), "format": "ev", "shape_dna": dna }));
+            let f =
+                compare::fingerprint_eigenvalues(&source, &ev.eigenvalues, &m, &a.dna).map_err(|e| fail(path, &e))?;
+            let shown = json!({ "source": source, "format": "ev", "shape_dna": f.dna });
+            return Ok((f, shown));
         }
         let shape =
             ShapeArgs { file: path.to_path_buf(), format: None, weld: kac_core::Weld::Exact, keep_degenerate: false };
         let (v, _) = shape.load()?;
-        let an = Analysis::ShapeDna { options: a.dna.options(), operator: a.op.clone(), solver: a.solver.clone() };
-        let out = analysis::run(&v, &an, Hooks::default())?;
-        Ok(
-            json!({ "source": path.display().to_string(), "shape_id": v.id.hex(), "shape_dna": out.summary["shape_dna"], "operator": out.summary["operator"], "mass": out.summary["mass"] }),
-        )
+        an_supported(&v, &a)?;
+        let f = compare::fingerprint(&v.id.hex(), &v, &a.dna, &a.op, &a.solver, Hooks::default())?;
+        let (operator, mass) = f.operator.as_ref().map_or(("", ""), |o| (o.operator, o.mass));
+        let shown =
+            json!({ "source": source, "shape_id": f.id, "shape_dna": f.dna, "operator": operator, "mass": mass });
+        Ok((f, shown))
     };
     let (x, y) = (side(&a.a)?, side(&a.b)?);
-    let vals = |s: &Value| -> Vec<f64> { serde_json::from_value(s["shape_dna"]["values"].clone()).unwrap_or_default() };
-    let d =
-        shape_dna::distance(&vals(&x), &vals(&y), a.metric).map_err(|e| Failure { code: 2, message: e.to_string() })?;
+    let found = [x.0, y.0];
+    let c = compare::comparison(&found, vec![], &a.dna, &a.op, a.metric, 1)
+        .map_err(|e| Failure { code: 2, message: e.to_string() })?;
     print_json(&json!({
         "descriptor": a.descriptor,
         "metric": a.metric.name(),
-        "distance": d,
+        "distance": c.distances[0][1],
         "k": a.dna.k,
         "normalization": a.dna.normalization.name(),
         "reweighting": a.dna.reweighting.name(),
         "include_zero": a.dna.include_zero,
-        "a": x,
-        "b": y,
+        "a": x.1,
+        "b": y.1,
     }))
+}
+
+/// A shape-DNA of this shape is one the truth table admits (the same check as a `shape-dna` job).
+fn an_supported(v: &Validated, a: &CompareCmd) -> Result<(), Failure> {
+    let an = Analysis::ShapeDna { options: a.dna.clone(), operator: a.op.clone(), solver: a.solver.clone() };
+    an.supported(&v.shape)?;
+    Ok(())
 }

@@ -14,7 +14,7 @@ pub struct Start {
     #[arg(long, value_delimiter = ',', required = true)]
     pub times: Vec<f64>,
     /// Eigenpairs of the superposition.
-    #[arg(short = 'k', long = "k", default_value_t = 100)]
+    #[arg(short = 'k', long = "k", default_value_t = crate::analysis::k_signature())]
     pub k: usize,
     /// Initial values (u₀, or Re ψ₀) as a .npy, one row per vertex of the file.
     #[arg(long)]

@@ -50,13 +50,13 @@ pub struct DiffuseCmd {
     #[command(flatten)]
     pub start: Start,
     /// The diffusivity α of ∂u/∂t = −αΔu.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = crate::analysis::one())]
     pub diffusivity: f64,
     /// spectral (the k smallest eigenpairs, with the truncation bound) or implicit (backward Euler).
-    #[arg(long, default_value = "spectral", value_parser = ["spectral", "implicit"])]
-    pub method: String,
+    #[arg(long, value_enum, default_value_t = HeatMethod::default())]
+    pub method: HeatMethod,
     /// Backward-Euler steps per time.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = crate::analysis::steps_default())]
     pub steps: usize,
     #[command(flatten)]
     pub op: OperatorSpec,
@@ -70,7 +70,7 @@ pub fn diffuse(a: DiffuseCmd) -> Result<(), Failure> {
         times: a.start.times.clone(),
         start: a.start.data()?,
         diffusivity: a.diffusivity,
-        method: if a.method == "implicit" { HeatMethod::Implicit } else { HeatMethod::Spectral },
+        method: a.method,
         k: a.start.k,
         steps: a.steps,
         operator: a.op.clone(),

@@ -5,10 +5,9 @@
 
 use super::store::StoredShape;
 use crate::analysis::{
-    self, AnalysisError, CompareFailure, CompareNearest, CompareNeighbour, CompareSummary, Fingerprint, Hooks,
-    OperatorSpec, Output, SolverSpec, Summary,
+    self, compare, AnalysisError, CompareFailure, Fingerprint, Hooks, OperatorSpec, Output, SolverSpec, Summary,
 };
-use kac_core::descriptors::shape_dna::{self, Metric, Normalization, Reweighting, ShapeDnaOptions};
+use kac_core::descriptors::shape_dna::{Metric, ShapeDnaOptions};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
@@ -18,19 +17,13 @@ pub const MAX_SHAPES: usize = 500;
 /// Distances between stored shapes by shape-DNA, and each shape's nearest neighbours.
 #[derive(Deserialize, Serialize, utoipa::ToSchema)]
 #[serde(remote = "Self")]
-#[serde(deny_unknown_fields)]
 pub struct CompareRequest {
     /// Shapes to compare (default: every stored shape, at most 500, in id order).
     pub shape_ids: Option<Vec<String>>,
-    /// Fingerprint length (default 50).
-    #[serde(default = "default_dna_k")]
-    pub k: usize,
-    #[serde(default)]
-    pub normalization: Normalization,
-    #[serde(default)]
-    pub reweighting: Reweighting,
-    #[serde(default)]
-    pub include_zero: bool,
+    /// The shape-DNA's options (k, normalization, reweighting, include_zero) at the top level: one type and one
+    /// set of defaults for every request and flag that fingerprints.
+    #[serde(flatten)]
+    pub dna: ShapeDnaOptions,
     #[serde(default)]
     pub metric: Metric,
     /// Nearest neighbours listed per shape (default 5).
@@ -40,10 +33,6 @@ pub struct CompareRequest {
     pub operator: OperatorSpec,
 }
 
-/// The shape-DNA length: the one default (`ShapeDnaOptions::default`) every request and flag uses.
-fn default_dna_k() -> usize {
-    ShapeDnaOptions::default().k
-}
 fn default_neighbours() -> usize {
     5
 }
@@ -52,12 +41,7 @@ kac_core::object_only_serde!(CompareRequest);
 
 impl CompareRequest {
     pub fn options(&self) -> ShapeDnaOptions {
-        ShapeDnaOptions {
-            k: self.k,
-            include_zero: self.include_zero,
-            normalization: self.normalization,
-            reweighting: self.reweighting,
-        }
+        self.dna.clone()
     }
 }
 
@@ -66,7 +50,7 @@ impl CompareRequest {
 pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
     let options = req.options();
     let solver = SolverSpec::default();
-    let (mut ids, mut fingerprints, mut failures) = (vec![], vec![], vec![]);
+    let (mut found, mut failures) = (vec![], vec![]);
     for (i, s) in shapes.iter().enumerate() {
         hooks.control.check()?;
         if let Some(p) = hooks.control.progress {
@@ -74,52 +58,27 @@ pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) 
         }
         // Each shape's own solve reports no progress (the comparison reports shapes done), but stops on the flag.
         let own = Hooks { control: kac_core::spectrum::Control { progress: None, ..hooks.control }, ..hooks };
-        match analysis::shape_dna_of(&s.validated, &options, &req.operator, &solver, own, &Default::default()) {
-            Ok((_, dna, _)) => {
-                ids.push(s.id.clone());
-                fingerprints.push(dna.values);
-            }
+        match compare::fingerprint(&s.id, &s.validated, &options, &req.operator, &solver, own) {
+            Ok(f) => found.push(f),
             Err(e) if e.is_stop() => return Err(e),
             Err(e) => {
                 let p = super::problem::Problem::of_analysis(&e);
                 failures.push(CompareFailure {
                     shape_id: s.id.clone(),
-                    code: p.code.to_string(),
+                    code: p.code,
                     status: p.status,
                     detail: p.detail,
                 });
             }
         }
     }
-    let distances = shape_dna::distance_matrix(&fingerprints, req.metric)?;
+    let summary = compare::comparison(&found, failures, &options, &req.operator, req.metric, req.neighbours)?;
     let family = analysis::fingerprint_family(&options, &req.operator);
-    let found: Vec<Fingerprint> = ids
-        .iter()
-        .zip(&fingerprints)
-        .map(|(id, v)| Fingerprint { family: family.clone(), shape_id: id.clone(), values: v.clone() })
+    let fingerprints = found
+        .into_iter()
+        .map(|f| Fingerprint { family: family.clone(), shape_id: f.id, values: f.dna.values })
         .collect();
-    let nearest: Vec<_> = (0..ids.len())
-        .map(|i| {
-            let near: Vec<_> = shape_dna::nearest(&distances, i, req.neighbours)
-                .into_iter()
-                .map(|(j, d)| CompareNeighbour { shape_id: ids[j].clone(), distance: d })
-                .collect();
-            CompareNearest { shape_id: ids[i].clone(), nearest: near }
-        })
-        .collect();
-    let summary = Summary::Compare(CompareSummary {
-        descriptor: "shape-dna",
-        options,
-        metric: req.metric.name(),
-        operator: req.operator.clone(),
-        shape_ids: ids,
-        fingerprints,
-        distances,
-        nearest,
-        failures,
-        algorithm_version: analysis::ALGORITHM_VERSION,
-        warnings: vec![],
-    });
-    let summary = serde_json::to_value(summary).map_err(|e| AnalysisError::invalid_parameter(e.to_string()))?;
-    Ok(Output { fingerprints: found, summary, arrays: vec![] })
+    let summary =
+        serde_json::to_value(Summary::Compare(summary)).map_err(|e| AnalysisError::invalid_parameter(e.to_string()))?;
+    Ok(Output { fingerprints, summary, arrays: vec![] })
 }

@@ -78,6 +78,7 @@ pub struct ApiDoc;
 /// The document as pretty JSON (what `kac openapi` prints and `/openapi.json` serves).
 pub fn document() -> String {
     let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
+    flatten_requests(&mut doc, &["CompareRequest", "SearchRequest"]);
     close_request_schemas(&mut doc);
     name_analysis_variants(&mut doc);
     name_result_variants(&mut doc);
@@ -150,6 +151,35 @@ fn name_analysis_variants(doc: &mut serde_json::Value) {
     if let Some(Value::Object(a)) = doc.pointer_mut("/components/schemas/Analysis") {
         a.insert("oneOf".into(), Value::Array(refs));
         a.insert("discriminator".into(), serde_json::json!({ "propertyName": "analysis", "mapping": mapping }));
+    }
+}
+
+/// Requests that flatten an option set into their top level (`CompareRequest` and `SearchRequest` take the
+/// shape-DNA's options, `ShapeDnaOptions`, beside their own fields) as one flat object: the same fields and
+/// required ones, which generators read as one model and which the request check closes like any object (an
+/// `allOf` whose member is closed where it stands alone would refuse the other members' fields).
+fn flatten_requests(doc: &mut serde_json::Value, names: &[&str]) {
+    use serde_json::{Map, Value};
+    for name in names {
+        let pointer = format!("/components/schemas/{name}");
+        let Some(schema) = doc.pointer(&pointer).cloned() else { continue };
+        if schema.get("allOf").is_none() {
+            continue;
+        }
+        let (mut props, mut required) = (Map::new(), Vec::<Value>::new());
+        flatten_into(doc, &schema, &mut props, &mut required);
+        let mut flat = Map::new();
+        if let Some(d) = schema.get("description") {
+            flat.insert("description".into(), d.clone());
+        }
+        flat.insert("type".into(), "object".into());
+        flat.insert("properties".into(), Value::Object(props));
+        if !required.is_empty() {
+            flat.insert("required".into(), Value::Array(required));
+        }
+        if let Some(slot) = doc.pointer_mut(&pointer) {
+            *slot = Value::Object(flat);
+        }
     }
 }
 

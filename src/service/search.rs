@@ -5,7 +5,7 @@
 
 use super::store::FingerprintStore;
 use crate::analysis::{self, Fingerprint, OperatorSpec};
-use kac_core::descriptors::shape_dna::{self, Metric, Normalization, Reweighting, ShapeDnaOptions};
+use kac_core::descriptors::shape_dna::{self, Metric, ShapeDnaOptions};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::sync::RwLock;
@@ -13,22 +13,16 @@ use std::sync::RwLock;
 /// The nearest stored shapes to a shape or a fingerprint, by shape-DNA.
 #[derive(Deserialize, Serialize, utoipa::ToSchema)]
 #[serde(remote = "Self")]
-#[serde(deny_unknown_fields)]
 pub struct SearchRequest {
     /// A stored shape to search from (its fingerprint is computed first, as a `shape-dna` job, when the store has
     /// none of this family); the shape itself is left out of the answer.
     pub shape_id: Option<String>,
     /// Or a fingerprint of `k` values computed elsewhere (with the same parameters).
     pub fingerprint: Option<Vec<f64>>,
-    /// Fingerprint length (default 50).
-    #[serde(default = "default_k")]
-    pub k: usize,
-    #[serde(default)]
-    pub normalization: Normalization,
-    #[serde(default)]
-    pub reweighting: Reweighting,
-    #[serde(default)]
-    pub include_zero: bool,
+    /// The shape-DNA's options (k, normalization, reweighting, include_zero) at the top level: one type and one
+    /// set of defaults for every request and flag that fingerprints.
+    #[serde(flatten)]
+    pub dna: ShapeDnaOptions,
     #[serde(default)]
     pub metric: Metric,
     /// Nearest shapes returned (default 10, at most 1000).
@@ -38,10 +32,6 @@ pub struct SearchRequest {
     pub operator: OperatorSpec,
 }
 
-/// The shape-DNA length: the one default (`ShapeDnaOptions::default`) every request and flag uses.
-fn default_k() -> usize {
-    ShapeDnaOptions::default().k
-}
 fn default_neighbours() -> usize {
     10
 }
@@ -50,12 +40,7 @@ kac_core::object_only_serde!(SearchRequest);
 
 impl SearchRequest {
     pub fn options(&self) -> ShapeDnaOptions {
-        ShapeDnaOptions {
-            k: self.k,
-            include_zero: self.include_zero,
-            normalization: self.normalization,
-            reweighting: self.reweighting,
-        }
+        self.dna.clone()
     }
     pub fn family(&self) -> String {
         analysis::fingerprint_family(&self.options(), &self.operator)

@@ -390,13 +390,13 @@ pub fn submit_compare(
     mut request: super::compare::CompareRequest,
     shapes: Vec<Arc<StoredShape>>,
 ) -> Result<(JobView, bool), JobError> {
-    if request.k == 0 {
+    if request.dna.k == 0 {
         return Err(JobError::Analysis(crate::analysis::AnalysisError::invalid_k(
             "k = 0: ask for at least one eigenpair",
         )));
     }
-    if request.k > config.max_k {
-        return Err(JobError::Limit(Limit::Pairs(format!("k = {} is above --max-k {}", request.k, config.max_k))));
+    if request.dna.k > config.max_k {
+        return Err(JobError::Limit(Limit::Pairs(format!("k = {} is above --max-k {}", request.dna.k, config.max_k))));
     }
     // Each shape's shape-DNA within the limits a shape-dna job of it would have (the largest decides).
     let dna = Analysis::ShapeDna {

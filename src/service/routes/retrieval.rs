@@ -84,13 +84,13 @@ pub(crate) async fn search(
     let req: SearchRequest = strict_body(&st, body, "SearchRequest")?;
     // What other replicas computed or removed since the last search.
     st.index.sync(&*st.fingerprints).map_err(store_error)?;
-    if req.k == 0 {
+    if req.dna.k == 0 {
         return Err(ApiError::Analysis(analysis::AnalysisError::invalid_k(
             "k = 0: a fingerprint has at least one value",
         )));
     }
-    if req.k > st.config.max_k {
-        return Err(ApiError::KTooLarge { detail: format!("k = {} is above --max-k {}", req.k, st.config.max_k) });
+    if req.dna.k > st.config.max_k {
+        return Err(ApiError::KTooLarge { detail: format!("k = {} is above --max-k {}", req.dna.k, st.config.max_k) });
     }
     if req.neighbours > 1000 {
         return Err(ApiError::invalid_request(format!("neighbours = {}: at most 1000", req.neighbours)));

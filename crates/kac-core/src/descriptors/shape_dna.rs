@@ -56,6 +56,17 @@ impl Normalization {
     pub fn from_name(s: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|n| n.name() == s)
     }
+    /// A name, or a sentence listing the names.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        Self::from_name(s)
+            .ok_or_else(|| format!("unknown normalization '{s}'; one of: {}", Self::ALL.map(|n| n.name()).join(", ")))
+    }
+}
+
+impl std::fmt::Display for Normalization {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -76,6 +87,16 @@ impl Reweighting {
     }
     pub fn from_name(s: &str) -> Option<Self> {
         [Reweighting::None, Reweighting::Index].into_iter().find(|r| r.name() == s)
+    }
+    /// A name, or a sentence listing the names.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        Self::from_name(s).ok_or_else(|| format!("unknown reweighting '{s}'; one of: none, index"))
+    }
+}
+
+impl std::fmt::Display for Reweighting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -128,16 +149,23 @@ pub fn weyl_eigenvalue(n: f64, dimension: u8, measure: f64) -> f64 {
 }
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
 #[serde(default)]
 pub struct ShapeDnaOptions {
     /// Values reported (default 50).
+    #[cfg_attr(feature = "cli", arg(short = 'k', long = "k", default_value_t = ShapeDnaOptions::default().k))]
     pub k: usize,
     /// Report the zero modes (λ ≤ zero tolerance) too; default false: the fingerprint starts at the first
     /// non-zero eigenvalue.
+    #[cfg_attr(feature = "cli", arg(long))]
     pub include_zero: bool,
+    /// none, area, volume, geometry, weyl, first-nonzero.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = ShapeDnaOptions::default().normalization, value_parser = Normalization::parse))]
     pub normalization: Normalization,
+    /// none or index (divide the i-th value by i).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = ShapeDnaOptions::default().reweighting, value_parser = Reweighting::parse))]
     pub reweighting: Reweighting,
 }
 
@@ -298,6 +326,16 @@ impl Metric {
     }
     pub fn from_name(s: &str) -> Option<Self> {
         [Metric::Euclidean, Metric::Manhattan, Metric::Canberra].into_iter().find(|m| m.name() == s)
+    }
+    /// A name, or a sentence listing the names.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        Self::from_name(s).ok_or_else(|| format!("unknown metric '{s}'; one of: euclidean, manhattan, canberra"))
+    }
+}
+
+impl std::fmt::Display for Metric {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 

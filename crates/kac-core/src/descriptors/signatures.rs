@@ -8,6 +8,7 @@ use std::f64::consts::LN_10;
 
 /// Heat kernel signature (Sun, Ovsjanikov & Guibas 2009): HKS(x, t) = k_t(x, x) = Σ_i e^{−λ_i t} φ_i(x)².
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
 #[serde(default)]
@@ -15,10 +16,14 @@ pub struct HksOptions {
     /// Explicit times; when absent, `count` times log-spaced in [4 ln 10 / λ_max, 4 ln 10 / λ₁] (λ₁ the first
     /// non-zero eigenvalue, λ_max the largest computed): the range in which the computed eigenpairs decide
     /// the signature, as proposed by Sun et al.
+    #[cfg_attr(feature = "cli", arg(long, value_delimiter = ','))]
     pub times: Option<Vec<f64>>,
+    /// Times on the default grid (default 100).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = HksOptions::default().count))]
     pub count: usize,
     /// Divide HKS(·, t) by the heat trace Z(t) = Σ_i e^{−λ_i t} (Sun et al.'s scaling, which weighs all
     /// times alike).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub scale: bool,
 }
 
@@ -93,20 +98,26 @@ pub fn hks(basis: &Basis<'_>, opts: &HksOptions) -> Result<Hks, DescriptorError>
 /// an additive constant, the derivative in τ (a forward difference) removes the constant, and the modulus of
 /// the discrete Fourier transform over τ removes the shift. The first `frequencies` moduli are the descriptor.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
 #[serde(default)]
 pub struct SiHksOptions {
     /// Base α of the log-time grid (default 2).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SiHksOptions::default().alpha))]
     pub alpha: f64,
     /// First τ; default log_α(1 / λ_max), so that the grid starts where the computed spectrum stops resolving
     /// the kernel and follows the shape's scale.
+    #[cfg_attr(feature = "cli", arg(long, allow_hyphen_values = true))]
     pub tau_start: Option<f64>,
     /// Grid step Δτ (default 1/16).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SiHksOptions::default().tau_step))]
     pub tau_step: f64,
     /// Number of τ samples (default 385: 24 octaves at Δτ = 1/16).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SiHksOptions::default().samples))]
     pub samples: usize,
     /// Fourier moduli kept, from frequency 0 up (default 6).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = SiHksOptions::default().frequencies))]
     pub frequencies: usize,
 }
 
@@ -195,16 +206,20 @@ pub fn si_hks(basis: &Basis<'_>, opts: &SiHksOptions) -> Result<SiHks, Descripto
 /// log-energy e at x, WKS(x, e) = Σ_i φ_i(x)² exp(−(e − log λ_i)² / 2σ²) / C_e with
 /// C_e = Σ_i exp(−(e − log λ_i)² / 2σ²). Zero modes are left out (log 0).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
 #[serde(default)]
 pub struct WksOptions {
     /// Number of log-energies, evenly spaced in [log λ₁, log λ_max] (default 100).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = WksOptions::default().count))]
     pub count: usize,
     /// σ as a multiple of the energy spacing (default 6, as in the authors' code).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = WksOptions::default().variance))]
     pub variance: f64,
     /// Explicit log-energies instead of the default grid (σ is then `variance` times their mean spacing, or
     /// `variance` itself for a single energy).
+    #[cfg_attr(feature = "cli", arg(long, value_delimiter = ',', allow_hyphen_values = true))]
     pub energies: Option<Vec<f64>>,
 }
 

@@ -24,16 +24,20 @@ use faer::{Mat, Par};
 use serde::{Deserialize, Serialize};
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
 #[serde(default)]
 pub struct HeatMethodOptions {
-    /// t = time_factor · h² (default 1).
+    /// t = time_factor · h² (default 1; h the mean edge length).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = HeatMethodOptions::default().time_factor))]
     pub time_factor: f64,
     /// Varadhan cross-check: time t' = varadhan_factor · h² (0 turns the check off); default (null): chosen from
     /// the shape's size, t' = max((D/9)², 10h²) with D the bounding box's diagonal …
+    #[cfg_attr(feature = "cli", arg(long))]
     pub varadhan_factor: Option<f64>,
     /// … in this many backward-Euler substeps (default 25).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = HeatMethodOptions::default().varadhan_steps))]
     pub varadhan_steps: usize,
 }
 
