@@ -1019,6 +1019,7 @@ async fn every_analysis_result_matches_its_schema() {
         (upload(&sphere), json!({ "analysis": "gps", "k": 10 })),
         (upload(&sphere), json!({ "analysis": "shape-dna", "options": { "k": 10 } })),
         (upload(&sphere), json!({ "analysis": "heat", "k": 20, "sources": [0] })),
+        (upload(&sphere), json!({ "analysis": "heat", "k": 20 })),
         (
             upload(&square),
             json!({ "analysis": "heat", "k": 20, "sources": [24], "operator": { "boundary": "dirichlet" } }),

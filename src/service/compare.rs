@@ -82,3 +82,19 @@ pub fn run(shapes: &[Arc<StoredShape>], req: &CompareRequest, hooks: Hooks<'_>) 
         serde_json::to_value(Summary::Compare(summary)).map_err(|e| AnalysisError::invalid_parameter(e.to_string()))?;
     Ok(Output { fingerprints, summary, arrays: vec![] })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The flattened shape-DNA options refuse a field no part declares even without the request check (which
+    /// refuses it first over HTTP, with its suggestion).
+    #[test]
+    fn unknown_fields_are_refused_by_the_type_too() {
+        let ok: CompareRequest = serde_json::from_value(serde_json::json!({ "k": 7, "neighbours": 2 })).unwrap();
+        assert_eq!((ok.dna.k, ok.neighbours), (7, 2));
+        assert!(serde_json::from_value::<CompareRequest>(serde_json::json!({ "normalisation": "area" })).is_err());
+        let search = serde_json::json!({ "fingerprint": [1.0], "k": 1, "reweightin": "index" });
+        assert!(serde_json::from_value::<super::super::search::SearchRequest>(search).is_err());
+    }
+}

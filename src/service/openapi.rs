@@ -304,13 +304,27 @@ fn name_result_variants(doc: &mut serde_json::Value) {
             "discriminator": { "propertyName": "analysis", "mapping": mapping },
         }),
     );
-    // Drop the pieces no schema refers to any more.
-    for name in composed {
-        let reference = format!("\"#/components/schemas/{name}\"");
+    // Drop the pieces no schema refers to any more (until none goes: a piece may be referred to only by another).
+    loop {
         let text = serde_json::to_string(&*schemas).unwrap_or_default();
-        let elsewhere = text.matches(&reference).count();
-        if elsewhere == 0 {
+        let unused: Vec<&str> = composed
+            .iter()
+            .copied()
+            .filter(|name| schemas.contains_key(*name))
+            .filter(|name| !text.contains(&format!("\"#/components/schemas/{name}\"")))
+            .collect();
+        if unused.is_empty() {
+            break;
+        }
+        for name in unused {
             schemas.remove(name);
+        }
+    }
+    // An untagged union whose branches can hold the same value (a heat result's `sources`: an empty list is both
+    // a list of reports and a list of vertices) is `anyOf`: `oneOf` would refuse the value both branches hold.
+    if let Some(Value::Object(sources)) = schemas.get_mut("HeatSources") {
+        if let Some(branches) = sources.remove("oneOf") {
+            sources.insert("anyOf".into(), branches);
         }
     }
 }

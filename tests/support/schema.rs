@@ -1,6 +1,6 @@
 //! Results held to their schemas: the committed OpenAPI document's `{Name}Result` for an analysis' result, as a
-//! JSON Schema 2020-12 validator (OpenAPI 3.1 schemas are JSON Schema), closed for the check: a field the schema
-//! does not name fails, so a result can only say what its type says.
+//! JSON Schema 2020-12 validator (OpenAPI 3.1 schemas are JSON Schema), closed for the check at every level: a
+//! field a schema does not name fails, so a result can only say what its types say.
 
 use serde_json::{json, Value};
 use std::collections::HashMap;
@@ -21,6 +21,22 @@ fn pascal(name: &str) -> String {
         .collect()
 }
 
+/// `additionalProperties: false` on every object schema with declared properties, at any depth.
+fn close(schema: &mut Value) {
+    match schema {
+        Value::Object(o) => {
+            if o.contains_key("properties") && !o.contains_key("additionalProperties") {
+                o.insert("additionalProperties".into(), false.into());
+            }
+            for v in o.values_mut() {
+                close(v);
+            }
+        }
+        Value::Array(a) => a.iter_mut().for_each(close),
+        _ => {}
+    }
+}
+
 impl ResultSchemas {
     /// The committed document (`openapi/openapi.json`, the one the clients are generated from).
     pub fn committed() -> Self {
@@ -29,9 +45,11 @@ impl ResultSchemas {
         let mut components = doc["components"].clone();
         let mapping = components["schemas"]["AnalysisResult"]["discriminator"]["mapping"].clone();
         let mapping = mapping.as_object().expect("AnalysisResult maps each analysis to its result");
-        for target in mapping.values() {
-            let name = target.as_str().unwrap().trim_start_matches("#/components/schemas/");
-            components["schemas"][name]["additionalProperties"] = false.into();
+        assert!(!mapping.is_empty());
+        // Closed at every level: each object schema with declared properties (the results, and every type they
+        // hold) takes no other field; free-form objects (an operator's `parameters`) declare none and stay open.
+        for schema in components["schemas"].as_object_mut().unwrap().values_mut() {
+            close(schema);
         }
         Self { components, validators: Mutex::new(HashMap::new()) }
     }

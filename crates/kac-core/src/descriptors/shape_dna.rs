@@ -152,7 +152,7 @@ pub fn weyl_eigenvalue(n: f64, dimension: u8, measure: f64) -> f64 {
 #[cfg_attr(feature = "cli", derive(clap::Args))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ShapeDnaOptions {
     /// Values reported (default 50).
     #[cfg_attr(feature = "cli", arg(short = 'k', long = "k", default_value_t = ShapeDnaOptions::default().k))]
