@@ -234,3 +234,46 @@ fn gradient_then_divergence_on_the_command_line() {
     assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stderr).contains("triangle mesh"), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// `kac correspondence A B --map OUT.npy`: a lumpy sphere (no symmetry) against a rotated copy with its vertices
+/// shuffled; the map written is the permutation (each source vertex's index on the target), and the JSON says what
+/// was fitted and refined. A landmark given as SOURCE:TARGET is accepted; a vertex that is not there is refused.
+#[test]
+fn correspondence_recovers_a_shuffled_copy_and_writes_the_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut a = kac_core::geometry::generate::icosphere(3);
+    for p in &mut a.vertices {
+        let [x, y, z] = *p;
+        let r = 1.0 + 0.3 * x + 0.2 * y * y - 0.25 * z * z * z + 0.15 * x * y;
+        *p = [x * r, 1.3 * y * r, 0.8 * z * r];
+    }
+    let n = a.vertices.len();
+    // Target vertex y is source vertex perm[y]; so source vertex x is target vertex inverse[x].
+    let perm: Vec<u32> = (0..n as u32).map(|y| (y * 389 + 17) % n as u32).collect();
+    let mut inverse = vec![0u32; n];
+    for (y, &x) in perm.iter().enumerate() {
+        inverse[x as usize] = y as u32;
+    }
+    let mut b = a.clone();
+    b.vertices = perm.iter().map(|&x| a.vertices[x as usize]).map(|[x, y, z]| [-y + 2.0, x, z - 1.0]).collect();
+    b.faces = a.faces.iter().map(|f| f.map(|v| inverse[v as usize])).collect();
+    let (pa, pb, map) = (dir.path().join("a.off"), dir.path().join("b.off"), dir.path().join("map.npy"));
+    std::fs::write(&pa, kac_core::io::write::off(&a)).unwrap();
+    std::fs::write(&pb, kac_core::io::write::off(&b)).unwrap();
+    let (sa, sb, sm) = (pa.to_str().unwrap(), pb.to_str().unwrap(), map.to_str().unwrap());
+    let v = run_json(&["correspondence", sa, sb, "--fit-k", "20", "--refine-k", "60", "--map", sm]);
+    assert_eq!(v["analysis"], "correspondence");
+    assert_eq!((v["sizes"][0].as_u64(), v["sizes"].as_array().unwrap().last().unwrap().as_u64()), (Some(20), Some(60)));
+    assert!(v["orthogonality_defect"].as_f64().unwrap() < 0.05, "{}", v["orthogonality_defect"]);
+    let (rows, cols, data) = kac_npy(&std::fs::read(&map).unwrap());
+    assert_eq!((rows, cols), (n, 1));
+    let right = data.iter().enumerate().filter(|(x, &y)| y as u32 == inverse[*x]).count();
+    assert!(right as f64 > 0.97 * n as f64, "{right} of {n} source vertices matched");
+    let back = kac_npy(&std::fs::read(dir.path().join("map.target_to_source.npy")).unwrap()).2;
+    let right = back.iter().enumerate().filter(|(y, &x)| x as u32 == perm[*y]).count();
+    assert!(right as f64 > 0.97 * n as f64, "{right} of {n} target vertices matched back");
+    let v = run_json(&["correspondence", sa, sb, "--fit-k", "20", "--refine-k", "40", "--landmarks", "0:0"]);
+    assert_eq!(v["arrays"]["source_to_target"]["rows"].as_u64(), Some(n as u64));
+    let out = kac().args(["correspondence", sa, sb, "--landmarks", "0:99999"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+}

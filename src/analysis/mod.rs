@@ -23,6 +23,7 @@ use serde_json::{json, Value};
 use std::sync::Arc;
 
 pub mod compare;
+pub mod correspond;
 mod eigen;
 mod error;
 mod extrapolate;

@@ -7,6 +7,7 @@ use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
 use std::path::PathBuf;
 
 mod analyses;
+mod correspond;
 mod curvature;
 mod evolution;
 mod generate;
@@ -70,6 +71,8 @@ enum Command {
     Interpolate(analyses::InterpolateCmd),
     /// Distance between two shapes (or .ev files) by shape-DNA.
     Compare(analyses::CompareCmd),
+    /// Which vertex of one shape is which of another: functional maps refined by ZoomOut, the maps both ways.
+    Correspondence(correspond::CorrespondenceCmd),
     /// Run the HTTP service (REST API under /v1, OpenAPI at /openapi.json, docs at /docs).
     Serve(crate::service::config::Config),
     /// Print the OpenAPI document.
@@ -177,6 +180,7 @@ pub fn run() -> i32 {
         Command::Smooth(a) => analyses::smooth(a),
         Command::Interpolate(a) => analyses::interpolate(a),
         Command::Compare(a) => analyses::compare(a),
+        Command::Correspondence(a) => correspond::run(a),
         Command::Serve(c) => crate::service::serve(c).map_err(|message| Failure { code: 1, message }),
         Command::Openapi => {
             println!("{}", crate::service::openapi::document());

@@ -26,6 +26,7 @@
 // `!(x > 0.0)` is deliberate throughout: it is also true for NaN, which must fail every positivity check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod correspondence;
 pub mod descriptors;
 pub mod error;
 pub mod geometry;

@@ -1,0 +1,689 @@
+//! Which point of one shape is which point of another: functional maps (Ovsjanikov, Ben-Chen, Solomon, Butscher
+//! & Guibas 2012, "Functional maps: a flexible representation of maps between shapes", ACM TOG 31(4)) refined
+//! spectrally by ZoomOut (Melzi, Ren, Rodolà, Sharma, Wonka & Ovsjanikov 2019, "ZoomOut: spectral upsampling for
+//! efficient shape correspondence", ACM TOG 38(6)).
+//!
+//! Conventions. The source S and the target T each have k M-orthonormal eigenfunctions (columns of Φ_S, Φ_T). A
+//! functional map C (k_T × k_S) takes the coefficients a = Φ_Sᵀ M_S f of a function f on S to the coefficients C a
+//! of its transfer to T. A vertex map π: T → S (each target vertex's match on the source) pulls functions back,
+//! f ∘ π, and has the functional map C = Φ_Tᵀ M_T Φ_S[π, :].
+//!
+//! The map is fitted as the small dense problem it is (Nogneng & Ovsjanikov 2017, "Informative descriptor
+//! preservation via commutativity for shape matching", Computer Graphics Forum 36(2), for the third term):
+//!
+//! E(C) = w_d ‖C A − B‖² + w_l Σ_ij (λ_i^T − λ_j^S)² C_ij² / ‖(λ^T − λ^S)²‖ + w_c Σ_f ‖C D_S^f − D_T^f C‖²
+//!
+//! with A, B the descriptors' coefficients (one column per descriptor function, each of unit M-norm), and
+//! D^f = Φᵀ M diag(f) Φ the operator of multiplication by descriptor f. Without the third term the rows of C
+//! decouple (k small systems); with it, E is one k_T·k_S system, solved densely.
+//!
+//! Vertex maps come from C by nearest neighbours in the spectral embedding: π(y) = argmin_x ‖Φ_S[x] Cᵀ − Φ_T[y]‖
+//! (T → S), and σ(x) = argmin_y ‖Φ_T[y] C − Φ_S[x]‖ (S → T; Cᵀ inverts C for near-isometries, where C is nearly
+//! orthogonal). The search is exact: distances by blocks of matrix products.
+
+use crate::descriptors::signatures::{self, WksOptions};
+use crate::descriptors::{Basis, DescriptorError};
+use crate::operators::sparse::{matvec, SparsePair};
+use crate::spectrum::{Control, EigenError};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
+use faer::{Accum, Mat, MatRef, Par, Side};
+use serde::{Deserialize, Serialize};
+
+/// One side of a correspondence: its eigenpairs (M-orthonormal) and its operator (for M).
+pub struct SpectralShape<'a> {
+    pub basis: Basis<'a>,
+    pub pair: &'a SparsePair,
+}
+
+impl SpectralShape<'_> {
+    fn n(&self) -> usize {
+        self.basis.n()
+    }
+    /// Φ[:, :k]ᵀ M F: the coefficients of the columns of F in the first k eigenfunctions.
+    fn coefficients(&self, k: usize, f: MatRef<'_, f64>) -> Mat<f64> {
+        let mf = mass_times(self.pair, f);
+        let mut out = Mat::zeros(k, f.ncols());
+        matmul(out.as_mut(), Accum::Replace, self.basis.vectors.subcols(0, k).transpose(), mf.as_ref(), 1.0, Par::Seq);
+        out
+    }
+}
+
+/// M F, column by column.
+fn mass_times(pair: &SparsePair, f: MatRef<'_, f64>) -> Mat<f64> {
+    let n = f.nrows();
+    let mut out = Mat::zeros(n, f.ncols());
+    let (mut x, mut y) = (vec![0.0; n], vec![0.0; n]);
+    for j in 0..f.ncols() {
+        for i in 0..n {
+            x[i] = f[(i, j)];
+        }
+        matvec(&pair.pattern, &pair.mass, &x, &mut y);
+        for i in 0..n {
+            out[(i, j)] = y[i];
+        }
+    }
+    out
+}
+
+/// How the map is fitted and refined.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
+#[serde(default)]
+pub struct CorrespondenceOptions {
+    /// Eigenfunctions the first map is fitted in (default 30).
+    #[cfg_attr(feature = "cli", arg(long = "fit-k", default_value_t = CorrespondenceOptions::default().fit_k))]
+    pub fit_k: usize,
+    /// WKS log-energies computed per shape (default 100), of which every `descriptor_step`-th is a probe.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = CorrespondenceOptions::default().descriptors))]
+    pub descriptors: usize,
+    /// Keep every this-many-th descriptor (default 5: 20 probes).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = CorrespondenceOptions::default().descriptor_step))]
+    pub descriptor_step: usize,
+    /// Weight of descriptor preservation (default 1).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = CorrespondenceOptions::default().descriptor_weight))]
+    pub descriptor_weight: f64,
+    /// Weight of Laplacian commutativity (default 0.01).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = CorrespondenceOptions::default().laplacian_weight))]
+    pub laplacian_weight: f64,
+    /// Weight of descriptor-operator commutativity (default 0.1; 0 leaves the rows of C decoupled).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = CorrespondenceOptions::default().commutativity_weight))]
+    pub commutativity_weight: f64,
+    /// ZoomOut's last basis size (default 100; at most the eigenpairs computed; the fit's size: no refinement).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = CorrespondenceOptions::default().refine_k))]
+    pub refine_k: usize,
+    /// ZoomOut's step in basis size (default 5).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = CorrespondenceOptions::default().refine_step))]
+    pub refine_step: usize,
+    /// The target is a part of the source (a cut, a partial scan): the map is rectangular, the source's basis
+    /// holding its eigenvalues up to the target's largest (Rodolà et al. 2017, "Partial functional correspondence",
+    /// Computer Graphics Forum 36(1): the map's slanted diagonal). Default false.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub partial: bool,
+    /// Known pairs (source vertex, target vertex): each adds its WKS-weighted landmark descriptors.
+    #[cfg_attr(feature = "cli", arg(skip))]
+    #[cfg_attr(feature = "openapi", schema(value_type = Vec<Vec<u32>>))]
+    pub landmarks: Vec<(u32, u32)>,
+}
+
+impl Default for CorrespondenceOptions {
+    fn default() -> Self {
+        CorrespondenceOptions {
+            fit_k: 30,
+            descriptors: 100,
+            descriptor_step: 5,
+            descriptor_weight: 1.0,
+            laplacian_weight: 1e-2,
+            commutativity_weight: 1e-1,
+            refine_k: 100,
+            refine_step: 5,
+            partial: false,
+            landmarks: vec![],
+        }
+    }
+}
+
+crate::object_only_serde!(CorrespondenceOptions);
+
+/// A correspondence: the functional map and the vertex maps both ways, with the cost of each match.
+#[derive(Debug, Clone)]
+pub struct Correspondence {
+    /// C (k_T × k_S) in the last basis size.
+    pub c: Mat<f64>,
+    /// For each target vertex, its match on the source.
+    pub target_to_source: Vec<u32>,
+    /// For each source vertex, its match on the target.
+    pub source_to_target: Vec<u32>,
+    /// ‖Φ_S[π(y)] Cᵀ − Φ_T[y]‖ per target vertex: how far its match is in the spectral embedding.
+    pub target_cost: Vec<f64>,
+    /// ‖Φ_T[σ(x)] C − Φ_S[x]‖ per source vertex.
+    pub source_cost: Vec<f64>,
+    /// The basis sizes of the refinement, first (the fit) to last.
+    pub sizes: Vec<usize>,
+    /// ‖CCᵀ − I‖_F / √k_T of the final map (0 for an exact isometry's, or a part's).
+    pub orthogonality_defect: f64,
+}
+
+/// Why a correspondence cannot be computed: a parameter or descriptor, or a stop (cancel, timeout).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CorrespondenceError {
+    #[error(transparent)]
+    Descriptor(#[from] DescriptorError),
+    #[error(transparent)]
+    Stopped(#[from] EigenError),
+}
+
+/// Unit M-norm columns (a column of zero norm is left as it is).
+fn normalize_columns(pair: &SparsePair, f: &mut Mat<f64>) {
+    let mf = mass_times(pair, f.as_ref());
+    for j in 0..f.ncols() {
+        let norm = (0..f.nrows()).map(|i| f[(i, j)] * mf[(i, j)]).sum::<f64>().max(0.0).sqrt();
+        if norm > 0.0 {
+            for i in 0..f.nrows() {
+                f[(i, j)] /= norm;
+            }
+        }
+    }
+}
+
+/// The probes of one side: WKS at shared log-energies (the union of both spectra's ranges, so that a function on one
+/// shape has its counterpart on the other), every `step`-th kept, then landmark WKS (the heat of each landmark's
+/// kernel weighted per energy), each column of unit M-norm.
+fn probes(
+    side: &SpectralShape<'_>,
+    energies: &[f64],
+    step: usize,
+    landmarks: &[u32],
+) -> Result<Mat<f64>, DescriptorError> {
+    let w = signatures::wks(
+        &side.basis,
+        &WksOptions { count: energies.len(), variance: 6.0, energies: Some(energies.to_vec()) },
+    )?;
+    let kept: Vec<usize> = (0..energies.len()).step_by(step.max(1)).collect();
+    let n = side.n();
+    let extra = landmarks.len() * kept.len();
+    let mut f = Mat::zeros(n, kept.len() + extra);
+    for (c, &j) in kept.iter().enumerate() {
+        for i in 0..n {
+            f[(i, c)] = w.values[(i, j)];
+        }
+    }
+    // Landmark descriptors: Σ_i φ_i(x) φ_i(l) g_e(λ_i) for each kept energy e (the wave kernel from the landmark).
+    let b = &side.basis;
+    let i1 = (0..b.k()).find(|&i| !b.is_zero(i)).unwrap_or(b.k());
+    let logs: Vec<f64> = b.values.iter().map(|l| if *l > b.zero_tol { l.ln() } else { f64::NAN }).collect();
+    let sigma = w.sigma;
+    for (li, &l) in landmarks.iter().enumerate() {
+        for (c, &j) in kept.iter().enumerate() {
+            let e = energies[j];
+            let col = kept.len() + li * kept.len() + c;
+            let weights: Vec<f64> = (0..b.k())
+                .map(|i| {
+                    if i < i1 {
+                        0.0
+                    } else {
+                        (-(e - logs[i]).powi(2) / (2.0 * sigma * sigma)).exp() * b.vectors[(l as usize, i)]
+                    }
+                })
+                .collect();
+            for x in 0..n {
+                f[(x, col)] = (i1..b.k()).map(|i| weights[i] * b.vectors[(x, i)]).sum();
+            }
+        }
+    }
+    normalize_columns(side.pair, &mut f);
+    Ok(f)
+}
+
+/// Solves the SPD system A X = B (A k × k) by Cholesky; None when A is not positive definite.
+fn spd_solve(a: &Mat<f64>, b: &Mat<f64>) -> Option<Mat<f64>> {
+    let llt = a.llt(Side::Lower).ok()?;
+    let mut x = b.clone();
+    solve_lower_triangular_in_place(llt.L(), x.as_mut(), Par::Seq);
+    solve_upper_triangular_in_place(llt.L().transpose(), x.as_mut(), Par::Seq);
+    Some(x)
+}
+
+/// The functional map C (k × k) fitted to the probes' coefficients A (source), B (target), the eigenvalues, and the
+/// multiplication operators of the probes (for commutativity).
+fn fit(
+    a: &Mat<f64>,
+    b: &Mat<f64>,
+    lambda_s: &[f64],
+    lambda_t: &[f64],
+    ops: &[(Mat<f64>, Mat<f64>)],
+    o: &CorrespondenceOptions,
+) -> Result<Mat<f64>, DescriptorError> {
+    let (kt, ks) = (lambda_t.len(), lambda_s.len());
+    // (λ_i^T − λ_j^S)², scaled to unit Frobenius norm (the weight then does not depend on the shapes' scale).
+    let mut d = Mat::from_fn(kt, ks, |i, j| (lambda_t[i] - lambda_s[j]).powi(2));
+    let norm = d.norm_l2();
+    if norm > 0.0 {
+        d = Mat::from_fn(kt, ks, |i, j| d[(i, j)] / norm);
+    }
+    let aat = {
+        let mut m = Mat::zeros(ks, ks);
+        matmul(m.as_mut(), Accum::Replace, a.as_ref(), a.transpose(), 1.0, Par::Seq);
+        m
+    };
+    let bat = {
+        let mut m = Mat::zeros(kt, ks);
+        matmul(m.as_mut(), Accum::Replace, b.as_ref(), a.transpose(), 1.0, Par::Seq);
+        m
+    };
+    let singular = || DescriptorError::param("correspondence", "the fit's system is singular: give more descriptors");
+    if o.commutativity_weight == 0.0 || ops.is_empty() {
+        // Row by row: (w_d A Aᵀ + w_l diag(D_i)) c_iᵀ = w_d A b_iᵀ.
+        let mut c = Mat::zeros(kt, ks);
+        for i in 0..kt {
+            let sys = Mat::from_fn(ks, ks, |p, q| {
+                o.descriptor_weight * aat[(p, q)] + if p == q { o.laplacian_weight * d[(i, p)] } else { 0.0 }
+            });
+            let rhs = Mat::from_fn(ks, 1, |p, _| o.descriptor_weight * bat[(i, p)]);
+            let x = spd_solve(&sys, &rhs).ok_or_else(singular)?;
+            for p in 0..ks {
+                c[(i, p)] = x[(p, 0)];
+            }
+        }
+        return Ok(c);
+    }
+    // vec(C) column-major: index i + kt·j. The normal equations of E.
+    let m = kt * ks;
+    let idx = |i: usize, j: usize| i + kt * j;
+    let mut sys = Mat::<f64>::zeros(m, m);
+    let mut rhs = Mat::<f64>::zeros(m, 1);
+    for j in 0..ks {
+        for i in 0..kt {
+            // w_d: (A Aᵀ ⊗ I); right-hand side w_d vec(B Aᵀ).
+            for q in 0..ks {
+                sys[(idx(i, j), idx(i, q))] += o.descriptor_weight * aat[(q, j)];
+            }
+            rhs[(idx(i, j), 0)] = o.descriptor_weight * bat[(i, j)];
+            sys[(idx(i, j), idx(i, j))] += o.laplacian_weight * d[(i, j)];
+        }
+    }
+    // w_c Σ_f ‖C X − Y C‖²: K = Xᵀ ⊗ I − I ⊗ Y, KᵀK = (X Xᵀ ⊗ I) − (X ⊗ Y) − (Xᵀ ⊗ Yᵀ) + (I ⊗ YᵀY).
+    for (x, y) in ops {
+        let mut xxt = Mat::zeros(ks, ks);
+        matmul(xxt.as_mut(), Accum::Replace, x.as_ref(), x.transpose(), 1.0, Par::Seq);
+        let mut yty = Mat::zeros(kt, kt);
+        matmul(yty.as_mut(), Accum::Replace, y.transpose(), y.as_ref(), 1.0, Par::Seq);
+        let w = o.commutativity_weight;
+        for j in 0..ks {
+            for q in 0..ks {
+                let (xx, xjq, xqj) = (xxt[(q, j)], x[(q, j)], x[(j, q)]);
+                for i in 0..kt {
+                    sys[(idx(i, j), idx(i, q))] += w * xx;
+                    for p in 0..kt {
+                        // −(X ⊗ Y) − (Xᵀ ⊗ Yᵀ): row (i, j), column (p, q).
+                        sys[(idx(i, j), idx(p, q))] -= w * (xjq * y[(i, p)] + xqj * y[(p, i)]);
+                    }
+                }
+            }
+            for i in 0..kt {
+                for p in 0..kt {
+                    sys[(idx(i, j), idx(p, j))] += w * yty[(i, p)];
+                }
+            }
+        }
+    }
+    let v = spd_solve(&sys, &rhs).ok_or_else(singular)?;
+    Ok(Mat::from_fn(kt, ks, |i, j| v[(idx(i, j), 0)]))
+}
+
+/// For each row of `query` (q × d), the row of `data` (n × d) nearest to it, and the distance: exact, by blocks of
+/// matrix products (|a − b|² = |a|² + |b|² − 2 a·b), the blocks in parallel.
+pub fn nearest_rows(data: MatRef<'_, f64>, query: MatRef<'_, f64>) -> (Vec<u32>, Vec<f64>) {
+    use rayon::prelude::*;
+    const BLOCK: usize = 512;
+    let n = data.nrows();
+    let dn: Vec<f64> = (0..n).map(|i| (0..data.ncols()).map(|j| data[(i, j)].powi(2)).sum()).collect();
+    let q = query.nrows();
+    let blocks: Vec<usize> = (0..q).step_by(BLOCK).collect();
+    let parts: Vec<(Vec<u32>, Vec<f64>)> = blocks
+        .par_iter()
+        .map(|&r0| {
+            let rows = BLOCK.min(q - r0);
+            let qb = query.subrows(r0, rows);
+            let mut g = Mat::zeros(rows, n);
+            matmul(g.as_mut(), Accum::Replace, qb, data.transpose(), 1.0, Par::Seq);
+            let mut best = vec![0u32; rows];
+            let mut dist = vec![0.0; rows];
+            for r in 0..rows {
+                let qn: f64 = (0..qb.ncols()).map(|j| qb[(r, j)].powi(2)).sum();
+                let (mut bi, mut bd) = (0usize, f64::INFINITY);
+                for i in 0..n {
+                    let d2 = dn[i] - 2.0 * g[(r, i)];
+                    if d2 < bd {
+                        bd = d2;
+                        bi = i;
+                    }
+                }
+                best[r] = bi as u32;
+                dist[r] = (bd + qn).max(0.0).sqrt();
+            }
+            (best, dist)
+        })
+        .collect();
+    let mut idx = Vec::with_capacity(q);
+    let mut dist = Vec::with_capacity(q);
+    for (b, d) in parts {
+        idx.extend(b);
+        dist.extend(d);
+    }
+    (idx, dist)
+}
+
+/// The first k pairs of a basis.
+fn truncated<'a>(b: &Basis<'a>, k: usize) -> Basis<'a> {
+    Basis::new(&b.values[..k], b.vectors.subcols(0, k), b.zero_tol)
+}
+
+/// Φ[:, :k].
+fn leading<'a>(side: &SpectralShape<'a>, k: usize) -> MatRef<'a, f64> {
+    side.basis.vectors.subcols(0, k)
+}
+
+/// The vertex maps of C (k_T × k_S) both ways, with their costs.
+fn vertex_maps(s: &SpectralShape<'_>, t: &SpectralShape<'_>, c: &Mat<f64>) -> (Vec<u32>, Vec<f64>, Vec<u32>, Vec<f64>) {
+    let (kt, ks) = (c.nrows(), c.ncols());
+    let (ts, ts_cost) = pull_back(s, t, c);
+    // S → T: target rows Φ_T C (n_T × k_S) searched from source rows Φ_S.
+    let mut t_emb = Mat::zeros(t.n(), ks);
+    matmul(t_emb.as_mut(), Accum::Replace, leading(t, kt), c.as_ref(), 1.0, Par::Seq);
+    let (st, st_cost) = nearest_rows(t_emb.as_ref(), leading(s, ks));
+    (ts, ts_cost, st, st_cost)
+}
+
+/// The functional map (k_T × k_S) of a vertex map π: T → S: Φ_T[:, :k_T]ᵀ M_T Φ_S[π, :k_S].
+pub fn map_of_vertices(s: &SpectralShape<'_>, t: &SpectralShape<'_>, pi: &[u32], kt: usize, ks: usize) -> Mat<f64> {
+    let pulled = Mat::from_fn(t.n(), ks, |y, j| s.basis.vectors[(pi[y] as usize, j)]);
+    t.coefficients(kt, pulled.as_ref())
+}
+
+/// The correspondence between `s` and `t`: the fitted map in `fit_k` functions, refined by ZoomOut up to
+/// `refine_k`, and the vertex maps of the last one. `stop` is asked between steps.
+pub fn correspond(
+    s: &SpectralShape<'_>,
+    t: &SpectralShape<'_>,
+    o: &CorrespondenceOptions,
+    control: &Control<'_>,
+) -> Result<Correspondence, CorrespondenceError> {
+    let available = s.basis.k().min(t.basis.k());
+    if o.fit_k < 2 || o.fit_k > available {
+        Err(DescriptorError::param(
+            "fit_k",
+            format!("{} is out of range: 2 ≤ fit_k ≤ the eigenpairs computed ({available})", o.fit_k),
+        ))?;
+    }
+    if o.descriptors == 0 || o.refine_step == 0 {
+        Err(DescriptorError::param("descriptors", "give at least one descriptor and a refinement step"))?;
+    }
+    for &(a, b) in &o.landmarks {
+        if a as usize >= s.n() || b as usize >= t.n() {
+            Err(DescriptorError::param("landmarks", format!("({a}, {b}) names a vertex that is not there")))?;
+        }
+    }
+    // Basis sizes: the target's grows from fit_k to refine_k; the source's is the same, or for a partial target the
+    // source's eigenvalues up to the target's largest (their count follows the areas' ratio: Weyl's law).
+    let last = o.refine_k.clamp(o.fit_k, if o.partial { t.basis.k() } else { available });
+    let source_size = |kt: usize| -> usize {
+        if !o.partial {
+            return kt;
+        }
+        let top = t.basis.values[kt - 1];
+        let within = s.basis.values.iter().filter(|&&l| l <= top * (1.0 + 1e-9)).count();
+        within.clamp(2, s.basis.k())
+    };
+    let last_s = source_size(last);
+    // Shared log-energies over both spectra's non-zero range in the eigenpairs used.
+    let range = |b: &Basis<'_>, k: usize| {
+        let nz: Vec<f64> = b.values[..k].iter().copied().filter(|&l| l > b.zero_tol).collect();
+        (nz.first().copied().unwrap_or(1.0).ln(), nz.last().copied().unwrap_or(1.0).ln())
+    };
+    let ((a0, a1), (b0, b1)) = (range(&s.basis, last_s), range(&t.basis, last));
+    let (e0, e1) = (a0.min(b0), a1.max(b1));
+    let count = o.descriptors.max(2);
+    let energies: Vec<f64> = (0..count).map(|i| e0 + (e1 - e0) * i as f64 / (count - 1) as f64).collect();
+    let (bs, bt) = (truncated(&s.basis, last_s), truncated(&t.basis, last));
+    let (ss, tt) = (SpectralShape { basis: bs, pair: s.pair }, SpectralShape { basis: bt, pair: t.pair });
+    let ls: Vec<u32> = o.landmarks.iter().map(|p| p.0).collect();
+    let lt: Vec<u32> = o.landmarks.iter().map(|p| p.1).collect();
+    let fs = probes(&ss, &energies, o.descriptor_step, &ls)?;
+    let ft = probes(&tt, &energies, o.descriptor_step, &lt)?;
+    let (kt, ks) = (o.fit_k, source_size(o.fit_k));
+    let a = ss.coefficients(ks, fs.as_ref());
+    let b = tt.coefficients(kt, ft.as_ref());
+    // The multiplication operators of the probes, in the fit's functions.
+    let mut ops = vec![];
+    if o.commutativity_weight != 0.0 {
+        let op = |side: &SpectralShape<'_>, col: MatRef<'_, f64>, k: usize| {
+            let scaled = Mat::from_fn(side.n(), k, |x, j| col[(x, 0)] * side.basis.vectors[(x, j)]);
+            side.coefficients(k, scaled.as_ref())
+        };
+        for f in 0..fs.ncols() {
+            ops.push((op(&ss, fs.as_ref().subcols(f, 1), ks), op(&tt, ft.as_ref().subcols(f, 1), kt)));
+        }
+    }
+    control.check()?;
+    let mut c = fit(&a, &b, &ss.basis.values[..ks], &tt.basis.values[..kt], &ops, o)?;
+    let mut sizes = vec![kt];
+    // ZoomOut: the vertex map of C, then the map of that vertex map in `refine_step` more functions.
+    let mut size = kt;
+    while size < last {
+        control.check()?;
+        let (pi, _) = pull_back(&ss, &tt, &c);
+        size = (size + o.refine_step).min(last);
+        c = map_of_vertices(&ss, &tt, &pi, size, source_size(size));
+        sizes.push(size);
+    }
+    let (ts, ts_cost, st, st_cost) = vertex_maps(&ss, &tt, &c);
+    // Rows of C are orthonormal for a map onto an isometric (or partial) target.
+    let mut cct = Mat::zeros(c.nrows(), c.nrows());
+    matmul(cct.as_mut(), Accum::Replace, c.as_ref(), c.transpose(), 1.0, Par::Seq);
+    let k = c.nrows();
+    let defect = Mat::from_fn(k, k, |i, j| cct[(i, j)] - if i == j { 1.0 } else { 0.0 }).norm_l2() / (k as f64).sqrt();
+    Ok(Correspondence {
+        c,
+        target_to_source: ts,
+        source_to_target: st,
+        target_cost: ts_cost,
+        source_cost: st_cost,
+        sizes,
+        orthogonality_defect: defect,
+    })
+}
+
+/// The vertex map T → S of C (k_T × k_S) and each match's cost.
+fn pull_back(s: &SpectralShape<'_>, t: &SpectralShape<'_>, c: &Mat<f64>) -> (Vec<u32>, Vec<f64>) {
+    let (kt, ks) = (c.nrows(), c.ncols());
+    let mut s_emb = Mat::zeros(s.n(), kt);
+    matmul(s_emb.as_mut(), Accum::Replace, leading(s, ks), c.transpose(), 1.0, Par::Seq);
+    nearest_rows(s_emb.as_ref(), leading(t, kt))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::generate;
+    use crate::geometry::TriangleMesh;
+    use crate::operators::{self, OperatorOptions};
+    use crate::spectrum::{self, EigenOptions, Spectrum};
+    use crate::Shape;
+
+    /// A permutation of 0..n from a fixed seed (a linear congruential shuffle: reproducible, no dependency).
+    fn permutation(n: usize, seed: u64) -> Vec<u32> {
+        let mut p: Vec<u32> = (0..n as u32).collect();
+        let mut s = seed;
+        for i in (1..n).rev() {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let j = (s >> 33) as usize % (i + 1);
+            p.swap(i, j);
+        }
+        p
+    }
+
+    /// The copy of `m` whose vertex y is `m`'s vertex perm[y], moved by `motion`.
+    fn shuffled(m: &TriangleMesh, perm: &[u32], motion: impl Fn([f64; 3]) -> [f64; 3]) -> TriangleMesh {
+        let mut inverse = vec![0u32; perm.len()];
+        for (y, &x) in perm.iter().enumerate() {
+            inverse[x as usize] = y as u32;
+        }
+        let mut out = m.clone();
+        out.vertices = perm.iter().map(|&x| motion(m.vertices[x as usize])).collect();
+        out.faces = m.faces.iter().map(|f| f.map(|v| inverse[v as usize])).collect();
+        out
+    }
+
+    /// A lumpy sphere with no symmetry.
+    fn lumpy(level: u32) -> TriangleMesh {
+        let mut m = generate::icosphere(level);
+        for p in &mut m.vertices {
+            let [x, y, z] = *p;
+            let r = 1.0 + 0.3 * x + 0.2 * y * y - 0.25 * z * z * z + 0.15 * x * y + 0.1 * (3.0 * z).sin();
+            *p = [x * r, 1.3 * y * r, 0.8 * z * r];
+        }
+        m
+    }
+
+    fn spectrum_of(m: &TriangleMesh, k: usize) -> (operators::Operator, Spectrum) {
+        let op = operators::build(&Shape::TriangleMesh(m.clone()), &OperatorOptions::default()).unwrap();
+        let s = spectrum::eigs(&op.pair, &EigenOptions { k, ..Default::default() }, None, Control::default()).unwrap();
+        (op, s)
+    }
+
+    fn run(a: &TriangleMesh, b: &TriangleMesh, k: usize, o: &CorrespondenceOptions) -> Correspondence {
+        let (oa, sa) = spectrum_of(a, k);
+        let (ob, sb) = spectrum_of(b, k);
+        let s = SpectralShape { basis: Basis::of(&sa, &oa.pair), pair: &oa.pair };
+        let t = SpectralShape { basis: Basis::of(&sb, &ob.pair), pair: &ob.pair };
+        correspond(&s, &t, o, &Control::default()).unwrap()
+    }
+
+    fn area(m: &TriangleMesh) -> f64 {
+        m.faces
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|v| m.vertices[v as usize]);
+                let (u, v) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [c[0] - a[0], c[1] - a[1], c[2] - a[2]]);
+                let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+                0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+            })
+            .sum()
+    }
+
+    /// The mean geodesic distance (heat method on the source) between each sampled target vertex's match and its
+    /// true match, over √area.
+    fn geodesic_error(src: &TriangleMesh, found: &[u32], truth: &[u32], samples: usize) -> f64 {
+        let step = (truth.len() / samples).max(1);
+        let mut total = 0.0;
+        let mut count = 0;
+        for y in (0..truth.len()).step_by(step) {
+            let (a, b) = (truth[y] as usize, found[y] as usize);
+            if a != b {
+                let g = crate::pde::geodesic::heat_method(src, &[a], &Default::default()).unwrap();
+                total += g.distance[b];
+            }
+            count += 1;
+        }
+        total / count as f64 / area(src).sqrt()
+    }
+
+    /// A rigidly moved copy with its vertices shuffled: the answer is the permutation, both ways.
+    #[test]
+    fn a_shuffled_rigid_copy_is_matched_by_its_permutation() {
+        let a = lumpy(3);
+        let perm = permutation(a.vertices.len(), 7);
+        let (c, s) = (0.6f64.cos(), 0.6f64.sin());
+        let b = shuffled(&a, &perm, |[x, y, z]| [c * x - s * y + 3.0, s * x + c * y - 1.0, z + 0.5]);
+        let o = CorrespondenceOptions { fit_k: 20, refine_k: 60, ..Default::default() };
+        let r = run(&a, &b, 60, &o);
+        let exact = r.target_to_source.iter().zip(&perm).filter(|(f, t)| f == t).count();
+        let fraction = exact as f64 / perm.len() as f64;
+        let err = geodesic_error(&a, &r.target_to_source, &perm, 60);
+        eprintln!("rigid copy: {fraction} exact, mean geodesic error {err:.5}");
+        assert!(fraction > 0.97 && err < 0.005, "{fraction} exact, mean geodesic error {err}");
+        let back = r.source_to_target.iter().enumerate().filter(|(x, &y)| perm[y as usize] as usize == *x).count();
+        assert!(back as f64 / perm.len() as f64 > 0.97, "{back} of {} matched back", perm.len());
+        assert_eq!(r.sizes.first().copied(), Some(20));
+        assert_eq!(r.sizes.last().copied(), Some(60));
+        assert!(r.orthogonality_defect < 0.05, "C of an isometry is orthogonal: {}", r.orthogonality_defect);
+    }
+
+    /// A bend of an asymmetric flat domain (one of Gordon, Webb & Wolpert's drums) onto a cylinder: a near-isometry
+    /// (edges across the bend become chords), with its vertices shuffled.
+    #[test]
+    fn a_bent_drum_is_matched_within_a_small_geodesic_error() {
+        let a = generate::gww_drum(1, 12);
+        let perm = permutation(a.vertices.len(), 11);
+        let r0 = 0.6;
+        let b = shuffled(&a, &perm, |[x, y, _]| [r0 * (x / r0).sin(), y, r0 * (1.0 - (x / r0).cos())]);
+        let r = run(&a, &b, 60, &CorrespondenceOptions { fit_k: 20, refine_k: 60, ..Default::default() });
+        let err = geodesic_error(&a, &r.target_to_source, &perm, 60);
+        eprintln!("bent drum: mean geodesic error {err:.4} (√area units)");
+        assert!(err < 0.02, "mean geodesic error {err}");
+    }
+
+    /// A partial copy: the source with a cap cut off (its vertices beyond a plane, about a tenth of the area), the
+    /// remaining vertices shuffled, three pairs known. Each target vertex's true match is the vertex it was copied
+    /// from.
+    #[test]
+    fn a_partial_copy_is_matched_within_a_stated_geodesic_error() {
+        let a = lumpy(3);
+        let cut = 0.75 * a.vertices.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max);
+        let kept: Vec<u32> = (0..a.vertices.len() as u32).filter(|&v| a.vertices[v as usize][0] < cut).collect();
+        let mut new_of = vec![u32::MAX; a.vertices.len()];
+        for (i, &v) in kept.iter().enumerate() {
+            new_of[v as usize] = i as u32;
+        }
+        let mut part = a.clone();
+        part.vertices = kept.iter().map(|&v| a.vertices[v as usize]).collect();
+        part.faces = a
+            .faces
+            .iter()
+            .filter(|f| f.iter().all(|&v| new_of[v as usize] != u32::MAX))
+            .map(|f| f.map(|v| new_of[v as usize]))
+            .collect();
+        let perm = permutation(part.vertices.len(), 13);
+        let b = shuffled(&part, &perm, |p| p);
+        let truth: Vec<u32> = perm.iter().map(|&i| kept[i as usize]).collect();
+        // Three known pairs: WKS alone does not survive the cut (the cut's boundary changes every eigenfunction
+        // near it; measured 0.39 without landmarks), three landmarks pin the map.
+        let mut inverse = vec![0u32; perm.len()];
+        for (y, &x) in perm.iter().enumerate() {
+            inverse[x as usize] = y as u32;
+        }
+        let landmarks: Vec<(u32, u32)> = [0usize, 97, 194].iter().map(|&x| (kept[x], inverse[x])).collect();
+        let o = CorrespondenceOptions { fit_k: 20, refine_k: 60, partial: true, landmarks, ..Default::default() };
+        let r = run(&a, &b, 80, &o);
+        let err = geodesic_error(&a, &r.target_to_source, &truth, 60);
+        eprintln!("partial copy ({} of {} vertices): mean geodesic error {err:.4}", kept.len(), a.vertices.len());
+        assert!(err < 0.01, "mean geodesic error {err}");
+    }
+
+    /// The refinement improves on the fit alone, and a stop ends it.
+    #[test]
+    fn zoomout_improves_the_fit_and_a_stop_ends_it() {
+        let a = generate::gww_drum(2, 12);
+        let perm = permutation(a.vertices.len(), 5);
+        // A strong near-isometry: a tight bend, and a 15 % stretch growing across the drum.
+        let r0 = 0.5;
+        let b = shuffled(&a, &perm, |[x, y, _]| {
+            let y = y * (1.0 + 0.15 * x / 3.0);
+            [x, r0 * (y / r0).sin(), r0 * (1.0 - (y / r0).cos())]
+        });
+        eprintln!("{} vertices", a.vertices.len());
+        let fitted = run(&a, &b, 80, &CorrespondenceOptions { fit_k: 10, refine_k: 10, ..Default::default() });
+        let refined = run(&a, &b, 80, &CorrespondenceOptions { fit_k: 10, refine_k: 80, ..Default::default() });
+        let (e0, e1) = (
+            geodesic_error(&a, &fitted.target_to_source, &perm, 60),
+            geodesic_error(&a, &refined.target_to_source, &perm, 60),
+        );
+        eprintln!("fit alone {e0:.4}, refined {e1:.4}");
+        assert!(e1 < 0.5 * e0 && e1 < 0.02, "fit {e0}, refined {e1}");
+        let (oa, sa) = spectrum_of(&a, 30);
+        let s = SpectralShape { basis: Basis::of(&sa, &oa.pair), pair: &oa.pair };
+        let stop = std::sync::atomic::AtomicBool::new(true);
+        let stopped = Control { progress: None, stop: Some(&stop) };
+        let r = correspond(&s, &s, &CorrespondenceOptions { fit_k: 10, refine_k: 30, ..Default::default() }, &stopped);
+        assert!(matches!(r, Err(CorrespondenceError::Stopped(_))));
+    }
+
+    /// Parameters out of range are refused, naming the parameter.
+    #[test]
+    fn bad_parameters_are_refused() {
+        let a = lumpy(2);
+        let (oa, sa) = spectrum_of(&a, 20);
+        let s = SpectralShape { basis: Basis::of(&sa, &oa.pair), pair: &oa.pair };
+        let go = Control::default();
+        for o in [
+            CorrespondenceOptions { fit_k: 1, ..Default::default() },
+            CorrespondenceOptions { fit_k: 21, ..Default::default() },
+            CorrespondenceOptions { landmarks: vec![(0, 9999)], fit_k: 10, ..Default::default() },
+        ] {
+            assert!(matches!(correspond(&s, &s, &o, &go), Err(CorrespondenceError::Descriptor(_))), "{o:?}");
+        }
+    }
+}

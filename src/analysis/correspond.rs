@@ -1,0 +1,121 @@
+//! Correspondence between two shapes (`kac correspondence`): each shape's eigenpairs (the cache's where it has
+//! them), the functional map and its ZoomOut refinement ([`kac_core::correspondence`]), and the vertex maps both
+//! ways in the uploads' numbering.
+
+use super::*;
+use kac_core::correspondence::{self as fm, CorrespondenceError, CorrespondenceOptions, SpectralShape};
+
+/// What a correspondence returns besides its arrays (`source_to_target`, `target_to_source` and their costs).
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+pub struct CorrespondenceSummary {
+    pub source_id: String,
+    pub target_id: String,
+    pub options: CorrespondenceOptions,
+    /// The target's basis size at the fit and at each refinement step.
+    pub sizes: Vec<usize>,
+    /// C (k_T × k_S), rows of coefficients: the final functional map from the source's eigenfunctions to the
+    /// target's.
+    pub functional_map: Vec<Vec<f64>>,
+    /// ‖CCᵀ − I‖_F / √k_T: near 0 for a near-isometry or a part; large where the map is not one.
+    pub orthogonality_defect: f64,
+    /// The matches' distances in the spectral embedding (small: confident).
+    pub source_cost: FiniteStats,
+    pub target_cost: FiniteStats,
+    /// Eigenpairs computed per shape.
+    pub eigenpairs: usize,
+    pub operator: OperatorUsed,
+    /// What the arrays are.
+    pub maps: &'static str,
+}
+
+impl From<CorrespondenceError> for AnalysisError {
+    fn from(e: CorrespondenceError) -> Self {
+        match e {
+            CorrespondenceError::Descriptor(d) => d.into(),
+            CorrespondenceError::Stopped(s) => s.into(),
+        }
+    }
+}
+
+/// For each validated vertex, the first input vertex welded into it.
+fn first_input(v: &Validated) -> Vec<u32> {
+    let mut first = vec![u32::MAX; v.shape.vertex_count()];
+    for (input, &w) in v.vertex_map.iter().enumerate() {
+        if w != u32::MAX && first[w as usize] == u32::MAX {
+            first[w as usize] = input as u32;
+        }
+    }
+    first
+}
+
+/// The correspondence from `source` to `target` under one operator spec (Neumann, order 1: the maps are between
+/// vertices), with `options.refine_k` eigenpairs per shape.
+pub fn correspondence(
+    source: &Validated,
+    target: &Validated,
+    options: &CorrespondenceOptions,
+    operator: &OperatorSpec,
+    solver: &SolverSpec,
+    hooks: Hooks<'_>,
+) -> Result<(CorrespondenceSummary, Vec<VertexArray>), AnalysisError> {
+    if operator.order != 1 || operator.boundary != BoundarySpec::Neumann || operator.dirichlet_vertices.is_some() {
+        return Err(AnalysisError::invalid_parameter(
+            "correspondence maps vertices to vertices: give a Neumann operator of order 1",
+        ));
+    }
+    // Landmarks in the uploads' numbering, to the validated one.
+    let (ls, lt): (Vec<u32>, Vec<u32>) = options.landmarks.iter().copied().unzip();
+    let ls = map_vertices(source, &ls, "landmarks (source)")?;
+    let lt = map_vertices(target, &lt, "landmarks (target)")?;
+    let mut core = options.clone();
+    core.landmarks = ls.iter().zip(&lt).map(|(&a, &b)| (a as u32, b as u32)).collect();
+    let k = options.refine_k.max(options.fit_k);
+    let reused = std::cell::Cell::new(false);
+    let es = eigenpairs(source, operator, solver, k.min(source.shape.vertex_count()), hooks, &reused)?;
+    hooks.control.check()?;
+    let et = eigenpairs(target, operator, solver, k.min(target.shape.vertex_count()), hooks, &reused)?;
+    hooks.control.phase("correspondence", 0, 0)?;
+    let s = SpectralShape { basis: basis_of(&es, k), pair: &es.operator.pair };
+    let t = SpectralShape { basis: basis_of(&et, k), pair: &et.operator.pair };
+    let r = fm::correspond(&s, &t, &core, &hooks.control)?;
+    // The maps in the uploads' numbering: row i of `source_to_target` is input vertex i of the source, its value
+    // the input vertex of the target it matches (NaN for a vertex validation dropped).
+    let (fs, ft) = (first_input(source), first_input(target));
+    let to_input = |v: &Validated, map: &[u32], other: &[u32]| -> Vec<f64> {
+        v.vertex_map
+            .iter()
+            .map(|&w| if w == u32::MAX { f64::NAN } else { f64::from(other[map[w as usize] as usize]) })
+            .collect()
+    };
+    let column = |v: &Validated, values: &[f64]| -> Vec<f64> {
+        v.vertex_map.iter().map(|&w| if w == u32::MAX { f64::NAN } else { values[w as usize] }).collect()
+    };
+    let array = |name: &'static str, v: &Validated, data: Vec<f64>| VertexArray {
+        name,
+        rows: v.vertex_map.len(),
+        cols: 1,
+        data,
+        columns: None,
+    };
+    let arrays = vec![
+        array("source_to_target", source, to_input(source, &r.source_to_target, &ft)),
+        array("target_to_source", target, to_input(target, &r.target_to_source, &fs)),
+        array("source_cost", source, column(source, &r.source_cost)),
+        array("target_cost", target, column(target, &r.target_cost)),
+    ];
+    let summary = CorrespondenceSummary {
+        source_id: source.id.hex(),
+        target_id: target.id.hex(),
+        options: options.clone(),
+        sizes: r.sizes.clone(),
+        functional_map: (0..r.c.nrows()).map(|i| (0..r.c.ncols()).map(|j| r.c[(i, j)]).collect()).collect(),
+        orthogonality_defect: r.orthogonality_defect,
+        source_cost: FiniteStats::of(&r.source_cost),
+        target_cost: FiniteStats::of(&r.target_cost),
+        eigenpairs: s.basis.k().min(t.basis.k()),
+        operator: OperatorUsed::of(&es.operator),
+        maps: "source_to_target: per source vertex (upload numbering) its match on the target; target_to_source: \
+               the reverse; *_cost: each match's distance in the spectral embedding",
+    };
+    Ok((summary, arrays))
+}
