@@ -1013,6 +1013,7 @@ async fn every_analysis_result_matches_its_schema() {
         (upload(&sphere), json!({ "analysis": "spectrum", "k": 10, "eigenvectors": true, "counting": true })),
         (upload(&square), json!({ "analysis": "spectrum", "k": 4, "extrapolate": true, "refinements": 1 })),
         (upload(&sphere), json!({ "analysis": "operator", "report": true })),
+        (upload(&square), json!({ "analysis": "operator", "operator": { "order": 2 } })),
         (upload(&sphere), json!({ "analysis": "hks", "k": 20 })),
         (upload(&sphere), json!({ "analysis": "si-hks", "k": 20 })),
         (upload(&sphere), json!({ "analysis": "wks", "k": 20 })),
@@ -1057,6 +1058,12 @@ async fn every_analysis_result_matches_its_schema() {
         seen.insert(r["analysis"].as_str().unwrap().to_string());
         if let Err(e) = schemas.check(&r) {
             failures.push(format!("{request}: {e}"));
+        }
+        // Every array is one the store can read back (a name it does not know makes a stored result unreadable).
+        for name in r["arrays"].as_object().into_iter().flatten().map(|(n, _)| n) {
+            if !kac::analysis::ARRAY_NAMES.contains(&name.as_str()) {
+                failures.push(format!("{request}: array {name} is not in ARRAY_NAMES"));
+            }
         }
     }
     // A comparison: between the two shapes, through its own route.

@@ -14,9 +14,15 @@ pub const UNKNOWN_ARRAYS: &[&str] = &["unknown_vertices"];
 /// Whether an array has one row per vertex of the upload (and so can colour the shape).
 /// Arrays with a row per element (triangle or tetrahedron), not per vertex: no coloured PLY for them.
 pub const ELEMENT_ARRAYS: &[&str] = &["gradient"];
+/// Arrays of a correspondence: per vertex of one of its two shapes (the result's shape is the source), so no
+/// coloured PLY of either.
+pub const PAIR_ARRAYS: &[&str] = &["source_to_target", "target_to_source", "source_cost", "target_cost"];
 
 pub fn is_per_vertex(name: &str) -> bool {
-    !MATRIX_ARRAYS.contains(&name) && !UNKNOWN_ARRAYS.contains(&name) && !ELEMENT_ARRAYS.contains(&name)
+    !MATRIX_ARRAYS.contains(&name)
+        && !UNKNOWN_ARRAYS.contains(&name)
+        && !ELEMENT_ARRAYS.contains(&name)
+        && !PAIR_ARRAYS.contains(&name)
 }
 
 /// For each unknown of the operator, its vertex in the upload's numbering (the first input vertex welded into

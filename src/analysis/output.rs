@@ -27,6 +27,15 @@ pub const ARRAY_NAMES: &[&str] = &[
     "schrodinger_im",
     "solution",
     "diffused",
+    "gradient",
+    "divergence",
+    "stiffness",
+    "mass",
+    "unknown_vertices",
+    "source_to_target",
+    "target_to_source",
+    "source_cost",
+    "target_cost",
 ];
 
 /// A per-vertex array in the input numbering, row-major (rows × cols).
