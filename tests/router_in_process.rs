@@ -1078,9 +1078,18 @@ async fn every_analysis_result_matches_its_schema() {
     if let Err(e) = schemas.check(&r) {
         failures.push(format!("compare: {e}"));
     }
+    // A correspondence: between the sphere and itself, through its own route.
+    let body = json!({ "source_id": ids[0], "target_id": ids[0], "fit_k": 10, "refine_k": 20 });
+    let (status, r) = call(&app, post_json("/v1/correspondence?wait=60", body)).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    seen.insert(r["analysis"].as_str().unwrap().to_string());
+    if let Err(e) = schemas.check(&r) {
+        failures.push(format!("correspondence: {e}"));
+    }
     assert!(failures.is_empty(), "{} results do not match their schemas:\n{}", failures.len(), failures.join("\n"));
     let mut all: Vec<String> = kac::analysis::registry::REGISTRY.iter().map(|e| e.name.to_string()).collect();
     all.push("compare".into());
+    all.push("correspondence".into());
     all.sort();
     assert_eq!(seen.into_iter().collect::<Vec<_>>(), all, "every analysis is checked");
 }
@@ -1107,4 +1116,62 @@ async fn compare_and_search_refuse_unknown_options_of_the_flattened_set() {
     assert_eq!((r["options"]["k"].as_u64(), r["options"]["normalization"].as_str()), (Some(7), Some("area")));
     assert_eq!(r["fingerprints"][0].as_array().unwrap().len(), 7);
     assert_eq!(r["fingerprints"][0][0].as_f64(), Some(0.0), "the zero mode is kept with include_zero");
+}
+
+/// A correspondence job over HTTP: a lumpy sphere against a shuffled copy of itself (stored as two shapes); the map
+/// served as `.npy` is the permutation, the same request again is the same job, and requests outside the limits or
+/// naming a shape that is not stored are refused.
+#[tokio::test]
+async fn a_correspondence_job_maps_a_shuffled_copy_by_its_permutation() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let mut a = kac_core::geometry::generate::icosphere(3);
+    for p in &mut a.vertices {
+        let [x, y, z] = *p;
+        let r = 1.0 + 0.3 * x + 0.2 * y * y - 0.25 * z * z * z + 0.15 * x * y;
+        *p = [x * r, 1.3 * y * r, 0.8 * z * r];
+    }
+    let n = a.vertices.len();
+    let perm: Vec<u32> = (0..n as u32).map(|y| (y * 389 + 17) % n as u32).collect();
+    let mut inverse = vec![0u32; n];
+    for (y, &x) in perm.iter().enumerate() {
+        inverse[x as usize] = y as u32;
+    }
+    let mut b = a.clone();
+    // Rotated and moved (a shuffled copy alone is the same shape: the id is the canonical geometry's hash).
+    b.vertices = perm.iter().map(|&x| a.vertices[x as usize]).map(|[x, y, z]| [-y + 2.0, x, z - 1.0]).collect();
+    b.faces = a.faces.iter().map(|f| f.map(|v| inverse[v as usize])).collect();
+    let mut ids = vec![];
+    for m in [&a, &b] {
+        let off = kac_core::io::write::off(m);
+        let (status, shape) = call(&app, Request::post("/v1/shapes?format=off").body(Body::from(off)).unwrap()).await;
+        assert_eq!(status, StatusCode::CREATED, "{shape}");
+        ids.push(shape["id"].as_str().unwrap().to_string());
+    }
+    let body = json!({ "source_id": ids[0], "target_id": ids[1], "fit_k": 20, "refine_k": 60 });
+    let (status, r) = call(&app, post_json("/v1/correspondence?wait=120", body.clone())).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    assert_eq!((r["analysis"].as_str(), r["shape_id"].as_str()), (Some("correspondence"), Some(ids[0].as_str())));
+    assert_eq!(r["functional_map"].as_array().unwrap().len(), 60);
+    let link = r["arrays"]["source_to_target"]["npy"].as_str().unwrap().to_string();
+    assert!(r["arrays"]["source_to_target"].get("ply").is_none(), "no coloured PLY for a pair's array");
+    let (status, bytes, _) = raw(&app, &link).await;
+    assert_eq!(status, StatusCode::OK);
+    let (rows, cols, map) = kac_core::io::npy::decode_f64(&bytes).unwrap();
+    assert_eq!((rows, cols), (n, 1));
+    let right = map.iter().enumerate().filter(|(x, &y)| y as u32 == inverse[*x]).count();
+    assert!(right as f64 > 0.97 * n as f64, "{right} of {n} matched");
+    // The same request is the same job (its result at once).
+    let (status, again) = call(&app, post_json("/v1/correspondence?wait=0", body)).await;
+    assert_eq!((status, again["result_id"].as_str()), (StatusCode::OK, r["result_id"].as_str()));
+    // Refusals: k above --max-k, an unknown shape, a misspelt option.
+    let big = json!({ "source_id": ids[0], "target_id": ids[1], "refine_k": 100000 });
+    let (status, p) = call(&app, post_json("/v1/correspondence", big)).await;
+    assert_eq!((status, p["code"].as_str()), (StatusCode::PAYLOAD_TOO_LARGE, Some("k-too-large")), "{p}");
+    let unknown = json!({ "source_id": ids[0], "target_id": "0".repeat(64) });
+    let (status, _) = call(&app, post_json("/v1/correspondence", unknown)).await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    let misspelt = json!({ "source_id": ids[0], "target_id": ids[1], "refine_kk": 3 });
+    let (status, p) = call(&app, post_json("/v1/correspondence", misspelt)).await;
+    assert_eq!((status, p["suggestion"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("refine_k")), "{p}");
 }

@@ -23,6 +23,8 @@ pub struct CorrespondenceSummary {
     pub target_cost: FiniteStats,
     /// Eigenpairs computed per shape.
     pub eigenpairs: usize,
+    /// The source's operator (the target's is built with the same options).
+    #[serde(flatten)]
     pub operator: OperatorUsed,
     /// What the arrays are.
     pub maps: &'static str,

@@ -108,6 +108,7 @@ pub enum Summary {
     Smooth(SmoothSummary),
     Interpolate(InterpolateSummary),
     Compare(CompareSummary),
+    Correspondence(Box<super::correspond::CorrespondenceSummary>),
 }
 
 /// The eigensolver's report on a spectrum.

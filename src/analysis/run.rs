@@ -281,6 +281,7 @@ fn parameters_of(body: &Summary) -> Option<&serde_json::Map<String, Value>> {
         | Summary::Trees(_)
         | Summary::MeanCurvature(_)
         | Summary::Compare(_) => return None,
+        Summary::Correspondence(s) => &s.operator.parameters,
     })
 }
 

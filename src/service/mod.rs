@@ -5,6 +5,7 @@
 pub mod bodies;
 pub mod compare;
 pub mod config;
+pub mod correspondence;
 pub mod error;
 pub mod faults;
 pub mod ids;

@@ -33,6 +33,7 @@ problem+json with a stable `type` (`/problems/{code}`).",
         super::routes::analyze,
         super::routes::list_analyses,
         super::routes::compare,
+        super::routes::correspondence,
         super::routes::search,
     ),
     components(schemas(
@@ -41,6 +42,7 @@ problem+json with a stable `type` (`/problems/{code}`).",
         super::routes::JobRequest,
         super::routes::JobForm,
         super::compare::CompareRequest,
+        super::correspondence::CorrespondenceRequest,
         super::search::SearchRequest,
         super::jobs::JobView,
         super::routes::JobResource,
@@ -78,7 +80,7 @@ pub struct ApiDoc;
 /// The document as pretty JSON (what `kac openapi` prints and `/openapi.json` serves).
 pub fn document() -> String {
     let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
-    flatten_requests(&mut doc, &["CompareRequest", "SearchRequest"]);
+    flatten_requests(&mut doc, &["CompareRequest", "SearchRequest", "CorrespondenceRequest"]);
     close_request_schemas(&mut doc);
     name_analysis_variants(&mut doc);
     name_result_variants(&mut doc);

@@ -71,7 +71,7 @@ fn mass_times(pair: &SparsePair, f: MatRef<'_, f64>) -> Mat<f64> {
 #[cfg_attr(feature = "cli", derive(clap::Args))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(remote = "Self")]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct CorrespondenceOptions {
     /// Eigenfunctions the first map is fitted in (default 30).
     #[cfg_attr(feature = "cli", arg(long = "fit-k", default_value_t = CorrespondenceOptions::default().fit_k))]

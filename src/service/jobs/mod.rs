@@ -156,6 +156,8 @@ pub enum Work {
     Analysis(Analysis, Arc<StoredShape>),
     /// Shape-DNA of several stored shapes and the distances between them.
     Compare(super::compare::CompareRequest, Vec<Arc<StoredShape>>),
+    /// The correspondence between two stored shapes (source, target).
+    Correspondence(super::correspondence::CorrespondenceRequest, Arc<StoredShape>, Arc<StoredShape>),
 }
 
 impl Job {
@@ -413,6 +415,45 @@ pub fn submit_compare(
     jobs.enqueue(id, String::new(), "compare", canonical)
 }
 
+/// Submits a correspondence between two stored shapes within the configured limits, or returns the existing job
+/// for the same request.
+pub fn submit_correspondence(
+    jobs: &Jobs,
+    config: &Config,
+    request: super::correspondence::CorrespondenceRequest,
+    source: &StoredShape,
+    target: &StoredShape,
+) -> Result<(JobView, bool), JobError> {
+    let o = &request.options;
+    let k = o.refine_k.max(o.fit_k);
+    if k > config.max_k {
+        return Err(JobError::Limit(Limit::Pairs(format!("refine_k = {k} is above --max-k {}", config.max_k))));
+    }
+    // The eigenvectors of both shapes and the embeddings the nearest neighbours are searched in.
+    let n = source.validated.shape.vertex_count().max(target.validated.shape.vertex_count());
+    let held = n.saturating_mul(3 * k);
+    if held > config.max_output_values {
+        return Err(JobError::Limit(Limit::Values(format!(
+            "{k} eigenpairs of {n} vertices hold about {held} values, above --max-output-values {}",
+            config.max_output_values
+        ))));
+    }
+    for s in [source, target] {
+        if !matches!(
+            s.validated.shape,
+            kac_core::Shape::TriangleMesh(_) | kac_core::Shape::TetMesh(_) | kac_core::Shape::PointCloud(_)
+        ) {
+            return Err(JobError::Analysis(crate::analysis::AnalysisError::not_applicable(format!(
+                "a correspondence is between surfaces, solids or point clouds, not a {}",
+                s.validated.shape.kind().as_str()
+            ))));
+        }
+    }
+    let canonical = serde_json::to_value(&request).map_err(|e| JobError::Internal(e.to_string()))?;
+    let id = job_id("correspondence", &canonical);
+    jobs.enqueue(id, source.id.clone(), "correspondence", canonical)
+}
+
 impl Jobs {
     /// Enqueues a request under its id unless a job with that id is queued, running or done (true: newly
     /// enqueued).
@@ -484,6 +525,13 @@ fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
             Err(e) => Err(NoWork::Store(e)),
         },
     };
+    if view.analysis == "correspondence" {
+        let req = serde_json::from_value::<super::correspondence::CorrespondenceRequest>(view.request.clone())
+            .map_err(|_| NoWork::Gone("the stored request no longer parses"))?;
+        let source = shape(&req.source_id, "the correspondence's source is no longer stored")?;
+        let target = shape(&req.target_id, "the correspondence's target is no longer stored")?;
+        return Ok(Work::Correspondence(req, source, target));
+    }
     if view.analysis == "compare" {
         let req = serde_json::from_value::<super::compare::CompareRequest>(view.request.clone())
             .map_err(|_| NoWork::Gone("the stored request no longer parses"))?;

@@ -8,6 +8,8 @@ use super::*;
 pub(super) fn start(state: &AppState, view: JobView, owner: String) {
     let name: &'static str = if view.analysis == "compare" {
         "compare"
+    } else if view.analysis == "correspondence" {
+        "correspondence"
     } else {
         serde_json::from_value::<Analysis>(view.request.clone()).map_or("unknown", |a| a.name())
     };
@@ -202,6 +204,9 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
         match &work {
             Work::Analysis(a, shape) => analysis::run(&shape.validated, a, hooks),
             Work::Compare(req, shapes) => crate::service::compare::run(shapes, req, hooks),
+            Work::Correspondence(req, s, t) => {
+                crate::service::correspondence::run(&s.validated, &t.validated, req, hooks)
+            }
         }
     }));
     match result {

@@ -21,6 +21,7 @@ pub(crate) use shapes::*;
 pub(crate) use viewer::*;
 
 use super::compare::CompareRequest;
+use super::correspondence::CorrespondenceRequest;
 use super::error::store_error;
 use super::error::{problem_response, ApiError, CODES};
 use super::ids::{JobPath, ResultPath, ShapePath};
@@ -63,6 +64,7 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/analyze", post(analyze))
         .route("/v1/analyses", get(list_analyses))
         .route("/v1/compare", post(compare))
+        .route("/v1/correspondence", post(correspondence))
         .route("/v1/search", post(search))
         .route("/problems/{code}", get(problem_doc))
         .route("/openapi.json", get(openapi_json))

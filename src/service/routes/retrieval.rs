@@ -52,6 +52,36 @@ pub(crate) async fn compare(
     answer_within(&st, &job, q.wait, &headers).await
 }
 
+/// Which vertex of one stored shape is which of another (functional maps refined by ZoomOut), as a job in the queue
+/// (its capacity, the job timeout, cancel; the same request again is the same job): the result (200) when it is
+/// ready within `wait` seconds, the job (202) otherwise. The result's arrays are the vertex maps both ways
+/// (`source_to_target`: per source vertex, its match on the target, in the uploads' numbering) and each match's
+/// cost, as `.npy`; its fields the functional map C and how it was fitted and refined.
+#[utoipa::path(post, path = "/v1/correspondence", tag = "jobs", params(CompareQuery), request_body = CorrespondenceRequest,
+    responses((status = 200, description = "the correspondence: the functional map, the vertex maps as arrays", body = AnalysisResult),
+              (status = 202, description = "not ready within wait: the job", body = JobResource, headers(("Location" = String))),
+              (status = 400, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 409, description = "the job was canceled", body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 413, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 422, body = crate::service::error::Problem, content_type = "application/problem+json"),
+              (status = 503, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn correspondence(
+    State(st): State<AppState>,
+    Query(q): Query<CompareQuery>,
+    headers: HeaderMap,
+    body: Result<Json<Value>, JsonRejection>,
+) -> Result<Response, ApiError> {
+    if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
+        return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
+    }
+    let req: CorrespondenceRequest = strict_body(&st, body, "CorrespondenceRequest")?;
+    let source = stored_shape(&st, &req.source_id)?;
+    let target = stored_shape(&st, &req.target_id)?;
+    let (job, _) = jobs::submit_correspondence(&st.jobs, &st.config, req, &source, &target)?;
+    answer_within(&st, &job, q.wait, &headers).await
+}
+
 /// The largest magnitude of a query fingerprint's values: a thousand squared differences of it stay finite.
 pub(crate) const MAX_FINGERPRINT_VALUE: f64 = 1e100;
 

@@ -1,0 +1,46 @@
+//! Correspondences between two stored shapes, run as jobs (`POST /v1/correspondence`): the request, and the
+//! computation a worker runs (both shapes' eigenpairs through the cache, the functional map and its refinement,
+//! the vertex maps both ways), inside the queue's limits, the job timeout and cancel.
+
+use crate::analysis::{correspond, AnalysisError, Hooks, OperatorSpec, Output, ResultHead, SolverSpec, Summary, Typed};
+use kac_core::correspondence::CorrespondenceOptions;
+use serde::{Deserialize, Serialize};
+
+/// Which vertex of one stored shape is which of another, by functional maps refined with ZoomOut.
+#[derive(Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(remote = "Self")]
+pub struct CorrespondenceRequest {
+    /// The source shape.
+    pub source_id: String,
+    /// The target shape.
+    pub target_id: String,
+    /// How the map is fitted and refined (fit_k, refine_k, descriptors, weights, partial, landmarks as
+    /// [source vertex, target vertex] pairs in the uploads' numbering), at the top level.
+    #[serde(flatten)]
+    pub options: CorrespondenceOptions,
+    /// The operator of both shapes (Neumann, order 1).
+    #[serde(default)]
+    pub operator: OperatorSpec,
+}
+
+kac_core::object_only_serde!(CorrespondenceRequest);
+
+/// The correspondence of the two shapes, as a result: the source is the result's shape.
+pub fn run(
+    source: &kac_core::Validated,
+    target: &kac_core::Validated,
+    req: &CorrespondenceRequest,
+    hooks: Hooks<'_>,
+) -> Result<Output, AnalysisError> {
+    let (summary, arrays) =
+        correspond::correspondence(source, target, &req.options, &req.operator, &SolverSpec::default(), hooks)?;
+    let head = ResultHead {
+        shape_id: source.id.hex(),
+        algorithm_version: crate::analysis::ALGORITHM_VERSION,
+        eigenpairs_reused: false,
+        warnings: vec![],
+    };
+    let summary = serde_json::to_value(Typed { head, body: Summary::Correspondence(Box::new(summary)) })
+        .map_err(|e| AnalysisError::invalid_parameter(e.to_string()))?;
+    Ok(Output { summary, arrays, fingerprints: vec![] })
+}
