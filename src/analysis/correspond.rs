@@ -72,12 +72,25 @@ pub fn correspondence(
     let mut core = options.clone();
     core.landmarks = ls.iter().zip(&lt).map(|(&a, &b)| (a as u32, b as u32)).collect();
     let k = options.refine_k.max(options.fit_k);
+    // A partial target's basis corresponds to more of the full source's eigenfunctions (their count follows the
+    // areas): the source gets up to twice as many.
+    let k_source = if options.partial { 2 * k } else { k };
     let reused = std::cell::Cell::new(false);
-    let es = eigenpairs(source, operator, solver, k.min(source.shape.vertex_count()), hooks, &reused)?;
+    let es = eigenpairs(source, operator, solver, k_source.min(source.shape.vertex_count()), hooks, &reused)?;
     hooks.control.check()?;
     let et = eigenpairs(target, operator, solver, k.min(target.shape.vertex_count()), hooks, &reused)?;
     hooks.control.phase("correspondence", 0, 0)?;
-    let s = SpectralShape { basis: basis_of(&es, k), pair: &es.operator.pair };
+    // The maps are between vertices: an operator over fewer unknowns (a point cloud whose outliers were left out)
+    // has no row for some of them.
+    for (e, which) in [(&es, "source"), (&et, "target")] {
+        if e.operator.interior.is_some() || e.operator.pair.n() != e.operator.full_size {
+            return Err(AnalysisError::not_applicable(format!(
+                "the {which}'s operator leaves vertices out (a cloud's outliers): a correspondence maps every \
+                 vertex; clean the cloud first"
+            )));
+        }
+    }
+    let s = SpectralShape { basis: basis_of(&es, k_source), pair: &es.operator.pair };
     let t = SpectralShape { basis: basis_of(&et, k), pair: &et.operator.pair };
     let r = fm::correspond(&s, &t, &core, &hooks.control)?;
     // The maps in the uploads' numbering: row i of `source_to_target` is input vertex i of the source, its value

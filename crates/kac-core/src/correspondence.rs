@@ -133,6 +133,13 @@ impl Default for CorrespondenceOptions {
 
 crate::object_only_serde!(CorrespondenceOptions);
 
+/// The most WKS energies per shape, and landmarks.
+pub const MAX_DESCRIPTORS: usize = 1000;
+pub const MAX_LANDMARKS: usize = 100;
+/// The largest fit with descriptor commutativity: its dense system has (fit_k · k_S)² entries (a partial source
+/// about twice fit_k): 100 gives 2 × 10⁸ values, 1.6 GB at most.
+pub const MAX_COUPLED_FIT_K: usize = 100;
+
 /// A correspondence: the functional map and the vertex maps both ways, with the cost of each match.
 #[derive(Debug, Clone)]
 pub struct Correspondence {
@@ -299,11 +306,11 @@ fn fit(
         let w = o.commutativity_weight;
         for j in 0..ks {
             for q in 0..ks {
-                let (xx, xjq, xqj) = (xxt[(q, j)], x[(q, j)], x[(j, q)]);
+                let (xx, xjq, xqj) = (xxt[(q, j)], x[(j, q)], x[(q, j)]);
                 for i in 0..kt {
                     sys[(idx(i, j), idx(i, q))] += w * xx;
                     for p in 0..kt {
-                        // −(X ⊗ Y) − (Xᵀ ⊗ Yᵀ): row (i, j), column (p, q).
+                        // −(X ⊗ Y) − (Xᵀ ⊗ Yᵀ): row (i, j), column (p, q): −(X_jq Y_ip + X_qj Y_pi).
                         sys[(idx(i, j), idx(p, q))] -= w * (xjq * y[(i, p)] + xqj * y[(p, i)]);
                     }
                 }
@@ -324,19 +331,20 @@ fn fit(
 /// dimensions of a spectral embedding: a clustered search with triangle-inequality bounds measured twice as slow.)
 pub fn nearest_rows(data: MatRef<'_, f64>, query: MatRef<'_, f64>) -> (Vec<u32>, Vec<f64>) {
     use rayon::prelude::*;
-    const BLOCK: usize = 256;
     let n = data.nrows();
+    // Query rows per block: up to 256, with a block's products (rows × n values) within about 64 MB per thread.
+    let block = (8_000_000 / n.max(1)).clamp(16, 256);
     let dn: Vec<f64> = (0..n).map(|i| (0..data.ncols()).map(|j| data[(i, j)].powi(2)).sum()).collect();
     let q = query.nrows();
-    let blocks: Vec<usize> = (0..q).step_by(BLOCK).collect();
+    let blocks: Vec<usize> = (0..q).step_by(block).collect();
     let parts: Vec<(Vec<u32>, Vec<f64>)> = blocks
         .par_iter()
         .map_init(
             // One product buffer per thread, reused block after block (a fresh one per block spent as much time in
             // page faults as in the products).
-            || Mat::<f64>::zeros(BLOCK, n),
+            || Mat::<f64>::zeros(block, n),
             |buffer, &r0| {
-                let rows = BLOCK.min(q - r0);
+                let rows = block.min(q - r0);
                 let qb = query.subrows(r0, rows);
                 // G = Q_b Dᵀ (rows × n), column-major: column i holds every query's product with point i, contiguous,
                 // so the scan below runs down columns.
@@ -420,6 +428,31 @@ pub fn correspond(
     if o.descriptors == 0 || o.refine_step == 0 {
         Err(DescriptorError::param("descriptors", "give at least one descriptor and a refinement step"))?;
     }
+    if o.descriptors > MAX_DESCRIPTORS || o.landmarks.len() > MAX_LANDMARKS {
+        Err(DescriptorError::param(
+            "descriptors",
+            format!("at most {MAX_DESCRIPTORS} descriptors and {MAX_LANDMARKS} landmarks"),
+        ))?;
+    }
+    for (name, w) in [
+        ("descriptor_weight", o.descriptor_weight),
+        ("laplacian_weight", o.laplacian_weight),
+        ("commutativity_weight", o.commutativity_weight),
+    ] {
+        if !(w >= 0.0 && w.is_finite()) {
+            Err(DescriptorError::param(name, format!("{w}: give a finite weight ≥ 0")))?;
+        }
+    }
+    if o.commutativity_weight > 0.0 && o.fit_k > MAX_COUPLED_FIT_K {
+        Err(DescriptorError::param(
+            "fit_k",
+            format!(
+                "{}: with descriptor commutativity the fit is one dense system of fit_k² unknowns; at most \
+                 {MAX_COUPLED_FIT_K} (or commutativity_weight 0, whose rows are solved apart)",
+                o.fit_k
+            ),
+        ))?;
+    }
     for &(a, b) in &o.landmarks {
         if a as usize >= s.n() || b as usize >= t.n() {
             Err(DescriptorError::param("landmarks", format!("({a}, {b}) names a vertex that is not there")))?;
@@ -427,7 +460,14 @@ pub fn correspond(
     }
     // Basis sizes: the target's grows from fit_k to refine_k; the source's is the same, or for a partial target the
     // source's eigenvalues up to the target's largest (their count follows the areas' ratio: Weyl's law).
-    let last = o.refine_k.clamp(o.fit_k, if o.partial { t.basis.k() } else { available });
+    let mut last = o.refine_k.clamp(o.fit_k, if o.partial { t.basis.k() } else { available });
+    if o.partial {
+        // The target's basis no further than the source's computed eigenvalues reach (the slanted diagonal must
+        // fit in the source's basis).
+        let top = s.basis.values[s.basis.k() - 1];
+        let reach = t.basis.values.iter().take_while(|&&l| l <= top).count();
+        last = last.min(reach.max(o.fit_k));
+    }
     let source_size = |kt: usize| -> usize {
         if !o.partial {
             return kt;
@@ -458,9 +498,12 @@ pub fn correspond(
     // The multiplication operators of the probes, in the fit's functions.
     let mut ops = vec![];
     if o.commutativity_weight != 0.0 {
+        // Φᵀ (M diag f + diag f M) Φ / 2: symmetric, as the multiplication operator is (with a lumped mass the two
+        // halves are equal; with a consistent one Φᵀ M diag f Φ alone is not symmetric).
         let op = |side: &SpectralShape<'_>, col: MatRef<'_, f64>, k: usize| {
             let scaled = Mat::from_fn(side.n(), k, |x, j| col[(x, 0)] * side.basis.vectors[(x, j)]);
-            side.coefficients(k, scaled.as_ref())
+            let a = side.coefficients(k, scaled.as_ref());
+            Mat::from_fn(k, k, |i, j| 0.5 * (a[(i, j)] + a[(j, i)]))
         };
         for f in 0..fs.ncols() {
             ops.push((op(&ss, fs.as_ref().subcols(f, 1), ks), op(&tt, ft.as_ref().subcols(f, 1), kt)));
@@ -741,6 +784,69 @@ mod tests {
         assert!(matches!(r, Err(CorrespondenceError::Stopped(_))));
     }
 
+    /// The fit's normal equations against the energy written term by term: for small random A, B, eigenvalues and
+    /// non-symmetric operators, the solution of fit() has zero gradient of E(C) = w_d‖CA − B‖² + w_l Σ D_ij C_ij²
+    /// + w_c Σ_f ‖C X_f − Y_f C‖² (checked by central differences of E, entry by entry).
+    #[test]
+    fn the_fit_solves_its_energy() {
+        let (kt, ks, q) = (3usize, 4usize, 5usize);
+        let r = |i: usize| ((i * 7919 + 13) % 101) as f64 / 50.0 - 1.0;
+        let a = Mat::from_fn(ks, q, |i, j| r(i * 31 + j));
+        let b = Mat::from_fn(kt, q, |i, j| r(i * 17 + j + 500));
+        let ls: Vec<f64> = (0..ks).map(|i| i as f64 * 1.3).collect();
+        let lt: Vec<f64> = (0..kt).map(|i| i as f64 * 1.1 + 0.2).collect();
+        let ops: Vec<(Mat<f64>, Mat<f64>)> = (0..2)
+            .map(|f| {
+                (
+                    Mat::from_fn(ks, ks, |i, j| r(900 + f * 50 + i * 5 + j)),
+                    Mat::from_fn(kt, kt, |i, j| r(300 + f * 40 + i * 3 + j)),
+                )
+            })
+            .collect();
+        let o = CorrespondenceOptions {
+            descriptor_weight: 1.0,
+            laplacian_weight: 0.3,
+            commutativity_weight: 0.7,
+            ..Default::default()
+        };
+        let c = fit(&a, &b, &ls, &lt, &ops, &o).unwrap();
+        let mut d = Mat::from_fn(kt, ks, |i, j| (lt[i] - ls[j]).powi(2));
+        let norm = d.norm_l2();
+        d = Mat::from_fn(kt, ks, |i, j| d[(i, j)] / norm);
+        let energy = |c: &Mat<f64>| {
+            let mut e = 0.0;
+            let mut ca = Mat::zeros(kt, q);
+            matmul(ca.as_mut(), Accum::Replace, c.as_ref(), a.as_ref(), 1.0, Par::Seq);
+            e += o.descriptor_weight
+                * (0..kt)
+                    .flat_map(|i| (0..q).map(move |j| (i, j)))
+                    .map(|(i, j)| (ca[(i, j)] - b[(i, j)]).powi(2))
+                    .sum::<f64>();
+            e += o.laplacian_weight
+                * (0..kt)
+                    .flat_map(|i| (0..ks).map(move |j| (i, j)))
+                    .map(|(i, j)| d[(i, j)] * c[(i, j)].powi(2))
+                    .sum::<f64>();
+            for (x, y) in &ops {
+                let mut cx = Mat::zeros(kt, ks);
+                matmul(cx.as_mut(), Accum::Replace, c.as_ref(), x.as_ref(), 1.0, Par::Seq);
+                matmul(cx.as_mut(), Accum::Add, y.as_ref(), c.as_ref(), -1.0, Par::Seq);
+                e += o.commutativity_weight * cx.norm_l2().powi(2);
+            }
+            e
+        };
+        let h = 1e-6;
+        for i in 0..kt {
+            for j in 0..ks {
+                let (mut up, mut down) = (c.clone(), c.clone());
+                up[(i, j)] += h;
+                down[(i, j)] -= h;
+                let g = (energy(&up) - energy(&down)) / (2.0 * h);
+                assert!(g.abs() < 1e-6, "∂E/∂C[{i},{j}] = {g}");
+            }
+        }
+    }
+
     /// Parameters out of range are refused, naming the parameter.
     #[test]
     fn bad_parameters_are_refused() {
@@ -748,10 +854,17 @@ mod tests {
         let (oa, sa) = spectrum_of(&a, 20);
         let s = SpectralShape { basis: Basis::of(&sa, &oa.pair), pair: &oa.pair };
         let go = Control::default();
+        // A coupled fit larger than the bound is refused before any allocation (the spectrum would allow it).
+        let (ob, sb) = spectrum_of(&lumpy(3), MAX_COUPLED_FIT_K + 1);
+        let big = SpectralShape { basis: Basis::of(&sb, &ob.pair), pair: &ob.pair };
+        let o = CorrespondenceOptions { fit_k: MAX_COUPLED_FIT_K + 1, ..Default::default() };
+        assert!(matches!(correspond(&big, &big, &o, &go), Err(CorrespondenceError::Descriptor(_))));
         for o in [
             CorrespondenceOptions { fit_k: 1, ..Default::default() },
             CorrespondenceOptions { fit_k: 21, ..Default::default() },
             CorrespondenceOptions { landmarks: vec![(0, 9999)], fit_k: 10, ..Default::default() },
+            CorrespondenceOptions { laplacian_weight: f64::NAN, fit_k: 10, ..Default::default() },
+            CorrespondenceOptions { descriptors: MAX_DESCRIPTORS + 1, fit_k: 10, ..Default::default() },
         ] {
             assert!(matches!(correspond(&s, &s, &o, &go), Err(CorrespondenceError::Descriptor(_))), "{o:?}");
         }

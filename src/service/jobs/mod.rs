@@ -425,7 +425,7 @@ pub fn submit_correspondence(
     target: &StoredShape,
 ) -> Result<(JobView, bool), JobError> {
     let o = &request.options;
-    let k = o.refine_k.max(o.fit_k);
+    let k = o.refine_k.max(o.fit_k) * if o.partial { 2 } else { 1 };
     if k > config.max_k {
         return Err(JobError::Limit(Limit::Pairs(format!("refine_k = {k} is above --max-k {}", config.max_k))));
     }
