@@ -1161,6 +1161,30 @@ async fn a_correspondence_job_maps_a_shuffled_copy_by_its_permutation() {
     assert_eq!((rows, cols), (n, 1));
     let right = map.iter().enumerate().filter(|(x, &y)| y as u32 == inverse[*x]).count();
     assert!(right as f64 > 0.97 * n as f64, "{right} of {n} matched");
+    // A labelling of the source carried to the target by the vertex map: each target vertex's label is its true
+    // match's (the upload's numbering on both sides).
+    let labels: Vec<f64> = a
+        .vertices
+        .iter()
+        .map(|p| {
+            if p[0] > 0.2 {
+                2.0
+            } else if p[1] > 0.0 {
+                1.0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let with = json!({ "source_id": ids[0], "target_id": ids[1], "fit_k": 20, "refine_k": 60,
+        "transfer": { "values": labels, "labels": true } });
+    let (status, t) = call(&app, post_json("/v1/correspondence?wait=120", with)).await;
+    assert_eq!(status, StatusCode::OK, "{t}");
+    let (_, bytes, _) = raw(&app, t["arrays"]["transferred"]["npy"].as_str().unwrap()).await;
+    let (rows, _, carried) = kac_core::io::npy::decode_f64(&bytes).unwrap();
+    assert_eq!(rows, n);
+    let right = carried.iter().enumerate().filter(|(y, &l)| l == labels[perm[*y] as usize]).count();
+    assert!(right as f64 > 0.97 * n as f64, "{right} of {n} labels carried");
     // The same request is the same job (its result at once).
     let (status, again) = call(&app, post_json("/v1/correspondence?wait=0", body)).await;
     assert_eq!((status, again["result_id"].as_str()), (StatusCode::OK, r["result_id"].as_str()));

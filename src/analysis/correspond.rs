@@ -39,6 +39,17 @@ impl From<CorrespondenceError> for AnalysisError {
     }
 }
 
+/// A per-vertex array of the source carried to the target: `labels` by the vertex map (each target vertex takes
+/// its match's value), a function by the functional map (its band-limited part).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct Transfer {
+    /// One value per source vertex (the upload's numbering).
+    pub values: Vec<f64>,
+    /// Labels (class ids) rather than a function.
+    #[serde(default)]
+    pub labels: bool,
+}
+
 /// For each validated vertex, the first input vertex welded into it.
 fn first_input(v: &Validated) -> Vec<u32> {
     let mut first = vec![u32::MAX; v.shape.vertex_count()];
@@ -58,8 +69,18 @@ pub fn correspondence(
     options: &CorrespondenceOptions,
     operator: &OperatorSpec,
     solver: &SolverSpec,
+    transfer: Option<&Transfer>,
     hooks: Hooks<'_>,
 ) -> Result<(CorrespondenceSummary, Vec<VertexArray>), AnalysisError> {
+    let carried = match transfer {
+        Some(t) => {
+            if let Some(i) = t.values.iter().position(|x| !x.is_finite()) {
+                return Err(AnalysisError::invalid_parameter(format!("transfer: value {i} is not a finite number")));
+            }
+            Some(from_input_rows(source, &t.values, "transfer")?)
+        }
+        None => None,
+    };
     if operator.order != 1 || operator.boundary != BoundarySpec::Neumann || operator.dirichlet_vertices.is_some() {
         return Err(AnalysisError::invalid_parameter(
             "correspondence maps vertices to vertices: give a Neumann operator of order 1",
@@ -112,12 +133,19 @@ pub fn correspondence(
         data,
         columns: None,
     };
-    let arrays = vec![
+    let mut arrays = vec![
         array("source_to_target", source, to_input(source, &r.source_to_target, &ft)),
         array("target_to_source", target, to_input(target, &r.target_to_source, &fs)),
         array("source_cost", source, column(source, &r.source_cost)),
         array("target_cost", target, column(target, &r.target_cost)),
     ];
+    if let (Some(f), Some(how)) = (&carried, transfer) {
+        let on_target: Vec<f64> = match how.labels {
+            true => r.target_to_source.iter().map(|&x| f[x as usize]).collect(),
+            false => fm::transfer_function(&s, &t, &r.c, f),
+        };
+        arrays.push(array("transferred", target, column(target, &on_target)));
+    }
     let summary = CorrespondenceSummary {
         source_id: source.id.hex(),
         target_id: target.id.hex(),
@@ -130,7 +158,8 @@ pub fn correspondence(
         eigenpairs: s.basis.k().min(t.basis.k()),
         operator: OperatorUsed::of(&es.operator),
         maps: "source_to_target: per source vertex (upload numbering) its match on the target; target_to_source: \
-               the reverse; *_cost: each match's distance in the spectral embedding",
+               the reverse; *_cost: each match's distance in the spectral embedding; transferred (when asked): the \
+               source's array on the target, labels by the vertex map, a function by the functional map",
     };
     Ok((summary, arrays))
 }

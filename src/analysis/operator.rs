@@ -16,7 +16,7 @@ pub const UNKNOWN_ARRAYS: &[&str] = &["unknown_vertices"];
 pub const ELEMENT_ARRAYS: &[&str] = &["gradient"];
 /// Arrays of a correspondence: per vertex of one of its two shapes (the result's shape is the source), so no
 /// coloured PLY of either.
-pub const PAIR_ARRAYS: &[&str] = &["source_to_target", "target_to_source", "source_cost", "target_cost"];
+pub const PAIR_ARRAYS: &[&str] = &["source_to_target", "target_to_source", "source_cost", "target_cost", "transferred"];
 
 pub fn is_per_vertex(name: &str) -> bool {
     !MATRIX_ARRAYS.contains(&name)

@@ -36,6 +36,7 @@ pub const ARRAY_NAMES: &[&str] = &[
     "target_to_source",
     "source_cost",
     "target_cost",
+    "transferred",
 ];
 
 /// A per-vertex array in the input numbering, row-major (rows × cols).

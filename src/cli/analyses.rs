@@ -266,7 +266,7 @@ pub fn embed(a: EmbedCmd) -> Result<(), Failure> {
 }
 
 /// Reads a per-vertex function: `.npy` (1-D or one column) or text with one number per line.
-fn read_function(path: &Path) -> Result<Vec<f64>, Failure> {
+pub(super) fn read_function(path: &Path) -> Result<Vec<f64>, Failure> {
     let bytes = std::fs::read(path).map_err(|e| Failure { code: 2, message: format!("{}: {e}", path.display()) })?;
     let bad = |m: String| Failure { code: 2, message: format!("{}: {m}", path.display()) };
     if bytes.starts_with(b"\x93NUMPY") {

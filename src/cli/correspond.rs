@@ -2,7 +2,7 @@
 //! with ZoomOut. The JSON result on stdout; `--map OUT.npy` writes, for each vertex of SOURCE, the index of its
 //! match on TARGET (and `OUT.target_to_source.npy` the reverse).
 
-use super::analyses::OutArgs;
+use super::analyses::{read_function, OutArgs};
 use super::{print_json, Failure, ShapeArgs};
 use crate::analysis::{correspond, Hooks, OperatorSpec};
 use clap::Args;
@@ -24,6 +24,12 @@ pub struct CorrespondenceCmd {
     /// Write the source → target vertex map as a float64 .npy (one row per source vertex).
     #[arg(long)]
     pub map: Option<PathBuf>,
+    /// A per-vertex array of SOURCE (.npy or one number per line) to carry to TARGET: the array `transferred`.
+    #[arg(long)]
+    pub transfer: Option<PathBuf>,
+    /// The transferred array holds labels: carried by the vertex map (default: a function, by the functional map).
+    #[arg(long)]
+    pub transfer_labels: bool,
     #[command(flatten)]
     pub op: OperatorSpec,
     #[command(flatten)]
@@ -49,13 +55,21 @@ pub fn run(a: CorrespondenceCmd) -> Result<(), Failure> {
     let mut options = a.options.clone();
     options.landmarks = a.landmarks.clone();
     let hooks = Hooks { threads: a.out.threads, ..Default::default() };
-    let (summary, arrays) = correspond::correspondence(&s, &t, &options, &a.op, &a.out.solver, hooks)?;
+    let transfer = match &a.transfer {
+        Some(path) => Some(correspond::Transfer { values: read_function(path)?, labels: a.transfer_labels }),
+        None => None,
+    };
+    let (summary, arrays) =
+        correspond::correspondence(&s, &t, &options, &a.op, &a.out.solver, transfer.as_ref(), hooks)?;
     let mut out = serde_json::to_value(&summary).map_err(|e| Failure { code: 1, message: e.to_string() })?;
     out["analysis"] = "correspondence".into();
     match &a.map {
         Some(path) => {
             let mut files = vec![];
-            for x in arrays.iter().filter(|x| x.name.ends_with("_to_target") || x.name.ends_with("_to_source")) {
+            for x in arrays
+                .iter()
+                .filter(|x| x.name.ends_with("_to_target") || x.name.ends_with("_to_source") || x.name == "transferred")
+            {
                 let p = if x.name == "source_to_target" {
                     path.clone()
                 } else {

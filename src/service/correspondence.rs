@@ -21,6 +21,9 @@ pub struct CorrespondenceRequest {
     /// The operator of both shapes (Neumann, order 1).
     #[serde(default)]
     pub operator: OperatorSpec,
+    /// A per-vertex array of the source to carry to the target (the result's array `transferred`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transfer: Option<correspond::Transfer>,
 }
 
 kac_core::object_only_serde!(CorrespondenceRequest);
@@ -32,8 +35,15 @@ pub fn run(
     req: &CorrespondenceRequest,
     hooks: Hooks<'_>,
 ) -> Result<Output, AnalysisError> {
-    let (summary, arrays) =
-        correspond::correspondence(source, target, &req.options, &req.operator, &SolverSpec::default(), hooks)?;
+    let (summary, arrays) = correspond::correspondence(
+        source,
+        target,
+        &req.options,
+        &req.operator,
+        &SolverSpec::default(),
+        req.transfer.as_ref(),
+        hooks,
+    )?;
     let head = ResultHead {
         shape_id: source.id.hex(),
         algorithm_version: crate::analysis::ALGORITHM_VERSION,

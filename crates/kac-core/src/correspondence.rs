@@ -383,6 +383,20 @@ pub fn nearest_rows(data: MatRef<'_, f64>, query: MatRef<'_, f64>) -> (Vec<u32>,
     (idx, dist)
 }
 
+/// A function on the source carried to the target by the functional map: its coefficients in the source's first
+/// k_S eigenfunctions (Φ_Sᵀ M_S f), mapped by C, summed over the target's first k_T (so the band-limited part of f
+/// travels; what lies above the basis is lost).
+pub fn transfer_function(s: &SpectralShape<'_>, t: &SpectralShape<'_>, c: &Mat<f64>, f: &[f64]) -> Vec<f64> {
+    let (kt, ks) = (c.nrows(), c.ncols());
+    let col = Mat::from_fn(f.len(), 1, |i, _| f[i]);
+    let a = s.coefficients(ks, col.as_ref());
+    let mut b = Mat::zeros(kt, 1);
+    matmul(b.as_mut(), Accum::Replace, c.as_ref(), a.as_ref(), 1.0, Par::Seq);
+    let mut g = Mat::zeros(t.n(), 1);
+    matmul(g.as_mut(), Accum::Replace, leading(t, kt), b.as_ref(), 1.0, Par::Seq);
+    (0..t.n()).map(|i| g[(i, 0)]).collect()
+}
+
 /// The first k pairs of a basis.
 fn truncated<'a>(b: &Basis<'a>, k: usize) -> Basis<'a> {
     Basis::new(&b.values[..k], b.vectors.subcols(0, k), b.zero_tol)
@@ -845,6 +859,32 @@ mod tests {
                 assert!(g.abs() < 1e-6, "∂E/∂C[{i},{j}] = {g}");
             }
         }
+    }
+
+    /// A function carried by C to a rotated shuffled copy is the function at the permutation, up to what lies above
+    /// the basis (the x coordinate of a smooth shape: within 2 % in 60 eigenfunctions).
+    #[test]
+    fn a_function_travels_by_the_map() {
+        let a = lumpy(3);
+        let perm = permutation(a.vertices.len(), 7);
+        let b = shuffled(&a, &perm, |[x, y, z]| [-y, x, z]);
+        let (oa, sa) = spectrum_of(&a, 60);
+        let (ob, sb) = spectrum_of(&b, 60);
+        let s = SpectralShape { basis: Basis::of(&sa, &oa.pair), pair: &oa.pair };
+        let t = SpectralShape { basis: Basis::of(&sb, &ob.pair), pair: &ob.pair };
+        let r = correspond(
+            &s,
+            &t,
+            &CorrespondenceOptions { fit_k: 20, refine_k: 60, ..Default::default() },
+            &Control::default(),
+        )
+        .unwrap();
+        let f: Vec<f64> = a.vertices.iter().map(|p| p[0]).collect();
+        let g = transfer_function(&s, &t, &r.c, &f);
+        let want: Vec<f64> = perm.iter().map(|&x| f[x as usize]).collect();
+        let err = g.iter().zip(&want).map(|(u, v)| (u - v).powi(2)).sum::<f64>().sqrt();
+        let norm = want.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(err < 0.02 * norm, "relative error {}", err / norm);
     }
 
     /// Parameters out of range are refused, naming the parameter.
