@@ -1180,6 +1180,8 @@ async fn a_correspondence_job_maps_a_shuffled_copy_by_its_permutation() {
         "transfer": { "values": labels, "labels": true } });
     let (status, t) = call(&app, post_json("/v1/correspondence?wait=120", with)).await;
     assert_eq!(status, StatusCode::OK, "{t}");
+    // Its eigenpairs came from the cache the first request filled (the result says so).
+    assert_eq!(t["eigenpairs_reused"].as_bool(), Some(true), "{}", t["eigenpairs_reused"]);
     let (_, bytes, _) = raw(&app, t["arrays"]["transferred"]["npy"].as_str().unwrap()).await;
     let (rows, _, carried) = kac_core::io::npy::decode_f64(&bytes).unwrap();
     assert_eq!(rows, n);

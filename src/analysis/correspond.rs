@@ -62,7 +62,8 @@ fn first_input(v: &Validated) -> Vec<u32> {
 }
 
 /// The correspondence from `source` to `target` under one operator spec (Neumann, order 1: the maps are between
-/// vertices), with `options.refine_k` eigenpairs per shape.
+/// vertices), with `options.refine_k` eigenpairs per shape, as a result of its own (`analysis: correspondence`,
+/// the source its shape): one builder for the CLI and the service.
 pub fn correspondence(
     source: &Validated,
     target: &Validated,
@@ -71,7 +72,7 @@ pub fn correspondence(
     solver: &SolverSpec,
     transfer: Option<&Transfer>,
     hooks: Hooks<'_>,
-) -> Result<(CorrespondenceSummary, Vec<VertexArray>), AnalysisError> {
+) -> Result<Output, AnalysisError> {
     let carried = match transfer {
         Some(t) => {
             if let Some(i) = t.values.iter().position(|x| !x.is_finite()) {
@@ -161,5 +162,14 @@ pub fn correspondence(
                the reverse; *_cost: each match's distance in the spectral embedding; transferred (when asked): the \
                source's array on the target, labels by the vertex map, a function by the functional map",
     };
-    Ok((summary, arrays))
+    // The head every result has: the source is the result's shape; warnings from the operator's parameters.
+    let head = ResultHead {
+        shape_id: source.id.hex(),
+        algorithm_version: ALGORITHM_VERSION,
+        eigenpairs_reused: reused.get(),
+        warnings: operator_warnings(&summary.operator.parameters),
+    };
+    let summary = serde_json::to_value(Typed { head, body: Summary::Correspondence(Box::new(summary)) })
+        .map_err(|e| AnalysisError::invalid_parameter(format!("the result could not be written as JSON: {e}")))?;
+    Ok(Output { summary, arrays, fingerprints: vec![] })
 }

@@ -647,11 +647,6 @@ fn compute(
     })
 }
 
-/// A warning: a code (stable, documented in the README) and a sentence.
-pub(crate) fn warning(code: &str, message: String) -> Warning {
-    Warning::new(code, message)
-}
-
 /// How far a point cloud's noise level (after denoising) may reach relative to its spacing before the operator is
 /// built on points still off their surface.
 pub const NOISE_WARN_SPACINGS: f64 = 1.0;
@@ -664,16 +659,16 @@ pub const NOISE_WARN_SPACINGS: f64 = 1.0;
 /// - `cloud-clumps-kept`: small separate pieces were kept (they hold more than the share that may be dropped);
 /// - `cloud-normalization-chapter`: the chapter's uniform-weight normalization, whose spectra are biased.
 pub(crate) fn operator_warnings(parameters: &serde_json::Map<String, Value>) -> Vec<Warning> {
-    let parameters = &Value::Object(parameters.clone());
+    let get = |key: &str| parameters.get(key).unwrap_or(&Value::Null);
     let mut w = vec![];
     let (given, m, estimate) = (
-        parameters["intrinsic_dimension_given"].as_bool(),
-        parameters["intrinsic_dimension"].as_f64(),
-        parameters["intrinsic_dimension_estimate"].as_f64(),
+        get("intrinsic_dimension_given").as_bool(),
+        get("intrinsic_dimension").as_f64(),
+        get("intrinsic_dimension_estimate").as_f64(),
     );
     if let (Some(true), Some(m), Some(e)) = (given, m, estimate) {
         if (e - m).abs() > 0.5 {
-            w.push(warning(
+            w.push(Warning::new(
                 "intrinsic-dimension-disagrees",
                 format!(
                     "the intrinsic dimension given is {m}, the neighbourhoods' estimate (Levina–Bickel) {e:.2}: \
@@ -682,8 +677,8 @@ pub(crate) fn operator_warnings(parameters: &serde_json::Map<String, Value>) -> 
             ));
         }
     }
-    if parameters["normalization"] == "chapter" {
-        w.push(warning(
+    if get("normalization") == "chapter" {
+        w.push(Warning::new(
             "cloud-normalization-chapter",
             "the chapter's normalization (eq. 9.39, uniform weights vol/K) biases a cloud's spectrum: 8 % and 20 % \
              low at l = 2 and 3 on the unit sphere's 2,562 points, 15 % high on the first cluster of a 50 × 50 flat \
@@ -691,12 +686,12 @@ pub(crate) fn operator_warnings(parameters: &serde_json::Map<String, Value>) -> 
                 .into(),
         ));
     }
-    let denoise = &parameters["denoise"];
+    let denoise = get("denoise");
     if let (Some(true), Some(noise), Some(h)) =
-        (denoise["applied"].as_bool(), denoise["report"]["noise"].as_f64(), parameters["spacing_h"].as_f64())
+        (denoise["applied"].as_bool(), denoise["report"]["noise"].as_f64(), get("spacing_h").as_f64())
     {
         if h > 0.0 && noise > NOISE_WARN_SPACINGS * h {
-            w.push(warning(
+            w.push(Warning::new(
                 "cloud-noisy",
                 format!(
                     "the cloud's noise level {noise:.3e} is {:.1} spacings (h = {h:.3e}) after denoising: the operator \
@@ -706,8 +701,8 @@ pub(crate) fn operator_warnings(parameters: &serde_json::Map<String, Value>) -> 
             ));
         }
     }
-    if let Some(kept) = parameters["outliers"]["clumps_kept"].as_u64().filter(|&k| k > 0) {
-        w.push(warning(
+    if let Some(kept) = get("outliers")["clumps_kept"].as_u64().filter(|&k| k > 0) {
+        w.push(Warning::new(
             "cloud-clumps-kept",
             format!(
                 "{kept} points in small separate pieces were kept (together above the share that may be dropped): \

@@ -64,7 +64,7 @@ pub(crate) fn run(
             // where the k pairs do not decide the kernel at its first time, truncation biases it.
             let mut warnings = vec![];
             if hc.times[0] < resolved {
-                warnings.push(super::run::warning(
+                warnings.push(Warning::new(
                     "curvature-window-unresolved",
                     format!(
                         "the window starts at t = {:.3e}, below the smallest time the mesh resolves ({resolved:.3e}, \
@@ -74,7 +74,7 @@ pub(crate) fn run(
                 ));
             }
             if hc.truncation_bound > CURVATURE_TRUNCATION_WARN {
-                warnings.push(super::run::warning(
+                warnings.push(Warning::new(
                     "curvature-window-truncated",
                     format!(
                         "at the window's first time the {k} pairs may miss {:.1e} of the heat trace (above \

@@ -59,10 +59,8 @@ pub fn run(a: CorrespondenceCmd) -> Result<(), Failure> {
         Some(path) => Some(correspond::Transfer { values: read_function(path)?, labels: a.transfer_labels }),
         None => None,
     };
-    let (summary, arrays) =
-        correspond::correspondence(&s, &t, &options, &a.op, &a.out.solver, transfer.as_ref(), hooks)?;
-    let mut out = serde_json::to_value(&summary).map_err(|e| Failure { code: 1, message: e.to_string() })?;
-    out["analysis"] = "correspondence".into();
+    let result = correspond::correspondence(&s, &t, &options, &a.op, &a.out.solver, transfer.as_ref(), hooks)?;
+    let (mut out, arrays) = (result.summary, result.arrays);
     match &a.map {
         Some(path) => {
             let mut files = vec![];

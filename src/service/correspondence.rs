@@ -2,7 +2,7 @@
 //! computation a worker runs (both shapes' eigenpairs through the cache, the functional map and its refinement,
 //! the vertex maps both ways), inside the queue's limits, the job timeout and cancel.
 
-use crate::analysis::{correspond, AnalysisError, Hooks, OperatorSpec, Output, ResultHead, SolverSpec, Summary, Typed};
+use crate::analysis::{correspond, AnalysisError, Hooks, OperatorSpec, Output, SolverSpec};
 use kac_core::correspondence::CorrespondenceOptions;
 use serde::{Deserialize, Serialize};
 
@@ -35,7 +35,7 @@ pub fn run(
     req: &CorrespondenceRequest,
     hooks: Hooks<'_>,
 ) -> Result<Output, AnalysisError> {
-    let (summary, arrays) = correspond::correspondence(
+    correspond::correspondence(
         source,
         target,
         &req.options,
@@ -43,14 +43,5 @@ pub fn run(
         &SolverSpec::default(),
         req.transfer.as_ref(),
         hooks,
-    )?;
-    let head = ResultHead {
-        shape_id: source.id.hex(),
-        algorithm_version: crate::analysis::ALGORITHM_VERSION,
-        eigenpairs_reused: false,
-        warnings: vec![],
-    };
-    let summary = serde_json::to_value(Typed { head, body: Summary::Correspondence(Box::new(summary)) })
-        .map_err(|e| AnalysisError::invalid_parameter(e.to_string()))?;
-    Ok(Output { summary, arrays, fingerprints: vec![] })
+    )
 }

@@ -11,16 +11,6 @@ pub struct ResultSchemas {
     validators: Mutex<HashMap<String, std::sync::Arc<jsonschema::Validator>>>,
 }
 
-/// `si-hks` → `SiHks`.
-fn pascal(name: &str) -> String {
-    name.split('-')
-        .map(|w| {
-            let mut c = w.chars();
-            c.next().map(|f| f.to_ascii_uppercase().to_string() + c.as_str()).unwrap_or_default()
-        })
-        .collect()
-}
-
 /// `additionalProperties: false` on every object schema with declared properties, at any depth.
 fn close(schema: &mut Value) {
     match schema {
@@ -57,10 +47,13 @@ impl ResultSchemas {
     /// Checks a result against the schema its `analysis` names; the errors, each with where it is.
     pub fn check(&self, result: &Value) -> Result<(), String> {
         let name = result["analysis"].as_str().ok_or("the result names no analysis")?;
-        let component = format!("{}Result", pascal(name));
-        if self.components["schemas"].get(&component).is_none() {
-            return Err(format!("the document has no {component}"));
-        }
+        // The schema the document's discriminator maps this analysis to.
+        let mapping = &self.components["schemas"]["AnalysisResult"]["discriminator"]["mapping"];
+        let component = mapping[name]
+            .as_str()
+            .ok_or_else(|| format!("the document maps no result schema to `{name}`"))?
+            .trim_start_matches("#/components/schemas/")
+            .to_string();
         let validator = {
             let mut cache = self.validators.lock().unwrap();
             cache
