@@ -928,8 +928,16 @@ fn slow_and_idle_connections_are_bounded() {
     assert!(answer.contains("body-timeout") && named, "{answer}");
     // Six idle sockets fill the limit: the seventh connection is answered 503 and closed ...
     let idle: Vec<_> = (0..6).map(|_| std::net::TcpStream::connect(&addr).unwrap()).collect();
-    std::thread::sleep(Duration::from_millis(200));
-    let over = reply(agent().get(&s.url("/livez")).call());
+    // The server counts a socket once it accepts it, which under load may be later than a fixed pause: probe (each
+    // probe's connection closes with its answer) until the limit answers, for at most five seconds.
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let over = loop {
+        let r = reply(agent().get(&s.url("/livez")).call());
+        if r.status == 503 || Instant::now() > deadline {
+            break r;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
     assert_problem(&over, 503, "too-many-connections");
     assert_eq!(over.retry_after.as_deref(), Some("1"));
     // ... and once the idle ones are dropped by the header timeout, the server answers again.
