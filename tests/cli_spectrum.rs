@@ -137,3 +137,48 @@ fn completeness_is_checked_by_default_and_no_verify_turns_it_off() {
     let v = run(&["--no-verify"]);
     assert!(v["solver"]["completeness"].is_null(), "{v}");
 }
+
+/// `--slices` as a user runs it: three slices of the Dirichlet square's 90 smallest pairs give the eigenvalues of one
+/// run, `solver.slices` reports each window (tiling the spectrum, open at both ends), and the result still matches
+/// the committed OpenAPI schema of a spectrum.
+#[test]
+fn spectrum_with_slices_reports_them_and_agrees_with_one_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let sq = write_square(dir.path(), 40);
+    let run = |slices: &str| -> serde_json::Value {
+        let out = kac()
+            .args(["spectrum", "-k", "90", "--boundary", "dirichlet", "--threads", "1", "--method", "sparse"])
+            .args(["--slices", slices])
+            .arg(&sq)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let (one, three) = (run("1"), run("3"));
+    assert!(one["solver"].get("slices").is_none(), "{}", one["solver"]);
+    let slices = three["solver"]["slices"].as_array().unwrap();
+    assert_eq!(slices.len(), 3, "{}", three["solver"]);
+    assert!(slices[0]["lo"].is_null() && slices[2]["hi"].is_null());
+    assert_eq!(slices[0]["hi"], slices[1]["lo"]);
+    assert_eq!(slices[1]["hi"], slices[2]["lo"]);
+    let pairs: u64 = slices.iter().map(|s| s["pairs"].as_u64().unwrap()).sum();
+    assert!(pairs >= 90, "{pairs}");
+    assert_eq!(three["completeness"]["complete"], true);
+    let (a, b) = (one["eigenvalues"].as_array().unwrap(), three["eigenvalues"].as_array().unwrap());
+    assert_eq!(a.len(), 90);
+    for (x, y) in a.iter().zip(b) {
+        let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+        assert!((x - y).abs() <= 1e-10 * x.abs(), "{x} vs {y}");
+    }
+    let mut result = three.clone();
+    result["result_id"] = serde_json::json!("0".repeat(64));
+    schema::ResultSchemas::committed().check(&result).unwrap();
+    // Out of range: refused before anything is computed, naming the setting.
+    let out = kac().args(["spectrum", "-k", "90", "--slices", "0"]).arg(&sq).output().unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("slices"), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[path = "support/schema.rs"]
+mod schema;

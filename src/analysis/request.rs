@@ -196,6 +196,13 @@ pub struct SolverSpec {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[arg(long)]
     pub subspace: Option<usize>,
+    /// Spectrum slicing: the interval [0, λ_k] cut into this many slices by Weyl's law, each solved around its own
+    /// shift with its own factorization, the slices in parallel on the threads given (default: one slice per 120
+    /// pairs, and at least one per thread where each gets 40 pairs; 1 solves in one run; 1 to 64). The result's
+    /// `solver.slices` says what each did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[arg(long)]
+    pub slices: Option<usize>,
 }
 
 pub(crate) fn is_true(b: &bool) -> bool {
@@ -215,6 +222,7 @@ impl Default for SolverSpec {
             sigma: None,
             block: None,
             subspace: None,
+            slices: None,
         }
     }
 }
@@ -235,6 +243,7 @@ impl SolverSpec {
             sigma: self.sigma,
             block: self.block,
             subspace: self.subspace,
+            slices: self.slices,
             ..Default::default()
         }
     }

@@ -133,6 +133,10 @@ pub struct SolverReport {
     /// The relative residual tolerance.
     pub tol: f64,
     pub threads: usize,
+    /// Spectrum slicing: each slice's window, shift, inertia, pairs and work (absent for a solve in one run; see
+    /// `solver.slices` of the request).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub slices: Vec<kac_core::spectrum::slicing::SliceReport>,
 }
 
 /// Where a spectrum's seconds went.

@@ -111,6 +111,7 @@ pub(crate) fn spectrum_output(
             completeness: st.completeness.clone(),
             tol: solver.tol,
             threads: if threads == 0 { rayon::current_num_threads() } else { threads },
+            slices: st.slices.clone(),
         },
         timings: SpectrumTimings {
             read_s: None,

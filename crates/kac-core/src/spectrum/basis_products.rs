@@ -46,6 +46,55 @@ pub fn update(w: &mut [f64], b: usize, v: MatRef<'_, f64>, c: MatRef<'_, f64>, a
     update_with(w, b, v, c, alpha, Isa::detect())
 }
 
+/// Rows below which a product stays on one thread (the split's overhead would outweigh the work).
+const PARALLEL_ROWS: usize = 8 * ROWS;
+
+/// Row ranges of about equal length, one per thread, for `n` rows.
+fn row_ranges(n: usize, threads: usize) -> Vec<(usize, usize)> {
+    let parts = threads.min(n / (PARALLEL_ROWS / 2)).max(1);
+    (0..parts).map(|i| (i * n / parts, (i + 1) * n / parts)).collect()
+}
+
+/// [`gram`] on `threads` threads: each takes a range of rows, and the partial products are summed (V is streamed
+/// once in all, each core reading its share).
+pub fn gram_par(v: MatRef<'_, f64>, y: &[f64], b: usize, threads: usize) -> Mat<f64> {
+    use rayon::prelude::*;
+    let (n, m) = (v.nrows(), v.ncols());
+    if threads <= 1 || n < PARALLEL_ROWS {
+        return gram(v, y, b);
+    }
+    assert_eq!(y.len(), block_len(n, b), "Y must be n × b row-major");
+    let parts: Vec<Mat<f64>> =
+        row_ranges(n, threads).into_par_iter().map(|(a, e)| gram(v.subrows(a, e - a), &y[a * b..e * b], b)).collect();
+    let mut out = Mat::<f64>::zeros(m, b);
+    for p in &parts {
+        out += p;
+    }
+    out
+}
+
+/// [`update`] on `threads` threads, each on a range of rows of W and V.
+pub fn update_par(w: &mut [f64], b: usize, v: MatRef<'_, f64>, c: MatRef<'_, f64>, alpha: f64, threads: usize) {
+    use rayon::prelude::*;
+    let n = v.nrows();
+    if threads <= 1 || n < PARALLEL_ROWS {
+        return update(w, b, v, c, alpha);
+    }
+    assert_eq!(w.len(), block_len(n, b), "W must be n × b row-major");
+    let ranges = row_ranges(n, threads);
+    let mut pieces: Vec<(usize, &mut [f64])> = Vec::with_capacity(ranges.len());
+    let mut rest = w;
+    for &(a, e) in &ranges {
+        let (head, tail) = rest.split_at_mut((e - a) * b);
+        pieces.push((a, head));
+        rest = tail;
+    }
+    pieces.into_par_iter().for_each(|(a, piece)| {
+        let rows = piece.len() / b;
+        update(piece, b, v.subrows(a, rows), c, alpha);
+    });
+}
+
 /// [`gram`] with the kernels of a given instruction set (widths 8 and 16 use AVX-512 where given; `Scalar` means
 /// faer's product). V may be any view (strided, reversed, transposed); the kernels take forward column-major ones.
 ///

@@ -151,7 +151,12 @@ pub(crate) fn verify_and_repair(
         let deflation = Deflation { sparse: &zeros.vectors, dense: Some((found_vectors.as_ref(), m_found.as_ref())) };
         let mut deflated_values = vec![0.0; z];
         deflated_values.extend_from_slice(&s.values[z..]);
-        let run = lanczos::Run { deflation: &deflation, deflated_values: &deflated_values, interior_shift: false };
+        let run = lanczos::Run {
+            deflation: &deflation,
+            deflated_values: &deflated_values,
+            interior_shift: false,
+            window: None,
+        };
         let o = EigenOptions {
             k: missing,
             sigma: Some(lanczos::default_sigma(pair)),

@@ -103,6 +103,7 @@ fn ritz_in_place(
     a0: usize,
     ma: usize,
     s: MatRef<'_, f64>,
+    par: Par,
     control: &Control<'_>,
 ) -> Result<(), EigenError> {
     let (n, p) = (v.nrows(), s.ncols());
@@ -112,7 +113,7 @@ fn ritz_in_place(
         control.check()?;
         let rows = RESTART_ROWS.min(n - r0);
         let mut xc = x.as_mut().subrows_mut(0, rows);
-        matmul(xc.rb_mut(), Accum::Replace, v.as_ref().subrows(r0, rows).subcols(a0, ma), s, 1.0, Par::Seq);
+        matmul(xc.rb_mut(), Accum::Replace, v.as_ref().subrows(r0, rows).subcols(a0, ma), s, 1.0, par);
         v.as_mut().subrows_mut(r0, rows).subcols_mut(a0, p).copy_from(xc.rb());
     }
     Ok(())
@@ -133,6 +134,9 @@ struct Ctx<'a> {
     mean_mass: f64,
     /// Scratch of the sparse block product (grows once).
     scratch: Vec<f64>,
+    /// Threads for the basis products (1: this thread only).
+    threads: usize,
+    par: Par,
 }
 
 impl Ctx<'_> {
@@ -161,8 +165,8 @@ impl Ctx<'_> {
         }
         for pass in 0..3 {
             let before = col_dots(w, mw, b);
-            let c = basis_products::gram(v, mw, b);
-            basis_products::update(w, b, v, c.as_ref(), -1.0);
+            let c = basis_products::gram_par(v, mw, b, self.threads);
+            basis_products::update_par(w, b, v, c.as_ref(), -1.0, self.threads);
             for col in 0..b {
                 for r in 0..m {
                     coef[(r, col)] += c[(r, col)];
@@ -197,7 +201,7 @@ impl Ctx<'_> {
     ) -> Mat<f64> {
         let (n, b) = (w.nrows(), w.ncols());
         let mut g = Mat::<f64>::zeros(b, b);
-        matmul(g.as_mut(), Accum::Replace, w.transpose(), mw, 1.0, Par::Seq);
+        matmul(g.as_mut(), Accum::Replace, w.transpose(), mw, 1.0, self.par);
         let g = Mat::from_fn(b, b, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
         let evd = g.self_adjoint_eigen(Side::Lower).expect("symmetric eigen of a small Gram matrix");
         let (s, u) = (evd.S(), evd.U());
@@ -214,8 +218,8 @@ impl Ctx<'_> {
                 bmat[(j, c)] = r * u[(c, idx)];
             }
         }
-        matmul(v.rb_mut().subcols_mut(lead, kept), Accum::Replace, w, transform.as_ref(), 1.0, Par::Seq);
-        matmul(mq.rb_mut().subcols_mut(0, kept), Accum::Replace, mw, transform.as_ref(), 1.0, Par::Seq);
+        matmul(v.rb_mut().subcols_mut(lead, kept), Accum::Replace, w, transform.as_ref(), 1.0, self.par);
+        matmul(mq.rb_mut().subcols_mut(0, kept), Accum::Replace, mw, transform.as_ref(), 1.0, self.par);
         // Refill vanished directions with random vectors.
         for j in kept..b {
             let mut x: Vec<f64> = (0..n).map(|_| rng.next()).collect();
@@ -278,6 +282,71 @@ pub struct Run<'a> {
     /// Whether σ may go inside the spectrum by Weyl's law (counting the deflated pairs as found): yes for a first
     /// solve; a repair looks for pairs lying among others it does not count, and keeps σ below the spectrum.
     pub interior_shift: bool,
+    /// A slice of the spectrum ([`super::slicing`]): the run factors at the window's shift and returns the pairs in
+    /// the window instead of the `k` smallest (`k` then sizes the subspace: the pairs the window is expected to hold).
+    pub window: Option<Window>,
+}
+
+/// The part of the spectrum one slice returns: the pairs with λ in [lo, hi), found by shift-invert around `sigma`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Window {
+    /// −∞ for the lowest slice.
+    pub lo: f64,
+    /// +∞ for the top slice, which returns pairs up to a count instead (`total`).
+    pub hi: f64,
+    pub sigma: f64,
+    /// Top slice: the pairs wanted counted from the bottom of the spectrum (deflated ones included, guards too):
+    /// the slice returns its pairs from `lo` up to the `total`-th eigenvalue, Sylvester's inertia at σ telling how
+    /// many lie below σ.
+    pub total: Option<usize>,
+    /// The eigenvalues in [lo, hi) when known (Sylvester's inertia at both ends): the slice is done once that many
+    /// converged pairs lie in the window, without guards beyond it.
+    pub count: Option<usize>,
+}
+
+/// Where a run's wanted pairs lie among the Ritz candidates sorted by ascending λ: the pairs returned are
+/// `start..end`; those that must have converged (with a guard on each side of a window) are `req_start..req_end`.
+struct Selection {
+    start: usize,
+    end: usize,
+    req_start: usize,
+    req_end: usize,
+    /// Whether the candidates reach as far as the window asks.
+    enough: bool,
+}
+
+fn select(
+    cand: &[(f64, Ritz, f64)],
+    sigma: f64,
+    want: usize,
+    window: Option<&Window>,
+    below: Option<usize>,
+) -> Selection {
+    let len = cand.len();
+    let Some(w) = window else {
+        let end = want.min(len);
+        return Selection { start: 0, end, req_start: 0, req_end: end, enough: want <= len };
+    };
+    let lam = |c: &(f64, Ritz, f64)| sigma + 1.0 / c.0;
+    let start = if w.lo == f64::NEG_INFINITY { 0 } else { cand.partition_point(|c| lam(c) < w.lo) };
+    let (end, req_end, enough) = match w.total {
+        Some(total) => {
+            // λ < σ exactly where θ < 0, which the ascending order puts first.
+            let at_sigma = cand.partition_point(|c| c.0 < 0.0);
+            let above = total.saturating_sub(below.unwrap_or(0));
+            let end = (at_sigma + above).max(start);
+            (end.min(len), end.min(len), end <= len)
+        }
+        None => {
+            let end = cand.partition_point(|c| lam(c) < w.hi).max(start);
+            match w.count {
+                Some(count) => (end, end, end - start == count),
+                None => (end, (end + 1).min(len), end < len),
+            }
+        }
+    };
+    let req_start = if w.lo == f64::NEG_INFINITY || w.count.is_some() { start } else { start.saturating_sub(1) };
+    Selection { start, end, req_start, req_end, enough }
 }
 
 impl Run<'_> {
@@ -315,6 +384,18 @@ fn factor_shift(
         FactorError::Failed(message) => EigenError::Factorization { message: format!("σ = {sigma:e}: {message}") },
     };
     let stop = control.stop;
+    if let Some(w) = &run.window {
+        let values = pair.shifted(w.sigma);
+        let (factor, below) =
+            Cholesky::factor_ldlt_stoppable(sym, &values, par, stop).map_err(|e| failed(w.sigma, e))?;
+        let e = solve_backward_error(pair, &values, &factor, par);
+        if e > LDLT_BACKWARD_ERROR {
+            return Err(EigenError::Factorization {
+                message: format!("σ = {:e}: the LDLᵀ factor is not backward stable ({e:.1e})", w.sigma),
+            });
+        }
+        return Ok(Shifted { sigma: w.sigma, factor, below_sigma: Some(below) });
+    }
     if let Some(sigma) = o.sigma {
         if sigma < 0.0 {
             let factor =
@@ -436,6 +517,18 @@ pub fn eigs_block_lanczos(
     // Eigenvalues below σ the iteration must find itself (the inertia less the deflated ones).
     let below_undeflated = below_sigma.map(|nu| nu.saturating_sub(run.deflated_below(sigma)));
     let numeric_s = t1.elapsed().as_secs_f64();
+    // A slice whose window holds far more pairs than it was planned for (Weyl's law misjudged the spectrum's
+    // density: thin shapes) gives up at once; the caller solves in one run.
+    if let Some(w) = &run.window {
+        let over = match (w.total, below_undeflated) {
+            (Some(total), Some(_)) => total.saturating_sub(below_sigma.unwrap_or(0)) > k,
+            (None, Some(nu)) => w.lo == f64::NEG_INFINITY && nu > k,
+            _ => false,
+        };
+        if over {
+            return Err(EigenError::NoConvergence { converged: 0, wanted: k, steps: 0 });
+        }
+    }
     let t2 = Instant::now();
     let mut clock = Clock::default();
     let mdiag = pair.mass_diagonal();
@@ -446,6 +539,8 @@ pub fn eigs_block_lanczos(
         mdiag: pair.mass_is_diagonal.then_some(mdiag),
         mean_mass,
         scratch: Vec::new(),
+        threads: if o.threads == 0 { rayon::current_num_threads() } else { o.threads },
+        par,
     };
     let mut rng = Rng(o.seed);
 
@@ -494,12 +589,12 @@ pub fn eigs_block_lanczos(
                 // The recurrence: Vᵀ M T Q = Eᵀ on the expanded part (exact arithmetic), Qᵀ M T Q = A.
                 if e_lo < m {
                     let et = e.as_ref().subcols(e_lo, m - e_lo).transpose();
-                    basis_products::update(&mut w.data, b, basis.subcols(e_lo, m - e_lo), et, -1.0);
+                    basis_products::update_par(&mut w.data, b, basis.subcols(e_lo, m - e_lo), et, -1.0, ctx.threads);
                     coef.as_mut().subrows_mut(e_lo, m - e_lo).copy_from(et);
                 }
                 let mut a = Mat::<f64>::zeros(b, b);
-                matmul(a.as_mut(), Accum::Replace, mq.as_ref().transpose(), w.as_ref(), 1.0, Par::Seq);
-                basis_products::update(&mut w.data, b, basis.subcols(m, b), a.as_ref(), -1.0);
+                matmul(a.as_mut(), Accum::Replace, mq.as_ref().transpose(), w.as_ref(), 1.0, par);
+                basis_products::update_par(&mut w.data, b, basis.subcols(m, b), a.as_ref(), -1.0, ctx.threads);
                 coef.as_mut().subrows_mut(m, b).copy_from(a.as_ref());
                 // Full reorthogonalization against the whole basis (locked vectors included), after the deflated
                 // directions (T keeps their complement, so this removes rounding only).
@@ -551,21 +646,35 @@ pub fn eigs_block_lanczos(
         // Ascending λ = σ + 1/θ: descending θ when σ is below the spectrum (every θ > 0); with σ inside it the
         // negative θ (λ < σ) come first, then the positive ones from the largest down.
         cand.sort_by(|x, y| (sigma + 1.0 / x.0).total_cmp(&(sigma + 1.0 / y.0)));
+        let pick = select(&cand, sigma, want, run.window.as_ref(), below_sigma);
+        let req = &cand[pick.req_start..pick.req_end];
         let leading = cand.iter().take_while(|c| converged(c)).count();
-        // How far the wanted pairs are from the tolerance: the largest ratio of residual to tol·|θ| among the first
-        // `want` candidates. Residuals fall by at most ~10–15× per block step in measured runs (10k–41k spheres,
-        // k = 50…200), so at 100× per step the test cannot succeed in fewer than log₁₀₀ of that ratio steps.
-        let far = cand.iter().take(want).map(|c| c.2 / (o.tol * c.0.abs())).fold(0.0, f64::max);
+        // How far the wanted pairs are from the tolerance: the largest ratio of residual to tol·|θ| among the
+        // candidates that must converge. Residuals fall by at most ~10–15× per block step in measured runs (10k–41k
+        // spheres, k = 50…200), so at 100× per step the test cannot succeed in fewer than log₁₀₀ of that ratio steps.
+        let far = req.iter().map(|c| c.2 / (o.tol * c.0.abs())).fold(0.0, f64::max);
         next_test = steps + ((far.max(1.0).log10() / 2.0) as usize).max(1);
         clock.rayleigh_ritz += lap(&mut t);
-        if leading.min(k) > best_converged {
-            best_converged = leading.min(k);
+        let progress = if run.window.is_some() { req.iter().filter(|c| converged(c)).count() } else { leading };
+        if progress.min(k) > best_converged {
+            best_converged = progress.min(k);
             control.report("iterating", best_converged, k);
         }
         // With σ inside the spectrum, the inertia says how many eigenvalues lie below it: all of them must be among
-        // the pairs returned (a cluster member the Krylov space has not met yet would otherwise go unnoticed).
-        let inertia_met = below_undeflated.is_none_or(|nu| cand.iter().take(k).filter(|c| c.0 < 0.0).count() == nu);
-        let done = leading >= want && inertia_met;
+        // the pairs returned (a cluster member the Krylov space has not met yet would otherwise go unnoticed). A
+        // slice above the bottom returns only part of them; the check of the whole result counts the rest.
+        let done = match &run.window {
+            None => {
+                let inertia_met =
+                    below_undeflated.is_none_or(|nu| cand.iter().take(k).filter(|c| c.0 < 0.0).count() == nu);
+                leading >= want && inertia_met
+            }
+            Some(w) => {
+                let inertia_met = w.lo != f64::NEG_INFINITY
+                    || below_undeflated.is_none_or(|nu| cand.partition_point(|c| c.0 < 0.0) == nu);
+                pick.enough && req.iter().all(converged) && inertia_met
+            }
+        };
         let full = m + 2 * b > msize;
         if !done && !full {
             continue;
@@ -577,12 +686,13 @@ pub fn eigs_block_lanczos(
             // The k smallest λ: locked columns as they are, active ones as V_active S; written in ascending λ
             // (the candidates' order already; sorted defensively).
             // The k wanted pairs and the converged guard pairs above them (for the completeness check's shift).
-            let top = &cand[..want];
+            let top = &cand[pick.start..pick.end];
+            let want = top.len();
             let act: Vec<usize> =
                 top.iter().filter_map(|c| if let Ritz::Active(j) = c.1 { Some(j) } else { None }).collect();
             let s_sel = Mat::from_fn(ma, act.len(), |i, j| s_a[(i, act[j])]);
             control.report("ritz-vectors", k, k);
-            ritz_in_place(&mut v, a0, ma, s_sel.as_ref(), &control)?;
+            ritz_in_place(&mut v, a0, ma, s_sel.as_ref(), par, &control)?;
             // Column of each candidate in V: locked ones where they are, active ones from a0 on in `top` order.
             let mut next_active = a0;
             let src: Vec<usize> = top
@@ -647,21 +757,46 @@ pub fn eigs_block_lanczos(
         let keep = (want + msize.saturating_sub(want + 2 * b) / 2).min(m - b).max(want.min(m - b)).max(a0 + 1);
         let mut lock_now: Vec<usize> = Vec::new();
         let mut rest: Vec<usize> = Vec::new();
-        for (pos, c) in cand.iter().enumerate() {
+        // A slice keeps the candidates nearest its window (the standard run: ascending λ, as sorted).
+        let order: Vec<usize> = match &run.window {
+            None => (0..cand.len()).collect(),
+            Some(w) => {
+                let lam = |c: &(f64, Ritz, f64)| sigma + 1.0 / c.0;
+                let hi = match w.total {
+                    Some(_) if pick.enough && pick.end > pick.start => lam(&cand[pick.end - 1]),
+                    Some(_) => f64::INFINITY,
+                    None => w.hi,
+                };
+                let dist = |c: &(f64, Ritz, f64)| (w.lo - lam(c)).max(lam(c) - hi).max(0.0);
+                let mut order: Vec<usize> = (0..cand.len()).collect();
+                order.sort_by(|&x, &y| dist(&cand[x]).total_cmp(&dist(&cand[y])));
+                order
+            }
+        };
+        let lockable = |pos: usize| match run.window {
+            None => pos < leading,
+            Some(_) => (pick.req_start..pick.req_end).contains(&pos) && converged(&cand[pos]),
+        };
+        for &pos in &order {
+            let c = &cand[pos];
             if let Ritz::Active(j) = c.1 {
-                if pos < leading {
+                if lockable(pos) {
                     lock_now.push(j);
                 } else if a0 + lock_now.len() + rest.len() < keep {
                     rest.push(j);
                 }
             }
         }
+        if run.window.is_some() && a0 + lock_now.len() + 3 * b > msize {
+            // The window holds more pairs than its subspace was sized for: the caller solves without slicing.
+            return Err(EigenError::NoConvergence { converged: a0 + lock_now.len(), wanted: k, steps });
+        }
         let sel: Vec<usize> = lock_now.iter().chain(&rest).copied().collect();
         let keep = a0 + sel.len();
         let s_keep = Mat::from_fn(ma, sel.len(), |i, j| s_a[(i, sel[j])]);
         // V[:, a0..keep] = V[:, a0..m] S_keep in place, then Q moved to keep..keep + b (keep + b ≤ m: Q's columns
         // are not among those overwritten, and every read of the product is done before the move).
-        ritz_in_place(&mut v, a0, ma, s_keep.as_ref(), &control)?;
+        ritz_in_place(&mut v, a0, ma, s_keep.as_ref(), par, &control)?;
         {
             let (mut left, right) = v.as_mut().split_at_col_mut(m);
             left.rb_mut().subcols_mut(keep, b).copy_from(right.subcols(0, b));

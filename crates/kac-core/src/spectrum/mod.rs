@@ -42,6 +42,7 @@ pub mod null_space;
 pub mod numeric;
 mod options;
 mod result;
+pub mod slicing;
 pub mod weyl_law;
 
 pub use options::*;
@@ -107,9 +108,15 @@ pub fn eigs(
         }
         let deflation = Deflation { sparse: &zeros.vectors, dense: None };
         let zero_values = vec![0.0; z];
-        let run = lanczos::Run { deflation: &deflation, deflated_values: &zero_values, interior_shift: true };
+        let run =
+            lanczos::Run { deflation: &deflation, deflated_values: &zero_values, interior_shift: true, window: None };
         let o = EigenOptions { k: k - z, ..options.clone() };
-        let mut s = match lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)? {
+        let sliced = slicing::solve(pair, &o, sym, control, &deflation, &zero_values)?;
+        let single = match sliced {
+            Some(s) => Some(s),
+            None => lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?,
+        };
+        let mut s = match single {
             Some(s) => prepend_zero_modes(pair, &zeros, s, &control)?,
             None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, control)?,
         };

@@ -47,6 +47,9 @@ pub struct EigenOptions {
     /// Put the operator's known zero modes in the result exactly and iterate on their complement (default true;
     /// see [`null_space`]).
     pub deflate_null_space: bool,
+    /// Slices of the spectrum solved apart ([`super::slicing`]): `None` chooses by k and the threads, `Some(1)`
+    /// solves in one run.
+    pub slices: Option<usize>,
 }
 
 /// The smallest residual tolerance a solve takes: a relative residual below about 100 machine epsilons cannot be
@@ -56,6 +59,8 @@ pub const MIN_TOL: f64 = 1e-14;
 pub const MAX_TOL: f64 = 0.1;
 /// The largest block size.
 pub const MAX_BLOCK: usize = 64;
+/// The most slices a solve is cut into ([`super::slicing`]).
+pub const MAX_SLICES: usize = 64;
 /// The largest |σ| a solve takes: beyond it, L − σM is σM to every digit for any operator a mesh of reasonable
 /// units gives (and overflows for the largest doubles).
 pub const MAX_ABS_SIGMA: f64 = 1e15;
@@ -108,6 +113,11 @@ impl EigenOptions {
                 );
             }
         }
+        if let Some(s) = self.slices {
+            if !(1..=MAX_SLICES).contains(&s) {
+                return bad("slices", format!("{s} is outside 1..={MAX_SLICES}"));
+            }
+        }
         if self.max_steps == 0 {
             return bad("max_steps", "0 steps: give at least 1".into());
         }
@@ -134,6 +144,7 @@ impl Default for EigenOptions {
             verify: true,
             max_factor_values: usize::MAX,
             deflate_null_space: true,
+            slices: None,
         }
     }
 }

@@ -49,6 +49,9 @@ pub struct Stats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub below_band: Option<usize>,
     pub timings: Timings,
+    /// Spectrum slicing ([`super::slicing`]): what each slice did; empty for a solve in one run.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub slices: Vec<super::slicing::SliceReport>,
     /// The completeness check; `None` when it was turned off.
     pub completeness: Option<Completeness>,
 }

@@ -1,0 +1,361 @@
+//! Spectrum slicing: the k smallest pairs found as several slices of [0, λ_k], each by shift-invert Lanczos around a
+//! shift of its own, with its own factorization, the slices solved in parallel on the threads given.
+//!
+//! - **The plan.** Weyl's law cuts the interval into windows expected to hold the same number of pairs; one LDLᵀ
+//!   factorization at every edge between two windows counts, by Sylvester's inertia, the eigenvalues below it, so
+//!   each window's count is known exactly and its Krylov subspace is sized for what it holds (Weyl's even split
+//!   meets clustered spectra unevenly: a window of the sphere can hold a 57-fold cluster more than planned), and a
+//!   window past the k-th eigenvalue is dropped.
+//! - **A slice.** An interior window [lo, hi) is solved around its midpoint σ and is done when as many converged
+//!   pairs lie in it as the inertia counts: that proves the window complete. The lowest window is the standard
+//!   interior-shift run (σ at 0.7 of its top, every eigenvalue below σ returned); the top one returns the pairs up to
+//!   the k-th eigenvalue counted from the bottom (its own inertia at σ says how many lie below σ) and guard pairs
+//!   above it, for the completeness check of the whole.
+//! - **The edges.** Eigenvectors of different slices are M-orthogonal as far as their residuals allow; at every edge,
+//!   where a cluster may be split between two slices, the pairs within a tenth of the narrower window go through one
+//!   Rayleigh–Ritz step together (M-orthonormalized, a direction held twice dropped by rank).
+//! - **Completeness** is then checked as for one run: Sylvester's inertia at a shift in a gap above λ_k must count
+//!   exactly the pairs found below it, and missed pairs are repaired.
+//! - **What it costs.** A window has unwanted eigenvalues on both sides, where the lowest run has them on one, so a
+//!   slice's pairs take more block steps (and solves) than the same number at the bottom of one run; what slicing
+//!   saves is the Gram–Schmidt work, which grows with the square of the basis, and memory, since a slice's basis
+//!   holds about twice its own pairs, not twice k. Measured on the 164k-vertex sphere (BENCHMARKS.md): at k = 1000
+//!   eight slices take 39.6 s and 2.8 GB on two threads against 58.6 s and 4.2 GB in one run; at k = 200 one run is
+//!   faster on one thread and on two. The automatic plan slices from [`SLICING_MIN_PAIRS`] pairs on.
+//!
+//! A plan the problem does not fit (a window holding more pairs than its subspace allows, a factor that is not
+//! backward stable, too few unknowns) is given up, and the k pairs are solved in one run instead.
+
+use super::lanczos::{self, Window};
+use super::*;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// The fewest pairs (beyond the known zero modes) the automatic plan slices: below, one run is faster on one thread
+/// and on two (measured on the 164k-vertex sphere at k = 200: 9.4 s in one run against 15.2 s in two slices on one
+/// thread, 8.2 s against 9.5 s on two: a slice's window has unwanted eigenvalues on both sides, so its pairs take
+/// more block steps than the same pairs at the bottom of one run; BENCHMARKS.md).
+pub const SLICING_MIN_PAIRS: usize = 400;
+
+/// Pairs per slice the automatic plan aims at (measured on the 164k-vertex sphere at k = 1000).
+pub const PAIRS_PER_SLICE: usize = 125;
+
+/// The window an edge's Rayleigh–Ritz step reaches into on each side, as a fraction of the narrower window.
+const EDGE_FRACTION: f64 = 0.1;
+
+/// What one slice did (reported in the solver's statistics).
+#[derive(Debug, Clone, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct SliceReport {
+    /// The window's lower end (null for the lowest slice, which starts at the bottom of the spectrum).
+    pub lo: Option<f64>,
+    /// The window's upper end (null for the top slice, which goes up to the k-th eigenvalue and its guards).
+    pub hi: Option<f64>,
+    pub sigma: f64,
+    /// Eigenvalues below σ (Sylvester's inertia of the slice's LDLᵀ factor).
+    pub below_sigma: Option<usize>,
+    /// Pairs the slice returned.
+    pub pairs: usize,
+    pub block_steps: usize,
+    pub solves: usize,
+    pub restarts: usize,
+    /// Factorization and iteration of this slice.
+    pub seconds: f64,
+}
+
+/// The number of slices for `wanted` pairs (beyond the deflated ones) on `threads` threads, unless `asked`.
+pub fn slice_count(wanted: usize, threads: usize, asked: Option<usize>) -> usize {
+    if let Some(s) = asked {
+        return s.clamp(1, (wanted / 8).max(1));
+    }
+    if wanted < SLICING_MIN_PAIRS {
+        return 1;
+    }
+    wanted.div_ceil(PAIRS_PER_SLICE).max(threads.min(wanted / PAIRS_PER_SLICE)).max(1)
+}
+
+/// The slices' windows by Weyl's law (each expected to hold the same number of pairs), or `None` where slicing does
+/// not apply (one slice, a fixed shift, an operator without a dimension for Weyl's law).
+pub(crate) fn plan(pair: &SparsePair, deflated: usize, wanted: usize, o: &EigenOptions) -> Option<Vec<Window>> {
+    // A fixed shift, or a subspace chosen for one run, asks for one run.
+    if o.sigma.is_some() || (o.subspace.is_some() && o.slices.is_none()) {
+        return None;
+    }
+    let d = pair.dimension?;
+    let measure: f64 = pair.mass.iter().sum();
+    if !(measure > 0.0) || !measure.is_finite() {
+        return None;
+    }
+    let threads = if o.threads == 0 { rayon::current_num_threads() } else { o.threads };
+    let s = slice_count(wanted, threads, o.slices);
+    if s < 2 {
+        return None;
+    }
+    let edge = |j: usize| weyl_law::weyl_eigenvalue(d, measure, (deflated + j * wanted / s) as f64);
+    let guard = (o.block.unwrap_or(8) / 2).max(2);
+    let mut out = Vec::with_capacity(s);
+    for j in 0..s {
+        let window = if j == 0 {
+            let hi = edge(1);
+            Window { lo: f64::NEG_INFINITY, hi, sigma: lanczos::WEYL_FRACTION * hi, total: None, count: None }
+        } else if j + 1 < s {
+            let (lo, hi) = (edge(j), edge(j + 1));
+            Window { lo, hi, sigma: 0.5 * (lo + hi), total: None, count: None }
+        } else {
+            let (lo, top) = (edge(j), edge(s));
+            Window {
+                lo,
+                hi: f64::INFINITY,
+                sigma: 0.5 * (lo + top),
+                total: Some(deflated + wanted + guard),
+                count: None,
+            }
+        };
+        if !(window.sigma > 0.0 && window.sigma.is_finite()) {
+            return None;
+        }
+        out.push(window);
+    }
+    Some(out)
+}
+
+/// The `o.k` smallest pairs of the deflated problem by slicing, with the guard pairs above them; `Ok(None)` when
+/// slicing does not apply or its plan did not fit (the caller then solves in one run).
+pub(crate) fn solve(
+    pair: &SparsePair,
+    o: &EigenOptions,
+    sym: &factor::Symbolic,
+    control: Control<'_>,
+    deflation: &null_space::Deflation<'_>,
+    deflated_values: &[f64],
+) -> Result<Option<Spectrum>, EigenError> {
+    let t0 = Instant::now();
+    let Some(slices) = plan(pair, deflation.len(), o.k, o) else { return Ok(None) };
+    let threads = if o.threads == 0 { rayon::current_num_threads() } else { o.threads };
+    let parallel = threads > 1;
+    control.phase("factorization", 0, o.k)?;
+    // Sylvester's inertia at every edge between two slices: each window's count exactly, so its subspace is
+    // sized for what it holds (Weyl's even split meets clustered spectra unevenly: a sphere's window can hold a
+    // 57-fold cluster more than planned). An edge moves within ±1 % of its window where its LDLᵀ factor is not
+    // backward stable.
+    let count_edge = |j: usize| -> Result<(f64, usize), EigenError> {
+        let (w0, w1) = (slices[j - 1], slices[j]);
+        let e = w1.lo;
+        let below = if w0.lo.is_finite() { w0.lo } else { 0.0 };
+        let above = if w1.hi.is_finite() { w1.hi } else { w1.sigma };
+        let reach = 0.01 * (e - below).min(above - e);
+        completeness::inertia_in_gap(sym, pair, e - reach, e + reach, &control)
+    };
+    let edges: Vec<Result<(f64, usize), EigenError>> = if parallel {
+        (1..slices.len()).into_par_iter().with_max_len(1).map(count_edge).collect()
+    } else {
+        (1..slices.len()).map(count_edge).collect()
+    };
+    let edges: Vec<(f64, usize)> = match edges.into_iter().collect() {
+        Ok(e) => e,
+        Err(EigenError::Canceled) => return Err(EigenError::Canceled),
+        Err(_) => return Ok(None),
+    };
+    let deflated = deflation.len();
+    let total = slices.last().and_then(|s| s.total).unwrap_or(deflated + o.k);
+    // Windows with their exact counts; slices past the one that reaches `total` pairs are dropped.
+    let mut planned: Vec<(Window, usize)> = Vec::with_capacity(slices.len());
+    let mut below = deflated;
+    for (j, w) in slices.iter().enumerate() {
+        let mut w = *w;
+        if j > 0 {
+            w.lo = edges[j - 1].0;
+        }
+        let last = j + 1 == slices.len() || edges[j].1 >= total;
+        if last {
+            w.hi = f64::INFINITY;
+            w.total = Some(total);
+            if !(w.sigma > w.lo) {
+                w.sigma = w.lo + 0.5 * (slices[j].sigma - slices[j].lo).abs().max(w.lo.abs() * 1e-3);
+            }
+            planned.push((w, total.saturating_sub(below).max(1)));
+            break;
+        }
+        w.hi = edges[j].0;
+        w.sigma = if w.lo.is_finite() { 0.5 * (w.lo + w.hi) } else { lanczos::WEYL_FRACTION * w.hi };
+        let count = edges[j].1.saturating_sub(below);
+        w.count = Some(count);
+        below = edges[j].1;
+        planned.push((w, count.max(1)));
+    }
+    let slices = planned;
+    if slices.len() < 2 {
+        return Ok(None);
+    }
+    // Threads left to each slice's factorization and solves once every slice has one.
+    let inner = (threads / slices.len()).max(1);
+    let converged: Vec<AtomicUsize> = slices.iter().map(|_| AtomicUsize::new(0)).collect();
+    let k = o.k;
+    let run_slice = |i: usize| -> (Result<Option<Spectrum>, EigenError>, f64) {
+        let t = Instant::now();
+        let (window, expected) = slices[i];
+        let report = |p: Progress| {
+            if p.phase == "iterating" {
+                converged[i].store(p.converged, Ordering::Relaxed);
+                let sum: usize = converged.iter().map(|c| c.load(Ordering::Relaxed)).sum();
+                control.report("iterating", sum.min(k), k);
+            }
+        };
+        let slice_control = Control { progress: Some(&report), stop: control.stop };
+        let run = lanczos::Run { deflation, deflated_values, interior_shift: true, window: Some(window) };
+        let os = EigenOptions { k: expected, threads: inner, subspace: None, ..o.clone() };
+        (lanczos::eigs_block_lanczos(pair, &os, Some(sym), slice_control, &run), t.elapsed().as_secs_f64())
+    };
+    let results: Vec<(Result<Option<Spectrum>, EigenError>, f64)> = if parallel {
+        (0..slices.len()).into_par_iter().with_max_len(1).map(run_slice).collect()
+    } else {
+        let mut out = Vec::with_capacity(slices.len());
+        for i in 0..slices.len() {
+            let r = run_slice(i);
+            let failed = r.0.is_err();
+            out.push(r);
+            if failed {
+                break;
+            }
+        }
+        out
+    };
+    let mut parts = Vec::with_capacity(slices.len());
+    let mut seconds = Vec::with_capacity(slices.len());
+    for (r, s) in results {
+        match r {
+            Ok(Some(spectrum)) => parts.push(spectrum),
+            Err(EigenError::Canceled) => return Err(EigenError::Canceled),
+            // The plan did not fit this problem (or too few unknowns): one run instead.
+            Ok(None) | Err(_) => return Ok(None),
+        }
+        seconds.push(s);
+    }
+    if parts.len() < slices.len() {
+        return Ok(None);
+    }
+    control.check()?;
+    let reports: Vec<SliceReport> = parts
+        .iter()
+        .zip(&slices)
+        .zip(&seconds)
+        .map(|((p, (w, _)), &s)| SliceReport {
+            lo: w.lo.is_finite().then_some(w.lo),
+            hi: w.hi.is_finite().then_some(w.hi),
+            sigma: w.sigma,
+            below_sigma: p.stats.below_sigma,
+            pairs: p.values.len(),
+            block_steps: p.stats.block_steps,
+            solves: p.stats.solves,
+            restarts: p.stats.restarts,
+            seconds: s,
+        })
+        .collect();
+    let mut s = stitch(pair, parts, &slices, &control)?;
+    if s.values.len() < k {
+        return Ok(None);
+    }
+    s.stats.slices = reports;
+    s.stats.timings.iteration_s = t0.elapsed().as_secs_f64();
+    Ok(Some(s))
+}
+
+/// The slices' pairs in one ascending spectrum, with each edge's neighbourhood Rayleigh–Ritz'd (see the module
+/// docs). Statistics add up the slices' work; σ and the inertia are the lowest slice's.
+fn stitch(
+    pair: &SparsePair,
+    parts: Vec<Spectrum>,
+    slices: &[(Window, usize)],
+    control: &Control<'_>,
+) -> Result<Spectrum, EigenError> {
+    let n = pair.n();
+    let total: usize = parts.iter().map(|p| p.values.len()).sum();
+    // Filled slice by slice, each slice's vectors dropped once copied: the peak holds one copy of the
+    // eigenvectors and one slice's.
+    let mut vectors = Mat::<f64>::with_capacity(n, total);
+    let mut values = Vec::with_capacity(total);
+    let mut stats = Stats { method: "block-lanczos", factorization: "ldlt", ..Default::default() };
+    for (i, p) in parts.into_iter().enumerate() {
+        control.check()?;
+        let (c, w) = (values.len(), p.values.len());
+        vectors.resize_with(n, c + w, |r, col| p.vectors[(r, col - c)]);
+        values.extend_from_slice(&p.values);
+        let ps = &p.stats;
+        if i == 0 {
+            stats.sigma = ps.sigma;
+            stats.below_sigma = ps.below_sigma;
+            stats.factor_nnz = ps.factor_nnz;
+            stats.block = ps.block;
+        }
+        stats.subspace = stats.subspace.max(ps.subspace);
+        stats.restarts += ps.restarts;
+        stats.block_steps += ps.block_steps;
+        stats.solves += ps.solves;
+        let (t, pt) = (&mut stats.timings, &ps.timings);
+        t.numeric_s += pt.numeric_s;
+        t.solve_s += pt.solve_s;
+        t.orthogonalize_s += pt.orthogonalize_s;
+        t.rayleigh_ritz_s += pt.rayleigh_ritz_s;
+        t.restart_s += pt.restart_s;
+    }
+    let mut s = Spectrum { values, vectors, residuals: vec![], stats };
+    // Each interior edge: the slices' windows meet there.
+    for j in 1..slices.len() {
+        control.check()?;
+        let edge = slices[j].0.lo;
+        let width = |w: &Window| -> f64 {
+            let lo = if w.lo.is_finite() { w.lo } else { 0.0 };
+            let hi = if w.hi.is_finite() { w.hi } else { s.values.last().copied().unwrap_or(lo) };
+            (hi - lo).max(0.0)
+        };
+        let reach = EDGE_FRACTION * width(&slices[j - 1].0).min(width(&slices[j].0));
+        let a = s.values.partition_point(|&v| v < edge - reach);
+        let b = s.values.partition_point(|&v| v < edge + reach);
+        if b > a {
+            rayleigh_ritz(pair, &mut s, a, b);
+        }
+    }
+    Ok(s)
+}
+
+/// Replaces the pairs a..b of `s` by the Ritz pairs of their span (M-orthonormal; a direction the others already
+/// hold, as a pair found by both slices, is dropped).
+fn rayleigh_ritz(pair: &SparsePair, s: &mut Spectrum, a: usize, b: usize) {
+    let x = s.vectors.as_ref().subcols(a, b - a).to_owned();
+    let mx = completeness::mass_times(pair, x.as_ref());
+    let mut lx = Mat::<f64>::zeros(x.nrows(), x.ncols());
+    let mut scratch = Vec::new();
+    crate::operators::sparse::spmm(&pair.pattern, &pair.stiffness, x.as_ref(), lx.as_mut(), &mut scratch);
+    let p = b - a;
+    let g = x.transpose() * &mx;
+    let l = x.transpose() * &lx;
+    let g = Mat::from_fn(p, p, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
+    let Ok(evd) = g.self_adjoint_eigen(faer::Side::Lower) else { return };
+    let top = (0..p).map(|i| evd.S()[i]).fold(0.0, f64::max);
+    let kept: Vec<usize> = (0..p).filter(|&i| evd.S()[i] > 1e-10 * top).collect();
+    let whiten = Mat::from_fn(p, kept.len(), |i, j| evd.U()[(i, kept[j])] / evd.S()[kept[j]].sqrt());
+    let lw = whiten.transpose() * &l * &whiten;
+    let r = kept.len();
+    let lw = Mat::from_fn(r, r, |i, j| 0.5 * (lw[(i, j)] + lw[(j, i)]));
+    let Ok(evd2) = lw.self_adjoint_eigen(faer::Side::Lower) else { return };
+    let y = &x * (&whiten * evd2.U());
+    let new_values: Vec<f64> = (0..r).map(|i| evd2.S()[i]).collect();
+    if r == p {
+        s.vectors.as_mut().subcols_mut(a, p).copy_from(y.as_ref());
+        s.values[a..b].copy_from_slice(&new_values);
+        return;
+    }
+    // Splice the r new pairs in place of the p old ones (a direction held twice).
+    let n = s.vectors.nrows();
+    let total = s.values.len() - p + r;
+    let mut vectors = Mat::<f64>::zeros(n, total);
+    vectors.as_mut().subcols_mut(0, a).copy_from(s.vectors.as_ref().subcols(0, a));
+    vectors.as_mut().subcols_mut(a, r).copy_from(y.as_ref());
+    let tail = s.values.len() - b;
+    vectors.as_mut().subcols_mut(a + r, tail).copy_from(s.vectors.as_ref().subcols(b, tail));
+    let mut values = s.values[..a].to_vec();
+    values.extend_from_slice(&new_values);
+    values.extend_from_slice(&s.values[b..]);
+    s.values = values;
+    s.vectors = vectors;
+}
