@@ -79,7 +79,12 @@ fn shots() -> PathBuf {
 
 /// The canvas as RGB pixels (its screenshot, saved as `NAME.png`).
 async fn canvas(c: &Client, name: &str) -> Vec<[u8; 3]> {
-    let png_bytes = c.find(Locator::Id("canvas")).await.unwrap().screenshot().await.unwrap();
+    canvas_by_id(c, "canvas", name).await
+}
+
+/// A canvas by its element id as RGB pixels (its screenshot, saved as `NAME.png`).
+async fn canvas_by_id(c: &Client, id: &str, name: &str) -> Vec<[u8; 3]> {
+    let png_bytes = c.find(Locator::Id(id)).await.unwrap().screenshot().await.unwrap();
     std::fs::write(shots().join(format!("{name}.png")), &png_bytes).unwrap();
     let decoder = png::Decoder::new(std::io::Cursor::new(png_bytes));
     let mut reader = decoder.read_info().unwrap();
@@ -257,5 +262,90 @@ async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() 
     let offered = js(&c, "return document.getElementById('analysis').selectedOptions[0].disabled").await;
     assert_eq!(offered, json!(false), "the selected analysis applies");
     no_errors(&c, "polyline").await;
+    c.close().await.unwrap();
+}
+
+/// Correspondence in the viewer: a lumpy sphere (no symmetry) and a rotated copy with its vertices shuffled are
+/// stored; the user picks the copy as the target and presses Match; the copy is drawn beside the shape, coloured by
+/// the shape's x coordinate carried over by the functional map (within 5 % of the range at every vertex, against the
+/// true permutation); a vertex picked on either side marks its true match on the other.
+#[tokio::test]
+#[ignore = "needs chromium and chromium-driver (scripts/test-all.sh installs and runs it)"]
+async fn two_shapes_side_by_side_show_which_point_is_which() {
+    let mut a = kac_core::geometry::generate::icosphere(3);
+    for p in &mut a.vertices {
+        let [x, y, z] = *p;
+        let r = 1.0 + 0.3 * x + 0.2 * y * y - 0.25 * z * z * z + 0.15 * x * y;
+        *p = [x * r, 1.3 * y * r, 0.8 * z * r];
+    }
+    let n = a.vertices.len();
+    let perm: Vec<u32> = (0..n as u32).map(|y| (y * 389 + 17) % n as u32).collect();
+    let mut inverse = vec![0u32; n];
+    for (y, &x) in perm.iter().enumerate() {
+        inverse[x as usize] = y as u32;
+    }
+    let mut b = a.clone();
+    b.vertices = perm.iter().map(|&x| a.vertices[x as usize]).map(|[x, y, z]| [-y + 2.0, x, z - 1.0]).collect();
+    b.faces = a.faces.iter().map(|f| f.map(|v| inverse[v as usize])).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let (_server, base) = serve(dir.path());
+    let (_driver, c) = browser().await;
+    c.goto(&format!("{base}/")).await.unwrap();
+    until(&c, "window.kac && window.kac.ready", "the page to load").await;
+    let mut ids = vec![];
+    for m in [&a, &b] {
+        let off = kac_core::io::write::off(m);
+        let up = format!(
+            "return fetch('/v1/shapes?format=off', {{ method: 'POST', body: {} }}).then(r => r.json()).then(s => s.id)",
+            json!(off)
+        );
+        ids.push(js(&c, &up).await.as_str().unwrap().to_string());
+    }
+    // Reload so the lists hold both; choose the shape, then the copy as the target, and match.
+    c.goto(&format!("{base}/#shape={}", ids[0])).await.unwrap();
+    c.refresh().await.unwrap();
+    until(&c, "window.kac && window.kac.ready && window.kac.viewer.frames > 0", "the shape").await;
+    let set_target = format!(
+        "const t = document.getElementById('target'); t.value = '{}'; t.dispatchEvent(new Event('change')); return 0",
+        ids[1]
+    );
+    js(&c, &set_target).await;
+    c.find(Locator::Id("match")).await.unwrap().click().await.unwrap();
+    until(&c, "window.kac.pair && window.kac.viewer2.frames > 0 && window.kac.viewer2.values", "the pair").await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let (left, right) = (canvas(&c, "8-pair-source").await, canvas_by_id(&c, "canvas2", "8-pair-target").await);
+    assert!(drawn(&left) > left.len() / 50 && drawn(&right) > right.len() / 50, "both shapes are drawn");
+    no_errors(&c, "match").await;
+    // The colours on the copy are the shape's x carried over: compared, per copy vertex, with the x of its true
+    // match (the copy's upload row y is the shape's row perm[y]).
+    let check = format!(
+        "const p = window.kac.pair, g = window.kac.state.geometry, g2 = p.geometry, perm = {};
+         const n = g.positions.length / 3, vals = window.kac.viewer2.values;
+         let worst = 0, lo = Infinity, hi = -Infinity;
+         for (let v = 0; v < n; v++) {{ lo = Math.min(lo, g.positions[3 * v]); hi = Math.max(hi, g.positions[3 * v]); }}
+         g2.inputToVertex.forEach((v2, y) => {{
+           const x = g.positions[3 * g.inputToVertex[perm[y]]];
+           worst = Math.max(worst, Math.abs(vals[v2] - x));
+         }});
+         return worst / (hi - lo)",
+        json!(perm)
+    );
+    let worst = js(&c, &check).await.as_f64().unwrap();
+    assert!(worst < 0.05, "x carried over by the functional map is off by {worst} of its range somewhere");
+    // Pick on the shape: the mark on the copy is the true match; then pick on the copy: the mark on the shape.
+    c.find(Locator::Id("canvas")).await.unwrap().click().await.unwrap();
+    until(&c, "window.kac.pair.rows && window.kac.pair.rows.source >= 0", "a picked vertex and its match").await;
+    let rows = js(&c, "return window.kac.pair.rows").await;
+    let (x, y) = (rows["source"].as_u64().unwrap() as usize, rows["target"].as_u64().unwrap() as usize);
+    assert_eq!(y as u32, inverse[x], "source row {x} is marked at copy row {y}");
+    js(&c, "window.kac.pair.rows = null; return 0").await;
+    c.find(Locator::Id("canvas2")).await.unwrap().click().await.unwrap();
+    until(&c, "window.kac.pair.rows && window.kac.pair.rows.target >= 0", "a vertex picked on the copy").await;
+    let rows = js(&c, "return window.kac.pair.rows").await;
+    let (x, y) = (rows["source"].as_u64().unwrap() as usize, rows["target"].as_u64().unwrap() as usize);
+    assert_eq!(x as u32, perm[y], "copy row {y} is marked at source row {x}");
+    let marked = js(&c, "return [window.kac.viewer.marker, window.kac.viewer2.marker]").await;
+    assert!(marked[0].is_u64() && marked[1].is_u64(), "both sides carry a mark: {marked}");
+    no_errors(&c, "pick").await;
     c.close().await.unwrap();
 }

@@ -425,6 +425,15 @@ async fn heat_curvature_flags_the_boundary() {
     assert_eq!(nulls as u64, boundary);
 }
 
+/// The service's count of eigensolver runs (`kac_eigensolves_total` of /metrics).
+async fn app_solves(app: &axum::Router) -> f64 {
+    let (status, body, _) = raw(app, "/metrics").await;
+    assert_eq!(status, StatusCode::OK);
+    let text = String::from_utf8(body).unwrap();
+    let line = text.lines().find(|l| l.starts_with("kac_eigensolves_total ")).expect("kac_eigensolves_total");
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
 async fn raw(app: &axum::Router, uri: &str) -> (StatusCode, Vec<u8>, String) {
     let resp = app.clone().oneshot(Request::get(uri).body(Body::empty()).unwrap()).await.unwrap();
     let status = resp.status();
@@ -1153,6 +1162,8 @@ async fn a_correspondence_job_maps_a_shuffled_copy_by_its_permutation() {
     assert_eq!(status, StatusCode::OK, "{r}");
     assert_eq!((r["analysis"].as_str(), r["shape_id"].as_str()), (Some("correspondence"), Some(ids[0].as_str())));
     assert_eq!(r["functional_map"].as_array().unwrap().len(), 60);
+    // An isometry's C is orthogonal: no `correspondence-not-isometric` warning.
+    assert_eq!(r["warnings"], json!([]), "{}", r["orthogonality_defect"]);
     let link = r["arrays"]["source_to_target"]["npy"].as_str().unwrap().to_string();
     assert!(r["arrays"]["source_to_target"].get("ply").is_none(), "no coloured PLY for a pair's array");
     let (status, bytes, _) = raw(&app, &link).await;
@@ -1200,4 +1211,19 @@ async fn a_correspondence_job_maps_a_shuffled_copy_by_its_permutation() {
     let misspelt = json!({ "source_id": ids[0], "target_id": ids[1], "refine_kk": 3 });
     let (status, p) = call(&app, post_json("/v1/correspondence", misspelt)).await;
     assert_eq!((status, p["suggestion"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("refine_k")), "{p}");
+    // A cloud with a stray point far off its sphere: the denoised operator leaves it out, so a map of every
+    // vertex cannot be made; refused before any eigensolve (no solve is counted).
+    let mut xyz: String = kac_core::geometry::generate::random_sphere_points(1500, 5)
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
+    xyz += "9 9 9\n";
+    let (status, cloud) = call(&app, Request::post("/v1/shapes?format=xyz").body(Body::from(xyz)).unwrap()).await;
+    assert_eq!(status, StatusCode::CREATED, "{cloud}");
+    let solves = app_solves(&app).await;
+    let body = json!({ "source_id": cloud["id"], "target_id": cloud["id"], "fit_k": 10, "refine_k": 20 });
+    let (status, p) = call(&app, post_json("/v1/correspondence?wait=60", body)).await;
+    assert_eq!((status, p["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("not-applicable")), "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("outliers"), "{p}");
+    assert_eq!(app_solves(&app).await, solves, "refused before any eigensolve");
 }

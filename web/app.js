@@ -8,8 +8,10 @@ import { plotCurves, plotMatrix, plotStaircase } from './plot.js';
 const $ = (id) => document.getElementById(id);
 const state = { shape: null, summary: null, geometry: null, job: null, result: null, arrays: {}, array: null, column: 0, vertex: null, jobSource: null };
 const viewer = new Viewer($('canvas'));
+// The second shape of a correspondence, beside the first.
+const viewer2 = new Viewer($('canvas2'));
 // For tests and the curious: the viewer's state and renderer.
-window.kac = { state, viewer, errors: [] };
+window.kac = { state, viewer, viewer2, errors: [], pair: null };
 window.addEventListener('error', (e) => window.kac.errors.push(String(e.message)));
 const consoleError = console.error.bind(console);
 console.error = (...args) => {
@@ -130,12 +132,18 @@ async function loadShapes() {
   const list = await guarded(() => api('GET', '/v1/shapes?limit=1000'));
   if (!list) return;
   const sel = $('shapes');
+  const target = $('target');
+  const keep = target.value;
   sel.length = 1;
+  target.length = 1;
   for (const s of list.items) {
-    const o = new Option(`${s.id.slice(0, 12)} — ${s.summary.kind} ${s.summary.vertices ?? ''} v`, s.id);
-    sel.add(o);
+    const label = `${s.id.slice(0, 12)} — ${s.summary.kind} ${s.summary.vertices ?? ''} v`;
+    sel.add(new Option(label, s.id));
+    target.add(new Option(label, s.id));
   }
   if (state.shape) sel.value = state.shape;
+  target.value = keep;
+  $('match').disabled = !state.shape || !target.value;
 }
 
 // Uploads as multipart with the file's name, so the server reads the format from the name as it would from any
@@ -207,6 +215,8 @@ async function selectShape(id) {
     state.geometry = g;
     viewer.setGeometry(g);
     $('run').disabled = false;
+    $('match').disabled = !$('target').value;
+    leavePair();
     $('controls').hidden = true;
     $('colourbar').hidden = true;
     $('picked-box').hidden = true;
@@ -447,6 +457,11 @@ async function openJob(id, array, column = 0) {
     const warnings = (r.warnings || []).map((w) => `⚠ ${w.code}: ${w.message}`);
     $('warnings').textContent = warnings.join('\n');
     $('warnings').hidden = warnings.length === 0;
+    if (r.analysis === 'correspondence') {
+      await showPair(r);
+      writeLink();
+      return;
+    }
     // Per-vertex arrays only (they have a coloured PLY); an operator's matrices are links in the summary.
     const names = Object.keys(r.arrays || {}).filter((n) => r.arrays[n].ply);
     $('array').innerHTML = '';
@@ -526,6 +541,7 @@ function rowOf(v) {
 function pickVertex(v, link = true) {
   state.vertex = v;
   viewer.setMarker(v);
+  if (window.kac.pair) markMatch('source', v);
   $('picked-box').hidden = false;
   $('picked').textContent = `${rowOf(v)}`;
   vertexPlot();
@@ -547,6 +563,94 @@ $('wave').addEventListener('click', () =>
 $('schrodinger').addEventListener('click', () =>
   submit({ shape_id: state.shape, analysis: 'schrodinger', k: 200, times: evolutionTimes().map((t) => t / 10), source: rowOf(state.vertex) }),
 );
+
+// ---- correspondence: two shapes side by side ------------------------------------------------------------------
+
+// The x coordinate of each upload row of a shape (NaN for a row validation dropped): the function that travels.
+function xOfRows(g) {
+  const n = g.positions.length / 3;
+  return Array.from(g.inputToVertex, (v) => (v < n ? g.positions[3 * v] : NaN));
+}
+
+$('target').addEventListener('change', () => ($('match').disabled = !state.shape || !$('target').value));
+$('match').addEventListener('click', () =>
+  guarded(async () => {
+    const values = xOfRows(state.geometry).map((x) => (Number.isFinite(x) ? x : 0));
+    const body = { source_id: state.shape, target_id: $('target').value, transfer: { values } };
+    const r = await api('POST', '/v1/correspondence?wait=0', body);
+    await follow(r.status && r.links ? r : { id: r.result_id, status: 'succeeded' });
+  }),
+);
+
+function leavePair() {
+  window.kac.pair = null;
+  $('canvas2').hidden = true;
+  $('pair-info').textContent = '';
+  viewer.setMarker(null);
+}
+
+// A correspondence's result: the target beside the source, the source coloured by its x coordinate and the target
+// by that function carried over by the functional map (`transferred`); a vertex picked on either marks its match
+// on the other.
+async function showPair(r) {
+  const get = async (name) => parseNpy(await api('GET', `/v1/results/${encodeURIComponent(state.job)}/arrays/${name}.npy`));
+  const g2 = parseGeometry(await api('GET', `/v1/shapes/${encodeURIComponent(r.target_id)}/geometry`));
+  const pair = { target: r.target_id, geometry: g2, s2t: await get('source_to_target'), t2s: await get('target_to_source') };
+  pair.transferred = r.arrays.transferred ? await get('transferred') : null;
+  $('canvas2').hidden = false;
+  viewer2.setGeometry(g2);
+  window.kac.pair = pair;
+  const rows = (g, data) => {
+    const n = g.positions.length / 3;
+    const out = new Float32Array(n).fill(NaN);
+    g.inputToVertex.forEach((v, row) => {
+      if (v < n) out[v] = data[row];
+    });
+    return out;
+  };
+  const source = rows(state.geometry, xOfRows(state.geometry));
+  // Without `transferred` (a result asked without it), each target vertex takes its match's x.
+  const xs = xOfRows(state.geometry);
+  const carried = pair.transferred ? pair.transferred.data : Array.from(pair.t2s.data, (row) => (Number.isFinite(row) ? xs[row] : NaN));
+  const target = rows(g2, carried);
+  let lo = Infinity, hi = -Infinity;
+  for (const x of source) if (Number.isFinite(x)) [lo, hi] = [Math.min(lo, x), Math.max(hi, x)];
+  if (!Number.isFinite(lo)) [lo, hi] = [0, 1];
+  viewer.isolines = 12;
+  viewer2.isolines = 12;
+  viewer.setValues(source, lo, hi);
+  viewer2.setValues(target, lo, hi);
+  $('colourbar').hidden = false;
+  $('cb-lo').textContent = lo.toPrecision(4);
+  $('cb-hi').textContent = hi.toPrecision(4);
+  $('controls').hidden = true;
+  $('pair-info').textContent = `left: this shape, coloured by x; right: ${r.target_id.slice(0, 12)}, by x carried over (${pair.transferred ? 'functional map' : 'vertex map'}); orthogonality defect ${Number(r.orthogonality_defect).toPrecision(3)}. Pick a vertex on either side.`;
+  if (state.vertex !== null) markMatch('source', state.vertex);
+}
+
+// Marks the match of a vertex picked on one side on the other; `window.kac.pair` holds both (geometry indices).
+function markMatch(side, v) {
+  const pair = window.kac.pair;
+  const [from, to, map] = side === 'source' ? [state.geometry, pair.geometry, pair.s2t] : [pair.geometry, state.geometry, pair.t2s];
+  let row = -1;
+  for (let i = 0; i < from.inputToVertex.length; i++) if (from.inputToVertex[i] === v) { row = i; break; }
+  const other = row >= 0 ? map.data[row] : NaN;
+  const w = Number.isFinite(other) ? to.inputToVertex[other] : null;
+  if (side === 'source') {
+    pair.sourceVertex = v;
+    pair.targetVertex = w;
+    viewer2.setMarker(w);
+  } else {
+    pair.targetVertex = v;
+    pair.sourceVertex = w;
+    viewer2.setMarker(v);
+    viewer.setMarker(w);
+    state.vertex = w;
+  }
+  pair.rows = { source: side === 'source' ? row : other, target: side === 'source' ? other : row };
+}
+
+viewer2.onpick = (v) => window.kac.pair && markMatch('target', v);
 
 // ---- plots ---------------------------------------------------------------------------------------------------------
 

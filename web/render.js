@@ -188,10 +188,12 @@ export class Viewer {
     if (!this.vao) return;
     gl.enable(gl.DEPTH_TEST);
     gl.useProgram(this.program);
-    const view = mat4View(this.cam);
+    // A canvas taller than wide (two shapes side by side) steps back so that the shape fits across it too.
+    const cam = { ...this.cam, distance: this.cam.distance * Math.max(1, h / w) };
+    const view = mat4View(cam);
     this.viewMatrix = view;
-    const near = Math.max(this.cam.distance - 2 * this.radius, this.radius * 1e-3);
-    const proj = mat4Perspective(0.7, w / h, near, this.cam.distance + 2 * this.radius);
+    const near = Math.max(cam.distance - 2 * this.radius, this.radius * 1e-3);
+    const proj = mat4Perspective(0.7, w / h, near, cam.distance + 2 * this.radius);
     this.projMatrix = proj;
     const u = (name) => gl.getUniformLocation(this.program, name);
     gl.uniformMatrix4fv(u('view'), false, view.m);

@@ -61,6 +61,12 @@ fn first_input(v: &Validated) -> Vec<u32> {
     first
 }
 
+/// The orthogonality defect of C above which a correspondence carries the warning `correspondence-not-isometric`.
+/// Measured (kac_core::correspondence's tests): below 0.05 for isometries (shuffled rigid copies, bends), 0.22 for
+/// the exact map of a copy with a cap cut off (C of a part is rectangular, its rows orthonormal only on the part's
+/// spectrum), 0.47 for the wrong map of that copy without landmarks (mean geodesic error 0.38).
+pub const MAP_DEFECT_WARN: f64 = 0.35;
+
 /// The correspondence from `source` to `target` under one operator spec (Neumann, order 1: the maps are between
 /// vertices), with `options.refine_k` eigenpairs per shape, as a result of its own (`analysis: correspondence`,
 /// the source its shape): one builder for the CLI and the service.
@@ -93,6 +99,18 @@ pub fn correspondence(
     let lt = map_vertices(target, &lt, "landmarks (target)")?;
     let mut core = options.clone();
     core.landmarks = ls.iter().zip(&lt).map(|(&a, &b)| (a as u32, b as u32)).collect();
+    // The maps are between vertices: an operator over fewer unknowns (a point cloud whose outliers it leaves out)
+    // has no row for some of them. Refused before any eigensolve.
+    for (v, which) in [(source, "source"), (target, "target")] {
+        let dropped = kac_core::operators::dropped_points(&v.shape, &operator_options(v, operator)?)?;
+        if let Some(&first) = dropped.first() {
+            return Err(AnalysisError::not_applicable(format!(
+                "the {which}'s operator leaves {} points out as outliers (the first: validated point {first}): a \
+                 correspondence maps every vertex; clean the cloud first, or set denoise to false",
+                dropped.len()
+            )));
+        }
+    }
     let k = options.refine_k.max(options.fit_k);
     // A partial target's basis corresponds to more of the full source's eigenfunctions (their count follows the
     // areas): the source gets up to twice as many.
@@ -102,8 +120,8 @@ pub fn correspondence(
     hooks.control.check()?;
     let et = eigenpairs(target, operator, solver, k.min(target.shape.vertex_count()), hooks, &reused)?;
     hooks.control.phase("correspondence", 0, 0)?;
-    // The maps are between vertices: an operator over fewer unknowns (a point cloud whose outliers were left out)
-    // has no row for some of them.
+    // Checked above for what the operator drops; this holds for whatever else would (defensive: a map past an
+    // operator's rows would index out of bounds).
     for (e, which) in [(&es, "source"), (&et, "target")] {
         if e.operator.interior.is_some() || e.operator.pair.n() != e.operator.full_size {
             return Err(AnalysisError::not_applicable(format!(
@@ -162,12 +180,25 @@ pub fn correspondence(
                the reverse; *_cost: each match's distance in the spectral embedding; transferred (when asked): the \
                source's array on the target, labels by the vertex map, a function by the functional map",
     };
-    // The head every result has: the source is the result's shape; warnings from the operator's parameters.
+    // The head every result has: the source is the result's shape; warnings from the operator's parameters and
+    // from the map itself.
+    let mut warnings = operator_warnings(&summary.operator.parameters);
+    if r.orthogonality_defect > MAP_DEFECT_WARN {
+        warnings.push(Warning::new(
+            "correspondence-not-isometric",
+            format!(
+                "the functional map is far from orthogonal (‖CCᵀ − I‖_F/√k = {:.2}, above {MAP_DEFECT_WARN}): the \
+                 shapes are not near-isometric, or a partial match (a cut) went astray; give landmarks (three \
+                 known pairs turned a wrong partial match, defect 0.47, into the exact one, defect 0.22)",
+                r.orthogonality_defect
+            ),
+        ));
+    }
     let head = ResultHead {
         shape_id: source.id.hex(),
         algorithm_version: ALGORITHM_VERSION,
         eigenpairs_reused: reused.get(),
-        warnings: operator_warnings(&summary.operator.parameters),
+        warnings,
     };
     let summary = serde_json::to_value(Typed { head, body: Summary::Correspondence(Box::new(summary)) })
         .map_err(|e| AnalysisError::invalid_parameter(format!("the result could not be written as JSON: {e}")))?;

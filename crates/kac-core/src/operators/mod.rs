@@ -317,6 +317,26 @@ impl Operator {
     }
 }
 
+/// The points of a cloud the operator [`build`] would leave out as outliers (the point-cloud operator on a cloud in
+/// R³ with the symmetric normalization and `denoise`: [`denoise::outliers`]), without building it: a caller that
+/// needs every point in the operator (a correspondence maps vertices) can refuse before any eigensolve. Empty for
+/// every other shape and operator.
+pub fn dropped_points(shape: &Shape, options: &OperatorOptions) -> Result<Vec<usize>, OperatorError> {
+    let cloud = &options.cloud;
+    match (options.operator.unwrap_or_else(|| OperatorKind::default_for(shape.kind())), shape) {
+        (OperatorKind::PointCloud, Shape::PointCloud(c))
+            if cloud.denoise
+                && c.ambient.is_none()
+                && !cloud.dimension.is_some_and(|m| m != 2)
+                && cloud.normalization == manifold::CloudNormalization::Symmetric =>
+        {
+            let found = denoise::outliers(&c.points)?;
+            Ok((0..found.flags.len()).filter(|&i| found.flags[i]).collect())
+        }
+        _ => Ok(vec![]),
+    }
+}
+
 /// Builds the operator pair of a shape.
 pub fn build(shape: &Shape, options: &OperatorOptions) -> Result<Operator, OperatorError> {
     let op = options.operator.unwrap_or_else(|| OperatorKind::default_for(shape.kind()));
