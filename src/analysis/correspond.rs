@@ -130,8 +130,15 @@ pub fn correspondence(
             )));
         }
     }
-    let s = SpectralShape { basis: basis_of(&es, k_source), pair: &es.operator.pair };
-    let t = SpectralShape { basis: basis_of(&et, k), pair: &et.operator.pair };
+    // The surfaces orient the orientation term (triangle meshes; vertices are the operator's unknowns here).
+    fn surface(v: &Validated) -> Option<&kac_core::geometry::TriangleMesh> {
+        match &v.shape {
+            kac_core::Shape::TriangleMesh(m) => Some(m),
+            _ => None,
+        }
+    }
+    let s = SpectralShape { basis: basis_of(&es, k_source), pair: &es.operator.pair, surface: surface(source) };
+    let t = SpectralShape { basis: basis_of(&et, k), pair: &et.operator.pair, surface: surface(target) };
     let r = fm::correspond(&s, &t, &core, &hooks.control)?;
     // The maps in the uploads' numbering: row i of `source_to_target` is input vertex i of the source, its value
     // the input vertex of the target it matches (NaN for a vertex validation dropped).
