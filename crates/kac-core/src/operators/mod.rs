@@ -327,7 +327,7 @@ pub fn dropped_points(shape: &Shape, options: &OperatorOptions) -> Result<Vec<us
         (OperatorKind::PointCloud, Shape::PointCloud(c))
             if cloud.denoise
                 && c.ambient.is_none()
-                && !cloud.dimension.is_some_and(|m| m != 2)
+                && cloud.dimension.is_none_or(|m| m == 2)
                 && cloud.normalization == manifold::CloudNormalization::Symmetric =>
         {
             let found = denoise::outliers(&c.points)?;
