@@ -709,6 +709,10 @@ pub fn eigs_block_lanczos(
             let mut idx: Vec<usize> = (0..want).collect();
             idx.sort_by(|&x, &y| raw[x].total_cmp(&raw[y]));
             let values: Vec<f64> = idx.iter().map(|&j| raw[j]).collect();
+            // The factor is no longer needed: freed before the eigenvectors are allocated beside the basis (at 10⁶
+            // vertices, k = 100, the basis is 1.6 GB, the factor 0.5 GB and the eigenvectors 0.8 GB).
+            let (factor_nnz, ldlt) = (chol.factor_nnz(), chol.is_ldlt());
+            drop(chol);
             let mut vectors = super::zeros_checked(n, want, &control)?;
             for (j, &from) in idx.iter().enumerate() {
                 if j % 64 == 0 {
@@ -731,8 +735,8 @@ pub fn eigs_block_lanczos(
                     restarts,
                     block_steps: steps,
                     solves,
-                    factor_nnz: chol.factor_nnz(),
-                    factorization: if chol.is_ldlt() { "ldlt" } else { "cholesky" },
+                    factor_nnz,
+                    factorization: if ldlt { "ldlt" } else { "cholesky" },
                     below_sigma,
                     symbolic_reused: reused,
                     timings: Timings {
