@@ -458,10 +458,11 @@ async function openJob(id, array, column = 0) {
     $('warnings').textContent = warnings.join('\n');
     $('warnings').hidden = warnings.length === 0;
     if (r.analysis === 'correspondence') {
-      await showPair(r);
+      await showPair(r, id);
       writeLink();
       return;
     }
+    leavePair();
     // Per-vertex arrays only (they have a coloured PLY); an operator's matrices are links in the summary.
     const names = Object.keys(r.arrays || {}).filter((n) => r.arrays[n].ply);
     $('array').innerHTML = '';
@@ -592,11 +593,13 @@ function leavePair() {
 // A correspondence's result: the target beside the source, the source coloured by its x coordinate and the target
 // by that function carried over by the functional map (`transferred`); a vertex picked on either marks its match
 // on the other.
-async function showPair(r) {
-  const get = async (name) => parseNpy(await api('GET', `/v1/results/${encodeURIComponent(state.job)}/arrays/${name}.npy`));
+async function showPair(r, job) {
+  const get = async (name) => parseNpy(await api('GET', `/v1/results/${encodeURIComponent(job)}/arrays/${name}.npy`));
   const g2 = parseGeometry(await api('GET', `/v1/shapes/${encodeURIComponent(r.target_id)}/geometry`));
   const pair = { target: r.target_id, geometry: g2, s2t: await get('source_to_target'), t2s: await get('target_to_source') };
   pair.transferred = r.arrays.transferred ? await get('transferred') : null;
+  // Another shape or result opened while these arrived: this pair is no longer the view.
+  if (state.job !== job || state.shape !== r.source_id) return;
   $('canvas2').hidden = false;
   viewer2.setGeometry(g2);
   window.kac.pair = pair;
@@ -644,8 +647,15 @@ function markMatch(side, v) {
     pair.targetVertex = v;
     pair.sourceVertex = w;
     viewer2.setMarker(v);
-    viewer.setMarker(w);
+    // The match becomes the picked vertex of the shape (its panel and plot follow), or nothing is picked.
     state.vertex = w;
+    viewer.setMarker(w);
+    $('picked-box').hidden = w === null;
+    if (w !== null) {
+      $('picked').textContent = `${rowOf(w)}`;
+      vertexPlot();
+      writeLink();
+    }
   }
   pair.rows = { source: side === 'source' ? row : other, target: side === 'source' ? other : row };
 }

@@ -197,9 +197,9 @@ pub struct SolverSpec {
     #[arg(long)]
     pub subspace: Option<usize>,
     /// Spectrum slicing: the interval [0, λ_k] cut into this many slices by Weyl's law, each solved around its own
-    /// shift with its own factorization, the slices in parallel on the threads given (default: one slice per 120
-    /// pairs, and at least one per thread where each gets 40 pairs; 1 solves in one run; 1 to 64). The result's
-    /// `solver.slices` says what each did.
+    /// shift with its own factorization, the slices in parallel on the threads given (default: one run below 400
+    /// pairs, then one slice per 125 pairs; 1 solves in one run; 1 to 64). The result's `solver.slices` says what
+    /// each did.
     #[serde(skip_serializing_if = "Option::is_none")]
     #[arg(long)]
     pub slices: Option<usize>,

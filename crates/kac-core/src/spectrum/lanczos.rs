@@ -302,6 +302,9 @@ pub struct Window {
     /// The eigenvalues in [lo, hi) when known (Sylvester's inertia at both ends): the slice is done once that many
     /// converged pairs lie in the window, without guards beyond it.
     pub count: Option<usize>,
+    /// The eigenvalues below `lo` (deflated ones included; Sylvester's inertia at `lo`): the top slice checks that it
+    /// holds every eigenvalue in [lo, σ) against its own inertia at σ.
+    pub below_lo: usize,
 }
 
 /// Where a run's wanted pairs lie among the Ritz candidates sorted by ascending λ: the pairs returned are
@@ -331,11 +334,14 @@ fn select(
     let start = if w.lo == f64::NEG_INFINITY { 0 } else { cand.partition_point(|c| lam(c) < w.lo) };
     let (end, req_end, enough) = match w.total {
         Some(total) => {
-            // λ < σ exactly where θ < 0, which the ascending order puts first.
+            // λ < σ exactly where θ < 0, which the ascending order puts first; the `total`-th eigenvalue may lie below
+            // σ as well as above it.
             let at_sigma = cand.partition_point(|c| c.0 < 0.0);
-            let above = total.saturating_sub(below.unwrap_or(0));
-            let end = (at_sigma + above).max(start);
-            (end.min(len), end.min(len), end <= len)
+            let end = (at_sigma as isize + total as isize - below.unwrap_or(0) as isize).max(start as isize) as usize;
+            // Every eigenvalue in [lo, σ) must be among the candidates (a cluster member not met yet would let the
+            // pair past the `total`-th take its place).
+            let all_below = below.is_some_and(|b| at_sigma.checked_sub(start) == b.checked_sub(w.below_lo));
+            (end.min(len), end.min(len), end <= len && all_below)
         }
         None => {
             let end = cand.partition_point(|c| lam(c) < w.hi).max(start);
@@ -520,9 +526,11 @@ pub fn eigs_block_lanczos(
     // A slice whose window holds far more pairs than it was planned for (Weyl's law misjudged the spectrum's
     // density: thin shapes) gives up at once; the caller solves in one run.
     if let Some(w) = &run.window {
-        let over = match (w.total, below_undeflated) {
-            (Some(total), Some(_)) => total.saturating_sub(below_sigma.unwrap_or(0)) > k,
-            (None, Some(nu)) => w.lo == f64::NEG_INFINITY && nu > k,
+        // The pairs the slice must hold: from lo to the `total`-th eigenvalue or to σ, whichever is further (top
+        // slice); every one below σ (lowest slice).
+        let over = match (w.total, below_sigma, below_undeflated) {
+            (Some(total), Some(b), _) => b.max(total).saturating_sub(w.below_lo) > k + k / 2 + 8,
+            (None, _, Some(nu)) => w.lo == f64::NEG_INFINITY && nu > k,
             _ => false,
         };
         if over {

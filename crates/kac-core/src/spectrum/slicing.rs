@@ -97,10 +97,17 @@ pub(crate) fn plan(pair: &SparsePair, deflated: usize, wanted: usize, o: &EigenO
     for j in 0..s {
         let window = if j == 0 {
             let hi = edge(1);
-            Window { lo: f64::NEG_INFINITY, hi, sigma: lanczos::WEYL_FRACTION * hi, total: None, count: None }
+            Window {
+                lo: f64::NEG_INFINITY,
+                hi,
+                sigma: lanczos::WEYL_FRACTION * hi,
+                total: None,
+                count: None,
+                below_lo: 0,
+            }
         } else if j + 1 < s {
             let (lo, hi) = (edge(j), edge(j + 1));
-            Window { lo, hi, sigma: 0.5 * (lo + hi), total: None, count: None }
+            Window { lo, hi, sigma: 0.5 * (lo + hi), total: None, count: None, below_lo: 0 }
         } else {
             let (lo, top) = (edge(j), edge(s));
             Window {
@@ -109,6 +116,7 @@ pub(crate) fn plan(pair: &SparsePair, deflated: usize, wanted: usize, o: &EigenO
                 sigma: 0.5 * (lo + top),
                 total: Some(deflated + wanted + guard),
                 count: None,
+                below_lo: 0,
             }
         };
         if !(window.sigma > 0.0 && window.sigma.is_finite()) {
@@ -166,10 +174,19 @@ pub(crate) fn solve(
         if j > 0 {
             w.lo = edges[j - 1].0;
         }
+        w.below_lo = below;
         let last = j + 1 == slices.len() || edges[j].1 >= total;
         if last {
             w.hi = f64::INFINITY;
             w.total = Some(total);
+            if j + 1 < slices.len() {
+                // The `total`-th eigenvalue lies below this window's planned top edge: σ halfway to where the count
+                // between the edges (linear in λ) reaches it, not at the planned midpoint, which may lie above it.
+                let (top, at_top) = edges[j];
+                let share = (total - below) as f64 / (at_top - below).max(1) as f64;
+                let lam_total = w.lo + share.clamp(0.0, 1.0) * (top - w.lo);
+                w.sigma = 0.5 * (w.lo + lam_total);
+            }
             if !(w.sigma > w.lo) {
                 w.sigma = w.lo + 0.5 * (slices[j].sigma - slices[j].lo).abs().max(w.lo.abs() * 1e-3);
             }
