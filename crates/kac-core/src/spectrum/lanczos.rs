@@ -680,6 +680,13 @@ pub fn eigs_block_lanczos(
             Some(w) => {
                 let inertia_met = w.lo != f64::NEG_INFINITY
                     || below_undeflated.is_none_or(|nu| cand.partition_point(|c| c.0 < 0.0) == nu);
+                // More converged pairs in an interior window than its inertia counts cannot be, unless an eigenvalue
+                // lies within rounding of an edge and a slice beside this one claims it too: that count can never be
+                // met, so the slice gives up (the caller solves in one run) instead of iterating to `max_steps`.
+                let inside = cand[pick.start..pick.end].iter().filter(|c| converged(c)).count();
+                if w.count.is_some_and(|count| inside > count) {
+                    return Err(EigenError::NoConvergence { converged: inside, wanted: k, steps });
+                }
                 pick.enough && req.iter().all(converged) && inertia_met
             }
         };
