@@ -272,21 +272,7 @@ async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() 
 #[tokio::test]
 #[ignore = "needs chromium and chromium-driver (scripts/test-all.sh installs and runs it)"]
 async fn two_shapes_side_by_side_show_which_point_is_which() {
-    let mut a = kac_core::geometry::generate::icosphere(3);
-    for p in &mut a.vertices {
-        let [x, y, z] = *p;
-        let r = 1.0 + 0.3 * x + 0.2 * y * y - 0.25 * z * z * z + 0.15 * x * y;
-        *p = [x * r, 1.3 * y * r, 0.8 * z * r];
-    }
-    let n = a.vertices.len();
-    let perm: Vec<u32> = (0..n as u32).map(|y| (y * 389 + 17) % n as u32).collect();
-    let mut inverse = vec![0u32; n];
-    for (y, &x) in perm.iter().enumerate() {
-        inverse[x as usize] = y as u32;
-    }
-    let mut b = a.clone();
-    b.vertices = perm.iter().map(|&x| a.vertices[x as usize]).map(|[x, y, z]| [-y + 2.0, x, z - 1.0]).collect();
-    b.faces = a.faces.iter().map(|f| f.map(|v| inverse[v as usize])).collect();
+    let pairs::ShuffledPair { a, b, perm, inverse } = pairs::lumpy_sphere_and_shuffled_copy();
     let dir = tempfile::tempdir().unwrap();
     let (_server, base) = serve(dir.path());
     let (_driver, c) = browser().await;
@@ -349,3 +335,6 @@ async fn two_shapes_side_by_side_show_which_point_is_which() {
     no_errors(&c, "pick").await;
     c.close().await.unwrap();
 }
+
+#[path = "support/pairs.rs"]
+mod pairs;

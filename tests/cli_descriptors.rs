@@ -241,22 +241,9 @@ fn gradient_then_divergence_on_the_command_line() {
 #[test]
 fn correspondence_recovers_a_shuffled_copy_and_writes_the_map() {
     let dir = tempfile::tempdir().unwrap();
-    let mut a = kac_core::geometry::generate::icosphere(3);
-    for p in &mut a.vertices {
-        let [x, y, z] = *p;
-        let r = 1.0 + 0.3 * x + 0.2 * y * y - 0.25 * z * z * z + 0.15 * x * y;
-        *p = [x * r, 1.3 * y * r, 0.8 * z * r];
-    }
-    let n = a.vertices.len();
     // Target vertex y is source vertex perm[y]; so source vertex x is target vertex inverse[x].
-    let perm: Vec<u32> = (0..n as u32).map(|y| (y * 389 + 17) % n as u32).collect();
-    let mut inverse = vec![0u32; n];
-    for (y, &x) in perm.iter().enumerate() {
-        inverse[x as usize] = y as u32;
-    }
-    let mut b = a.clone();
-    b.vertices = perm.iter().map(|&x| a.vertices[x as usize]).map(|[x, y, z]| [-y + 2.0, x, z - 1.0]).collect();
-    b.faces = a.faces.iter().map(|f| f.map(|v| inverse[v as usize])).collect();
+    let pairs::ShuffledPair { a, b, perm, inverse } = pairs::lumpy_sphere_and_shuffled_copy();
+    let n = a.vertices.len();
     let (pa, pb, map) = (dir.path().join("a.off"), dir.path().join("b.off"), dir.path().join("map.npy"));
     std::fs::write(&pa, kac_core::io::write::off(&a)).unwrap();
     std::fs::write(&pb, kac_core::io::write::off(&b)).unwrap();
@@ -277,3 +264,6 @@ fn correspondence_recovers_a_shuffled_copy_and_writes_the_map() {
     let out = kac().args(["correspondence", sa, sb, "--landmarks", "0:99999"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+#[path = "support/pairs.rs"]
+mod pairs;

@@ -1134,22 +1134,8 @@ async fn compare_and_search_refuse_unknown_options_of_the_flattened_set() {
 async fn a_correspondence_job_maps_a_shuffled_copy_by_its_permutation() {
     let dir = tempfile::tempdir().unwrap();
     let app = app(dir.path());
-    let mut a = kac_core::geometry::generate::icosphere(3);
-    for p in &mut a.vertices {
-        let [x, y, z] = *p;
-        let r = 1.0 + 0.3 * x + 0.2 * y * y - 0.25 * z * z * z + 0.15 * x * y;
-        *p = [x * r, 1.3 * y * r, 0.8 * z * r];
-    }
+    let pairs::ShuffledPair { a, b, perm, inverse } = pairs::lumpy_sphere_and_shuffled_copy();
     let n = a.vertices.len();
-    let perm: Vec<u32> = (0..n as u32).map(|y| (y * 389 + 17) % n as u32).collect();
-    let mut inverse = vec![0u32; n];
-    for (y, &x) in perm.iter().enumerate() {
-        inverse[x as usize] = y as u32;
-    }
-    let mut b = a.clone();
-    // Rotated and moved (a shuffled copy alone is the same shape: the id is the canonical geometry's hash).
-    b.vertices = perm.iter().map(|&x| a.vertices[x as usize]).map(|[x, y, z]| [-y + 2.0, x, z - 1.0]).collect();
-    b.faces = a.faces.iter().map(|f| f.map(|v| inverse[v as usize])).collect();
     let mut ids = vec![];
     for m in [&a, &b] {
         let off = kac_core::io::write::off(m);
@@ -1227,3 +1213,6 @@ async fn a_correspondence_job_maps_a_shuffled_copy_by_its_permutation() {
     assert!(p["detail"].as_str().unwrap().contains("outliers"), "{p}");
     assert_eq!(app_solves(&app).await, solves, "refused before any eigensolve");
 }
+
+#[path = "support/pairs.rs"]
+mod pairs;
