@@ -210,7 +210,7 @@ pub(crate) fn solve(
     let k = o.k;
     let run_slice = |i: usize| -> (Result<Option<Spectrum>, EigenError>, f64) {
         let t = Instant::now();
-        let (window, expected) = slices[i];
+        let (window, pairs) = slices[i];
         let report = |p: Progress| {
             if p.phase == "iterating" {
                 converged[i].store(p.converged, Ordering::Relaxed);
@@ -220,7 +220,7 @@ pub(crate) fn solve(
         };
         let slice_control = Control { progress: Some(&report), stop: control.stop };
         let run = lanczos::Run { deflation, deflated_values, interior_shift: true, window: Some(window) };
-        let os = EigenOptions { k: expected, threads: inner, subspace: None, ..o.clone() };
+        let os = EigenOptions { k: pairs, threads: inner, subspace: None, ..o.clone() };
         (lanczos::eigs_block_lanczos(pair, &os, Some(sym), slice_control, &run), t.elapsed().as_secs_f64())
     };
     let results: Vec<(Result<Option<Spectrum>, EigenError>, f64)> = if parallel {
