@@ -1,78 +1,314 @@
 #!/usr/bin/env python3
-"""Search latency over many stored fingerprints (issue 15, item 5).
+"""Search over many stored fingerprints: the index against the exact scan, on real shape-DNA distributions.
 
-Starts a release `kac serve` on a throwaway data directory, stores one real fingerprint (a shape-DNA job on a
-generated icosphere, k = 50, area normalization) to learn its family, stops the server, adds N synthetic
-fingerprints of that family straight into the store's SQLite table (ascending positive values like real
-shape-DNA; their shapes are not stored, which a search by fingerprint does not need), starts the server again
-(it loads the index), and times POST /v1/search over loopback: by fingerprint and by the stored shape's id,
-10 neighbours, sequentially. Prints one JSON line per N. Standard library only.
+Data. The fingerprints are shape-DNA (k = 50, area normalization) as bench/dna_corpus.py builds them: a real set
+of a few hundred, computed by `kac shape-dna` on the shared meshes (/work/shared/data) and on generated shapes
+at several resolutions, each also under vertex noise and uniform scaling (cached in bench/out/real_dna.json);
+and, for collections larger than that, synthetic rows that follow it: a point on the log-linear path between a
+real fingerprint and one of its 10 nearest, times small multiplicative noise (white and low-frequency), sorted.
+A fifth of the real set is held out of every collection; the rest is stored as it is.
 
-Usage: python3 bench/search.py [--n 1000,10000,100000] [--queries 200]
+Queries. Mostly held-out real fingerprints (not in the collection; their near-duplicates under other noise,
+scale or resolution may be), each slightly perturbed (0.1 % white and 0.2 % smooth multiplicative noise), and
+some stored synthetic rows perturbed the same way; shuffled together. Recall is reported for the two kinds
+apart.
+
+Data model (as src/service/store/sqlite.rs creates it): DATA_DIR/kac.sqlite3 holds
+`fingerprints (family TEXT, shape_id TEXT, fingerprint BLOB, PRIMARY KEY (family, shape_id))`, the BLOB being
+the k values as little-endian float64. A family is the hash of the shape-DNA options and the operator; this
+script learns it from one real search (a generated icosphere uploaded and searched by its id, which runs a
+shape-DNA job and stores its fingerprint), stops the server and inserts the other N − 1 rows straight into the
+table (one transaction, executemany in chunks; shape ids are 64 lowercase hex digits, increasing in insertion
+order so the primary key's B-tree is appended to). Their shapes are not stored: a search by fingerprint does
+not need them.
+
+Per N, in one run:
+  * index build: DATA_DIR/search-index.bin (the index snapshot) is deleted, the server is started; it builds
+    the index from the table and writes the snapshot. `index_build_s` is the time until it prints its
+    {"listening": ...} line; the script then waits for the snapshot file to exist and stop growing, reads the
+    process's peak resident memory (VmHWM in /proc/PID/status) and stops it (SIGTERM);
+  * start-up: the server is started again and reads the snapshot: `startup_s`, the time to {"listening": ...};
+    `server_load_report` is the server's own "search index loaded" log line of each start (where it read the
+    index from, how many fingerprints, its seconds, why a snapshot was refused), null where it logs none;
+  * queries: POST /v1/search {"k": 50, "normalization": "area", "fingerprint": [...], "neighbours": 10},
+    sequentially over loopback, each timed as the whole request (3 untimed warm-up requests first). First every
+    query through the index, then the first --exact-queries of them (a random mix of both kinds) again with "exact": true (the exact scan);
+    the two passes are apart so that neither's latency includes the other's effect on the caches;
+    recall@10 = |indexed ids ∩ exact ids| / 10, averaged; `exact_fraction`: indexed answers marked
+    "exact": true (proven exact); `mean_probed`: fingerprints the index computed a distance to;
+  * the serving process's VmHWM after all queries.
+Prints one JSON line per N on stdout (progress on stderr). The data directory is removed after each N unless
+--keep; 10^7 fingerprints take about 6 GB of table (measured: 590 MB per 10^6 rows) plus the snapshot on disk
+(--workdir to choose where). Inserting them takes about 9 s per 10^6 rows here.
+
+Usage: bench/.venv/bin/python bench/search.py [--n 100000,1000000,10000000] [--queries 200]
+           [--exact-queries 50] [--kac target/release/kac]
 """
-import argparse, json, os, random, sqlite3, struct, subprocess, tempfile, time
-import sys
+import argparse, itertools, json, os, shutil, signal, sqlite3, subprocess, sys, tempfile, threading, time
+
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from kac_http import call, release_kac  # noqa: E402
+import dna_corpus  # noqa: E402
 
-def start(kac, data):
-    env = dict(os.environ, KAC_ADDR="127.0.0.1:0", KAC_DATA_DIR=data, RUST_LOG="error")
+Q = {"k": 50, "normalization": "area"}
+SNAPSHOT = "search-index.bin"
+
+
+def log(*a):
+    print(*a, file=sys.stderr, flush=True)
+
+
+def start(kac, data, logfile=os.devnull):
+    """A `kac serve` on data; (process, base URL, seconds until it printed its listening line). Its log (errors,
+    and the service's own info lines such as "search index loaded", not one per request) goes to `logfile`."""
+    env = dict(os.environ, KAC_ADDR="127.0.0.1:0", KAC_DATA_DIR=data,
+               RUST_LOG="error,kac::service=info,kac::service::ops=error")
     t = time.perf_counter()
-    p = subprocess.Popen([kac, "serve"], env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-    base = "http://" + json.loads(p.stdout.readline())["listening"]
-    return p, base, time.perf_counter() - t
+    with open(logfile, "ab") as err:
+        p = subprocess.Popen([kac, "serve"], env=env, stdout=subprocess.PIPE, stderr=err)
+    line = p.stdout.readline()
+    secs = time.perf_counter() - t
+    if not line:
+        raise RuntimeError("kac serve exited (%s) before listening" % p.wait())
+    base = "http://" + json.loads(line)["listening"]
+    # whatever else it prints must not fill the pipe
+    threading.Thread(target=lambda: [None for _ in p.stdout], daemon=True).start()
+    return p, base, secs
+
+
+def load_report(logfile):
+    """The fields of the last "search index loaded" log line (from, fingerprints, seconds, refused), if any."""
+    found = None
+    for line in open(logfile, errors="replace"):
+        try:
+            fields = json.loads(line).get("fields", {})
+        except ValueError:
+            continue
+        if fields.get("message") == "search index loaded":
+            found = {k: v for k, v in fields.items() if k != "message"}
+    return found
+
+
+def stop(p):
+    p.send_signal(signal.SIGTERM)
+    try:
+        p.wait(timeout=120)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait()
+
+
+def peak_mb(p):
+    """The process's peak resident set (VmHWM), MB."""
+    for line in open("/proc/%d/status" % p.pid):
+        if line.startswith("VmHWM:"):
+            return round(int(line.split()[1]) / 1024)
+    return None
+
+
+def wait_snapshot(path, limit):
+    """Seconds until `path` exists and its size holds still for a second; None if not within `limit`."""
+    t0, last = time.perf_counter(), None
+    while time.perf_counter() - t0 < limit:
+        size = os.path.getsize(path) if os.path.exists(path) else None
+        if size is not None and size == last:
+            return time.perf_counter() - t0 - 1.0
+        last = size
+        time.sleep(1.0)
+    return None
+
 
 def pct(xs, q):
     xs = sorted(xs)
     return xs[min(len(xs) - 1, int(q * len(xs)))]
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--n", default="1000,10000,100000")
-    ap.add_argument("--queries", type=int, default=200)
-    a = ap.parse_args()
-    kac = release_kac()
-    rng = random.Random(7)
-    for n in (int(x) for x in a.n.split(",")):
-        work = tempfile.mkdtemp()
-        data = os.path.join(work, "data")
-        mesh = os.path.join(work, "sphere.off")
-        subprocess.run([kac, "generate", "icosphere", "--level", "3", "--out", mesh], check=True, stdout=subprocess.DEVNULL)
-        p, base, _ = start(kac, data)
+
+def learn_family(kac, data, work):
+    """The family of (k = 50, area) fingerprints, from one real search; it stores one fingerprint."""
+    mesh = os.path.join(work, "sphere.off")
+    subprocess.run([kac, "generate", "icosphere", "--level", "3", "--out", mesh], check=True,
+                   stdout=subprocess.DEVNULL)
+    p, base, _ = start(kac, data)
+    try:
         _, shape = call(base, "POST", "/v1/shapes?format=off", open(mesh, "rb").read(), "application/octet-stream")
-        q = {"k": 50, "normalization": "area"}
-        st, first = call(base, "POST", "/v1/search?wait=60", dict(q, shape_id=shape["id"]))
+        st, first = call(base, "POST", "/v1/search?wait=60", dict(Q, shape_id=shape["id"]))
         assert st == 200, (st, first)
-        family = first["family"]
-        p.terminate(); p.wait()
-        db = sqlite3.connect(os.path.join(data, "kac.sqlite3"))
-        rows = []
-        for i in range(n - 1):
-            v = sorted(rng.uniform(0.5, 200.0) for _ in range(50))
-            rows.append((family, "%064x" % rng.getrandbits(256), struct.pack("<50d", *v)))
-        db.executemany("INSERT INTO fingerprints (family, shape_id, fingerprint) VALUES (?, ?, ?)", rows)
-        db.commit(); db.close()
-        p, base, startup = start(kac, data)
+        return first["family"]
+    finally:
+        stop(p)
+
+
+def fill(data, family, base, rows, seed, pick):
+    """Inserts `rows` rows: the real fingerprints `base`, spread at random through the table, and synthetic
+    ones following them. Returns the synthetic rows numbered `pick` (in the order they were generated) and the
+    seconds it took."""
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed + 1)
+    n_syn = max(0, rows - len(base))
+    head = base[:rows]
+    # shape ids: a prefix increasing with the row, then random digits
+    def ids(start, m):
+        tail = rng.bytes(24 * m).hex()
+        return ["%016x%s" % ((start + i) * (2 ** 64 - 1) // max(rows, 1), tail[48 * i:48 * (i + 1)])
+                for i in range(m)]
+
+    def blobs(x):
+        b = np.ascontiguousarray(x, "<f8").tobytes()
+        w = 8 * x.shape[1]
+        return [b[i * w:(i + 1) * w] for i in range(len(x))]
+
+    db = sqlite3.connect(os.path.join(data, "kac.sqlite3"))
+    db.execute("PRAGMA journal_mode = DELETE")  # the server sets WAL again when it opens the file
+    db.execute("PRAGMA synchronous = OFF")
+    db.execute("PRAGMA cache_size = -262144")  # 256 MB
+    sql = "INSERT INTO fingerprints (family, shape_id, fingerprint) VALUES (?, ?, ?)"
+    picked = {}
+    # the real rows go to random places among the synthetic ones (table order is load order)
+    chunk = 250_000
+    share = rng.multinomial(len(head), np.diff(np.r_[0:n_syn:chunk, n_syn]) / n_syn) if n_syn else [len(head)]
+    at, done, real_at = 0, 0, np.cumsum(np.r_[0, share])
+    with db:  # one transaction
+        for c, chunk_rows in enumerate(itertools.chain(dna_corpus.synthetic(base, n_syn, seed=seed, chunk=chunk),
+                                                       [np.empty((0, base.shape[1]))] if not n_syn else [])):
+            for j in (j for j in pick if done <= j < done + len(chunk_rows)):
+                picked[j] = chunk_rows[j - done].copy()
+            x = np.concatenate([head[real_at[c]:real_at[c + 1]], chunk_rows])
+            x = x[rng.permutation(len(x))]
+            db.executemany(sql, zip(itertools.repeat(family), ids(at, len(x)), blobs(x)))
+            done += len(chunk_rows)
+            at += len(x)
+            if at // 1_000_000 > (at - len(x)) // 1_000_000:
+                log("  inserted %d / %d" % (at, rows))
+    assert at == rows, (at, rows)
+    db.close()
+    return [picked[j] for j in pick], time.perf_counter() - t0
+
+
+def queries(real_held, synthetic_rows, count, n_synthetic, rng):
+    """[(kind, fingerprint)]: held-out real fingerprints (cycled) and stored synthetic rows, perturbed, shuffled."""
+    n_real = count - len(synthetic_rows[:n_synthetic])
+    order = np.concatenate([rng.permutation(len(real_held)) for _ in range(n_real // max(1, len(real_held)) + 1)])
+    real = dna_corpus.perturb(real_held[order[:n_real]], rng, sigma=0.001, smooth=0.002)
+    syn = dna_corpus.perturb(np.array(synthetic_rows[:n_synthetic]).reshape(-1, real_held.shape[1]), rng,
+                             sigma=0.001, smooth=0.002)
+    qs = [("real", q.tolist()) for q in real] + [("synthetic", q.tolist()) for q in syn]
+    return [qs[i] for i in rng.permutation(len(qs))]
+
+
+def search(base, fp, n, exact=False):
+    body = dict(Q, fingerprint=fp, neighbours=10)
+    if exact:
+        body["exact"] = True
+    t = time.perf_counter()
+    st, r = call(base, "POST", "/v1/search", body, timeout=600)
+    secs = time.perf_counter() - t
+    assert st == 200 and r["searched"] == n, (st, r if st != 200 else r.get("searched"))
+    return secs, r
+
+
+def run(a, kac, n, base_real, held):
+    rng = np.random.default_rng(a.seed + n)
+    work = tempfile.mkdtemp(prefix="kac-search-", dir=a.workdir)
+    data = os.path.join(work, "data")
+    try:
+        family = learn_family(kac, data, work)
+        rows = n - 1  # the learning search stored one
+        n_syn_q = min(a.synthetic_queries, a.queries, max(0, rows - len(base_real)))
+        pick = sorted(rng.choice(max(0, rows - len(base_real)), n_syn_q, replace=False).tolist()) if n_syn_q else []
+        log("N = %d: inserting %d rows (%d real) into family %s" % (n, rows, min(rows, len(base_real)), family))
+        syn_rows, insert_s = fill(data, family, base_real, rows, a.seed + n, pick)
+        qs = queries(held, syn_rows, a.queries, n_syn_q, rng)
+        snap = os.path.join(data, SNAPSHOT)
+        if os.path.exists(snap):
+            os.remove(snap)
+
+        log("  building the index (first start)")
+        build_log, serve_log = os.path.join(work, "build.log"), os.path.join(work, "serve.log")
+        p, base, build_s = start(kac, data, build_log)
         try:
-            by_fp, by_id = [], []
-            for i in range(a.queries):
-                fp = sorted(rng.uniform(0.5, 200.0) for _ in range(50))
-                t = time.perf_counter()
-                st, r = call(base, "POST", "/v1/search", dict(q, fingerprint=fp, neighbours=10))
-                by_fp.append(time.perf_counter() - t)
-                assert st == 200 and r["searched"] == n, (st, r.get("searched"))
-                t = time.perf_counter()
-                st, r = call(base, "POST", "/v1/search", dict(q, shape_id=shape["id"], neighbours=10))
-                by_id.append(time.perf_counter() - t)
-                assert st == 200 and len(r["neighbours"]) == 10
-            ms = lambda x: round(1000 * x, 2)
-            print(json.dumps({"fingerprints": n, "k": 50, "neighbours": 10, "queries": a.queries,
-                              "startup_with_index_s": round(startup, 3),
-                              "by_fingerprint_ms": {"p50": ms(pct(by_fp, 0.5)), "p99": ms(pct(by_fp, 0.99))},
-                              "by_shape_id_ms": {"p50": ms(pct(by_id, 0.5)), "p99": ms(pct(by_id, 0.99))}}), flush=True)
+            snap_wait = wait_snapshot(snap, a.snapshot_wait)
+            build_mb = peak_mb(p)
         finally:
-            p.terminate(); p.wait()
+            stop(p)
+        build_report = load_report(build_log)
+        snap_written = "while running" if snap_wait is not None else ("at stop" if os.path.exists(snap) else None)
+        snap_mb = round(os.path.getsize(snap) / 2 ** 20) if os.path.exists(snap) else None
+
+        log("  start from the snapshot, %d queries" % len(qs))
+        p, base, startup_s = start(kac, data, serve_log)
+        serve_report = load_report(serve_log)
+        if serve_report and serve_report.get("from") != "snapshot":
+            log("  the second start did not read the snapshot: %s" % serve_report)
+        try:
+            for _, fp in qs[:3]:
+                search(base, fp, n)
+            indexed = [search(base, fp, n) for _, fp in qs]
+            n_exact = len(qs) if a.exact_queries is None else min(a.exact_queries, len(qs))
+            exact = [search(base, fp, n, exact=True) for _, fp in qs[:n_exact]]
+            serve_mb = peak_mb(p)
+        finally:
+            stop(p)
+
+        recall = {"real": [], "synthetic": []}
+        for (kind, _), (_, ri), (_, re) in zip(qs, indexed, exact):
+            got = {x["shape_id"] for x in ri["neighbours"]}
+            want = {x["shape_id"] for x in re["neighbours"]}
+            recall[kind].append(len(got & want) / max(1, len(want)))
+        marked = [r["exact"] for _, r in indexed if "exact" in r]
+        probed = [r["probed"] for _, r in indexed if "probed" in r]
+        ms = lambda xs: {"p50": round(1000 * pct(xs, 0.5), 2), "p99": round(1000 * pct(xs, 0.99), 2)}
+        mean = lambda xs: round(float(np.mean(xs)), 4) if xs else None
+        return {"fingerprints": n, "real_in_collection": min(rows, len(base_real)), "k": 50, "neighbours": 10,
+                "queries": len(qs), "real_queries": sum(k == "real" for k, _ in qs), "exact_queries": len(exact),
+                "insert_s": round(insert_s, 1),
+                "db_mb": round(os.path.getsize(os.path.join(data, "kac.sqlite3")) / 2 ** 20),
+                "index_build_s": round(build_s, 3),
+                "snapshot": {"written": snap_written, "mb": snap_mb,
+                             "after_listening_s": None if snap_wait is None else round(snap_wait, 1)},
+                "startup_s": round(startup_s, 3),
+                "server_load_report": {"build": build_report, "serve": serve_report},
+                "peak_mb": {"build": build_mb, "serve": serve_mb},
+                "indexed_ms": ms([s for s, _ in indexed]), "exact_scan_ms": ms([s for s, _ in exact]),
+                "recall_at_10": {"real": mean(recall["real"]), "synthetic": mean(recall["synthetic"]),
+                                 "min": min(recall["real"] + recall["synthetic"], default=None)},
+                "exact_fraction": mean(marked), "mean_probed": mean(probed)}
+    finally:
+        if a.keep:
+            log("  kept " + work)
+        else:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", default="100000,1000000,10000000", help="collection sizes, comma-separated")
+    ap.add_argument("--queries", type=int, default=200)
+    ap.add_argument("--exact-queries", type=int, default=None,
+                    help="queries also run with the exact scan, for recall (default: all; 50 is enough at 10^7)")
+    ap.add_argument("--synthetic-queries", type=int, default=50, help="of --queries, from stored synthetic rows")
+    ap.add_argument("--holdout", type=float, default=0.2, help="share of the real set kept out of the collection")
+    ap.add_argument("--kac", default=None, help="the binary (default: cargo build --release)")
+    ap.add_argument("--rebuild-real", action="store_true", help="recompute bench/out/real_dna.json")
+    ap.add_argument("--workdir", default=None, help="where the throwaway data directories go (default: TMPDIR)")
+    ap.add_argument("--keep", action="store_true", help="keep the data directories")
+    ap.add_argument("--snapshot-wait", type=float, default=120, help="seconds to wait for the snapshot file")
+    ap.add_argument("--seed", type=int, default=7)
+    a = ap.parse_args()
+    kac = os.path.abspath(a.kac) if a.kac else release_kac()
+
+    real = dna_corpus.real_fingerprints(kac, rebuild=a.rebuild_real, log=log)
+    values = np.array([v for _, v in real], float)
+    rng = np.random.default_rng(a.seed)
+    perm = rng.permutation(len(values))
+    n_held = max(1, int(round(a.holdout * len(values))))
+    held, base_real = values[np.sort(perm[:n_held])], values[np.sort(perm[n_held:])]
+    log("real set: %d fingerprints, %d held out as queries; %s" % (len(values), n_held,
+                                                                    json.dumps(dna_corpus.summary(values))))
+    for n in (int(float(x)) for x in a.n.split(",")):
+        print(json.dumps(run(a, kac, n, base_real, held)), flush=True)
+
 
 if __name__ == "__main__":
     main()

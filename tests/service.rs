@@ -1152,3 +1152,123 @@ fn cors_answers_real_origin_requests() {
     assert_eq!(up.header("access-control-allow-origin"), Some("https://front.example"));
     assert!(up.header("access-control-expose-headers").unwrap_or("").to_lowercase().contains("location"));
 }
+
+/// A multipart/form-data body of (part name, file name, bytes).
+fn multipart(parts: &[(&str, Option<&str>, &[u8])]) -> (String, Vec<u8>) {
+    let boundary = "kac-test-boundary-7f3a9c";
+    let mut body = vec![];
+    for (name, file, bytes) in parts {
+        body.extend(format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").bytes());
+        if let Some(f) = file {
+            body.extend(format!("; filename=\"{f}\"").bytes());
+        }
+        body.extend(b"\r\n\r\n");
+        body.extend(*bytes);
+        body.extend(b"\r\n");
+    }
+    body.extend(format!("--{boundary}--\r\n").bytes());
+    (format!("multipart/form-data; boundary={boundary}"), body)
+}
+
+/// Issue 33, items 3 and 4: a collection uploaded in one request (files and a zip archive of more), each file
+/// answered on its own with nothing lost for the bad ones, tagged, fingerprinted by the jobs the upload starts; a
+/// search limited to a tag sees only the shapes carrying it, and an edit of the tags or a deletion at once.
+#[test]
+fn a_collection_is_uploaded_in_bulk_tagged_and_searched_within_a_tag() {
+    let (s, _) = Server::start_in(tempfile::tempdir().unwrap(), &[]);
+    let sphere = |level: u32, stretch: f64| {
+        let mut m = kac_core::geometry::generate::icosphere(level);
+        m.vertices.iter_mut().for_each(|p| p[0] *= stretch);
+        off_of(&m)
+    };
+    let mut zipped = std::io::Cursor::new(vec![]);
+    {
+        let mut z = zip::ZipWriter::new(&mut zipped);
+        let o = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+        z.add_directory("inner/", o).unwrap();
+        z.start_file("inner/long.off", o).unwrap();
+        std::io::Write::write_all(&mut z, &sphere(2, 1.6)).unwrap();
+        z.start_file("broken.off", o).unwrap();
+        std::io::Write::write_all(&mut z, b"OFF\n3 1 0\n0 0 0\n").unwrap();
+        z.finish().unwrap();
+    }
+    let zipped = zipped.into_inner();
+    let options = json!({ "tags": ["set:a"], "fingerprint": { "k": 8, "normalization": "area" } }).to_string();
+    let (a, b, c) = (sphere(2, 1.0), sphere(3, 1.0), sphere(2, 1.3));
+    let (ct, body) = multipart(&[
+        ("options", None, options.as_bytes()),
+        ("file", Some("a.off"), &a),
+        ("file", Some("b.off"), &b),
+        ("file", Some("garbage.off"), b"not a shape"),
+        ("file", Some("c.off"), &c),
+        ("file", Some("more.zip"), &zipped),
+    ]);
+    let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct).send_bytes(&body));
+    assert_eq!(r.status, 200, "{}", r.body);
+    let files = r.body["files"].as_array().unwrap();
+    let got: Vec<(&str, u64)> =
+        files.iter().map(|f| (f["name"].as_str().unwrap(), f["status"].as_u64().unwrap())).collect();
+    assert_eq!(got[..3], [("a.off", 201), ("b.off", 201), ("garbage.off", got[2].1)]);
+    assert!(got[2].1 >= 400 && files[2]["problem"]["type"].is_string(), "{}", files[2]);
+    assert_eq!(got[3..], [("c.off", 201), ("more.zip/inner/long.off", 201), ("more.zip/broken.off", got[5].1)]);
+    assert!(got[5].1 >= 400, "{}", files[5]);
+    assert_eq!((r.body["created"].as_u64(), r.body["failed"].as_u64()), (Some(4), Some(2)));
+    let ids: Vec<String> =
+        [0, 1, 3, 4].iter().map(|&i| files[i]["shape"]["id"].as_str().unwrap().to_string()).collect();
+    for i in [0, 1, 3, 4] {
+        assert_eq!(files[i]["shape"]["tags"], json!(["set:a"]), "{}", files[i]);
+        let job = files[i]["job"]["id"].as_str().unwrap();
+        assert_eq!(wait_done(&s, job)["status"], "succeeded");
+    }
+    // The same file again: 200, and its job is the same job.
+    let (ct2, again) = multipart(&[("options", None, options.as_bytes()), ("file", Some("a.off"), &a)]);
+    let r2 = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct2).send_bytes(&again));
+    assert_eq!((r2.body["files"][0]["status"].as_u64(), r2.body["existing"].as_u64()), (Some(200), Some(1)));
+    assert_eq!(r2.body["files"][0]["job"]["id"], files[0]["job"]["id"]);
+    // Tags: one shape moved to another set; one shape uploaded alone with a tag of the first set.
+    let lone = upload(&s, &sphere(1, 1.0), "?format=off&tags=set:a,extra").body;
+    assert_eq!(lone["tags"], json!(["extra", "set:a"]));
+    let put =
+        reply(agent().put(&s.url(&format!("/v1/shapes/{}/tags", ids[1]))).send_json(json!({ "tags": ["set:b"] })));
+    assert_eq!((put.status, &put.body["tags"]), (200, &json!(["set:b"])), "{}", put.body);
+    let get = reply(agent().get(&s.url(&format!("/v1/shapes/{}", ids[1]))).call());
+    assert_eq!(get.body["tags"], json!(["set:b"]));
+    let search = |body: Value| reply(agent().post(&s.url("/v1/search")).send_json(body));
+    let within = |tags: Value| {
+        let r = search(json!({ "shape_id": ids[0], "k": 8, "normalization": "area", "tags": tags }));
+        assert_eq!(r.status, 200, "{}", r.body);
+        let mut n: Vec<String> = r.body["neighbours"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|n| n["shape_id"].as_str().unwrap().to_string())
+            .collect();
+        n.sort();
+        (n, r.body)
+    };
+    let mut want = vec![ids[2].clone(), ids[3].clone()];
+    want.sort();
+    let (set_a, body) = within(json!(["set:a"]));
+    assert_eq!(set_a, want, "the lone shape has no fingerprint of this family; the moved one is out");
+    assert_eq!((body["exact"].as_bool(), body["method"].as_str()), (Some(true), Some("scan")));
+    assert_eq!(within(json!(["set:b"])).0, vec![ids[1].clone()]);
+    assert!(within(json!(["set:a", "set:b"])).0.is_empty());
+    // exact: true is a scan of the whole family.
+    let all = search(json!({ "shape_id": ids[0], "k": 8, "normalization": "area", "exact": true }));
+    assert_eq!((all.body["exact"].as_bool(), all.body["probed"].as_u64()), (Some(true), Some(3)), "{}", all.body);
+    // Deleted: gone from the tag at once.
+    assert_eq!(reply(agent().delete(&s.url(&format!("/v1/shapes/{}", ids[2]))).call()).status, 204);
+    assert_eq!(within(json!(["set:a"])).0, vec![ids[3].clone()]);
+    // Refused: bad tags (nothing stored), tags of an unknown shape, a body that is not multipart, bad options.
+    assert_problem(&upload(&s, &sphere(1, 2.0), "?format=off&tags=bad%20tag"), 400, "invalid-request");
+    assert_eq!(reply(agent().get(&s.url("/v1/shapes")).call()).body["total"], 4);
+    let unknown = "0".repeat(64);
+    let r = reply(agent().put(&s.url(&format!("/v1/shapes/{unknown}/tags"))).send_json(json!({ "tags": ["x"] })));
+    assert_problem(&r, 404, "not-found");
+    assert_problem(&search(json!({ "fingerprint": vec![1.0; 8], "k": 8, "tags": ["é"] })), 400, "invalid-request");
+    let r = reply(agent().post(&s.url("/v1/shapes/bulk")).send_bytes(&a));
+    assert_problem(&r, 400, "invalid-request");
+    let (ct3, bad) = multipart(&[("options", None, br#"{"tags": ["ok"], "colour": 1}"#), ("file", Some("a.off"), &a)]);
+    let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct3).send_bytes(&bad));
+    assert_eq!((r.status, r.body["field"].as_str()), (422, Some("colour")), "{}", r.body);
+}

@@ -38,6 +38,10 @@ pub struct Config {
     /// Largest number of eigenpairs an analysis may ask for.
     #[arg(long, env = "KAC_MAX_K", default_value_t = 1000, value_parser = at_least_one)]
     pub max_k: usize,
+    /// The most cells of the search index one search probes before it answers without a proof that its
+    /// neighbours are the exact ones (`exact: false` in the answer). More cells: higher recall, slower searches.
+    #[arg(long, env = "KAC_SEARCH_CELLS", default_value_t = 32, value_parser = at_least_one)]
+    pub search_cells: usize,
     /// Largest count of any list or grid a descriptor takes (times, energies, τ samples, frequencies, sources,
     /// implicit steps, interpolation values); beyond it, 413 `too-many-samples` before anything is allocated.
     #[arg(long, env = "KAC_MAX_SAMPLES", default_value_t = 10_000, value_parser = at_least_one)]

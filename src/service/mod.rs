@@ -62,7 +62,14 @@ impl Inner {
             config.workers
         };
         let backend = store::open(&config)?;
-        let index = search::Index::load(&*backend.fingerprints)?;
+        let (index, loaded) = search::Index::load(&*backend.fingerprints, backend.index_snapshot.clone())?;
+        tracing::info!(
+            from = loaded.from,
+            fingerprints = loaded.fingerprints,
+            seconds = loaded.seconds,
+            refused = loaded.snapshot_refused.as_deref().unwrap_or(""),
+            "search index loaded"
+        );
         let lease = std::time::Duration::from_secs_f64(config.lease_s.max(0.3));
         let timeout = std::time::Duration::from_secs(config.job_timeout_s);
         let jobs = Arc::new(jobs::Jobs::new(
@@ -137,6 +144,10 @@ pub fn serve(config: Config) -> Result<(), String> {
         let deadline = *signalled.get_or_init(std::time::Instant::now) + grace;
         while state.jobs.running() > 0 && std::time::Instant::now() < deadline {
             tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        }
+        // The next start reads the index from its snapshot instead of the whole store.
+        if let Err(e) = state.index.persist() {
+            tracing::warn!(error = %e, "the search index snapshot could not be written");
         }
         tracing::info!(running = state.jobs.running(), "stopped");
         Ok(())

@@ -3,6 +3,7 @@
 //! handlers one file per resource.
 
 mod analyses;
+mod collection;
 mod health;
 mod registry;
 mod responses;
@@ -12,6 +13,7 @@ mod shapes;
 mod viewer;
 
 pub(crate) use analyses::*;
+pub(crate) use collection::*;
 pub(crate) use health::*;
 pub(crate) use registry::*;
 pub use responses::*;
@@ -26,7 +28,7 @@ use super::error::store_error;
 use super::error::{problem_response, ApiError, CODES};
 use super::ids::{JobPath, ResultPath, ShapePath};
 use super::jobs::{self, JobView, Status};
-use super::search::SearchRequest;
+use super::search::{SearchError, SearchRequest, Tag};
 use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis};
@@ -53,7 +55,9 @@ pub fn router(state: AppState) -> Router {
         .route("/livez", get(livez))
         .route("/readyz", get(readyz))
         .route("/v1/shapes", post(upload_shape).get(list_shapes))
+        .route("/v1/shapes/bulk", post(bulk_upload))
         .route("/v1/shapes/{id}", get(get_shape).delete(delete_shape))
+        .route("/v1/shapes/{id}/tags", get(get_tags).put(put_tags))
         .route("/v1/shapes/{id}/geometry", get(get_geometry))
         .route("/v1/jobs", post(create_job).get(list_jobs))
         .route("/v1/jobs/{id}", get(get_job).delete(delete_job))

@@ -77,6 +77,15 @@ pub struct SearchResult {
     pub fingerprint: Vec<f64>,
     /// Fingerprints of this family held.
     pub searched: usize,
+    /// Fingerprints whose distance was computed: all of them for a scan, fewer through the index.
+    pub probed: usize,
+    /// Whether the neighbours are proven to be the exact nearest ones: always for a scan; through the index, when
+    /// every cell not probed lies farther from the query than the last neighbour. Distances are exact either way.
+    pub exact: bool,
+    /// `scan` (every fingerprint of the family, or of the shapes carrying the tags) or `index`.
+    pub method: crate::service::search::Method,
+    /// The tags the search was limited to (sorted, repeats dropped).
+    pub tags: Vec<String>,
     /// Nearest first; ties by id.
     pub neighbours: Vec<Neighbour>,
 }

@@ -98,8 +98,12 @@ pub struct SearchQuery {
 
 /// The stored shapes nearest to a shape or a fingerprint by shape-DNA, over every fingerprint of the same family
 /// (k, normalization, reweighting, include_zero, operator) the service holds: those of finished `shape-dna`
-/// jobs and comparisons. A `shape_id` without a stored fingerprint gets one first, as a `shape-dna` job (202 with
-/// the job when it is not done within `wait`).
+/// jobs and comparisons; optionally only shapes carrying given `tags`. A `shape_id` without a stored fingerprint
+/// gets one first, as a `shape-dna` job (202 with the job when it is not done within `wait`).
+///
+/// Large families are searched through an index (cells of nearby fingerprints, the query's nearest cells probed
+/// first); the candidates are ranked by their exact stored values, and `exact` says whether the answer is proven
+/// to be the exact nearest neighbours. `exact: true` in the request compares every fingerprint instead.
 #[utoipa::path(post, path = "/v1/search", tag = "jobs", params(SearchQuery), request_body = SearchRequest,
     responses((status = 200, description = "the nearest shapes, nearest first, and how many were searched", body = SearchResult),
               (status = 202, description = "the query shape's fingerprint is being computed: the job", body = JobResource, headers(("Location" = String))),
@@ -127,6 +131,7 @@ pub(crate) async fn search(
     if req.neighbours > 1000 {
         return Err(ApiError::invalid_request(format!("neighbours = {}: at most 1000", req.neighbours)));
     }
+    let tags = Tag::parse_all(&req.tags).map_err(ApiError::invalid_request)?;
     let family = req.family();
     let query = match (&req.shape_id, &req.fingerprint) {
         (Some(_), Some(_)) | (None, None) => {
@@ -146,7 +151,7 @@ pub(crate) async fn search(
             }
             f.clone()
         }
-        (Some(id), None) => match st.index.get(&family, id) {
+        (Some(id), None) => match stored_fingerprint(&st, &family, id)? {
             Some(f) => f,
             None => {
                 let shape = stored_shape(&st, id)?;
@@ -157,7 +162,7 @@ pub(crate) async fn search(
                 };
                 let (job, _) = jobs::submit(&st.jobs, &st.config, shape, dna)?;
                 let view = wait_for(&st, &job, q.wait).await?;
-                match (st.index.get(&family, id), view.status) {
+                match (stored_fingerprint(&st, &family, id)?, view.status) {
                     (Some(f), _) => f,
                     (None, Status::Succeeded) => {
                         // A shape-dna job that finished before fingerprints were kept (or whose fingerprint could
@@ -190,12 +195,33 @@ pub(crate) async fn search(
             }
         },
     };
-    let (near, searched) = st
+    let exclude = match &req.shape_id {
+        Some(id) => Some(crate::service::ids::shape_id(id)?),
+        None => None,
+    };
+    let store = st.fingerprints.clone();
+    let fetch = move |family: &str, ids: &[String]| store.fingerprints_of(family, ids);
+    let found = st
         .index
-        .nearest(&family, &query, req.metric, req.neighbours, req.shape_id.as_deref())
-        .map_err(ApiError::invalid_request)?;
+        .nearest(
+            &crate::service::search::Query {
+                family: &family,
+                values: &query,
+                metric: req.metric,
+                count: req.neighbours,
+                exclude,
+                tags: &tags,
+                exact: req.exact,
+                max_cells: st.config.search_cells,
+            },
+            &fetch,
+        )
+        .map_err(|e| match e {
+            SearchError::Length(m) => ApiError::invalid_request(m),
+            SearchError::Store(e) => store_error(e),
+        })?;
     let neighbours: Vec<Neighbour> =
-        near.into_iter().map(|(shape_id, distance)| Neighbour { shape_id, distance }).collect();
+        found.neighbours.into_iter().map(|(shape_id, distance)| Neighbour { shape_id, distance }).collect();
     let operator = serde_json::to_value(&req.operator).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
     Ok(Json(SearchResult {
         descriptor: "shape-dna",
@@ -205,8 +231,18 @@ pub(crate) async fn search(
         operator,
         shape_id: req.shape_id.clone(),
         fingerprint: query,
-        searched,
+        searched: found.searched,
+        probed: found.probed,
+        exact: found.exact,
+        method: found.method,
+        tags: tags.into_iter().map(|t| t.as_str().to_string()).collect(),
         neighbours,
     })
     .into_response())
+}
+
+/// A stored shape's fingerprint in a family, exact, from the store (None: there is none yet).
+fn stored_fingerprint(st: &AppState, family: &str, id: &str) -> Result<Option<Vec<f64>>, ApiError> {
+    let mut got = st.fingerprints.fingerprints_of(family, &[id.to_string()]).map_err(store_error)?;
+    Ok(got.remove(id))
 }

@@ -16,6 +16,8 @@ pub struct ShapeResource {
     /// The validation summary (kind, counts, area, volume, topology, repairs), as `kac inspect` prints it.
     #[schema(value_type = kac_core::geometry::summary::Summary)]
     pub summary: Value,
+    /// The tags it carries (sorted), which a search may be limited to.
+    pub tags: Vec<String>,
     pub links: ShapeLinks,
 }
 
@@ -29,8 +31,9 @@ pub struct ShapeLinks {
     pub jobs: String,
 }
 
-pub(crate) fn shape_resource(s: &ShapeRecord) -> ShapeResource {
+pub(crate) fn shape_resource(st: &AppState, s: &ShapeRecord) -> ShapeResource {
     ShapeResource {
+        tags: st.index.tags_of(&s.id),
         id: s.id.clone(),
         format: s.format.clone(),
         created_at: s.created_at.clone(),
@@ -45,6 +48,9 @@ pub struct UploadQuery {
     /// Format name; default: from the Content-Type, the multipart file name, or the content.
     #[param(value_type = Option<kac_core::io::Format>)]
     pub format: Option<String>,
+    /// Tags to add to the shape, comma-separated (`tags=scan,customer:acme`); a shape already stored keeps its
+    /// other tags.
+    pub tags: Option<String>,
 }
 
 /// An upload: bytes, and what may tell their format.
@@ -57,6 +63,13 @@ pub(crate) struct Upload {
     pub(crate) fields: Vec<(String, String)>,
     /// Per-vertex inputs of the analysis sent as `.npy` parts, by field name ([`super::analyses::ARRAY_FIELDS`]).
     pub(crate) arrays: Vec<(String, Bytes)>,
+}
+
+impl Upload {
+    /// A file as it is, its format from its name or its content.
+    pub(crate) fn file(bytes: Bytes, filename: Option<String>) -> Upload {
+        Upload { bytes, format: None, filename, media_type: None, fields: vec![], arrays: vec![] }
+    }
 }
 
 pub(crate) fn parse_format(name: &str) -> Result<Format, ApiError> {
@@ -207,11 +220,19 @@ pub(crate) async fn upload_shape(
     Query(q): Query<UploadQuery>,
     req: Request,
 ) -> Result<Response, ApiError> {
+    // Tags parse before the body is read: a bad tag stores nothing.
+    let tags = match q.tags.as_deref() {
+        Some(t) => Tag::parse_all(&t.split(',').collect::<Vec<_>>()).map_err(ApiError::invalid_request)?,
+        None => vec![],
+    };
     let up = read_upload(&st, q.format, req).await?;
     let (created, shape) = ingest(&st, up).await?;
+    if !tags.is_empty() {
+        super::collection::add_tags(&st, &shape.id, &tags)?;
+    }
     let status = if created { StatusCode::CREATED } else { StatusCode::OK };
     let loc = format!("/v1/shapes/{}", shape.id);
-    Ok(with_location((status, Json(shape_resource(&shape))).into_response(), &loc))
+    Ok(with_location((status, Json(shape_resource(&st, &shape))).into_response(), &loc))
 }
 
 #[derive(Deserialize, utoipa::IntoParams)]
@@ -230,7 +251,7 @@ pub(crate) async fn list_shapes(
     let limit = p.limit.unwrap_or(100).min(1000);
     let offset = p.offset.unwrap_or(0);
     let (items, total) = st.shapes.list(offset, limit).map_err(store_error)?;
-    let items: Vec<ShapeResource> = items.iter().map(shape_resource).collect();
+    let items: Vec<ShapeResource> = items.iter().map(|s| shape_resource(&st, s)).collect();
     Ok(Json(ShapePage { total, offset, limit, items }))
 }
 
@@ -245,7 +266,7 @@ pub(crate) async fn get_shape(
     st.shapes
         .get(&id)
         .map_err(store_error)?
-        .map(|s| Json(shape_resource(&s)))
+        .map(|s| Json(shape_resource(&st, &s)))
         .ok_or(ApiError::NotFound { what: "shape", id: id.hex() })
 }
 

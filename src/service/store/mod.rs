@@ -28,6 +28,9 @@ pub struct Backend {
     pub fingerprints: Arc<dyn FingerprintStore>,
     pub results: Arc<dyn ResultStore>,
     pub queue: Arc<dyn JobQueue>,
+    /// Where this replica keeps its search index's snapshot (the embedded store's directory; none with a shared
+    /// store, whose replicas build their index from its tables and log).
+    pub index_snapshot: Option<PathBuf>,
 }
 
 /// Opens the backend `--store` names (default: the embedded one in `--data-dir`).
@@ -38,11 +41,18 @@ pub fn open(config: &super::config::Config) -> std::io::Result<Backend> {
         std::fs::create_dir_all(dir)?;
         let db = Arc::new(Database::open(dir, config.max_vertices, config.store_cache_bytes)?);
         let results = Arc::new(FileResults::open(dir, config.store_cache_bytes)?);
-        return Ok(Backend { shapes: db.clone(), fingerprints: db.clone(), results, queue: db });
+        let index_snapshot = Some(dir.join("search-index.bin"));
+        return Ok(Backend { shapes: db.clone(), fingerprints: db.clone(), results, queue: db, index_snapshot });
     }
     if store.starts_with("postgres://") || store.starts_with("postgresql://") {
         let pg = Arc::new(Postgres::open(&store, config.pg_pool_size, config.max_vertices, config.store_cache_bytes)?);
-        return Ok(Backend { shapes: pg.clone(), fingerprints: pg.clone(), results: pg.clone(), queue: pg });
+        return Ok(Backend {
+            shapes: pg.clone(),
+            fingerprints: pg.clone(),
+            results: pg.clone(),
+            queue: pg,
+            index_snapshot: None,
+        });
     }
     Err(std::io::Error::new(
         std::io::ErrorKind::InvalidInput,
@@ -137,24 +147,61 @@ pub trait ShapeStore: Send + Sync {
 }
 
 /// Shape-DNA fingerprints of stored shapes, by family (the parameters they were computed with), kept as shapes
-/// are analysed so that a search compares against every shape the service holds.
+/// are analysed so that a search compares against every shape the service holds; and the shapes' tags, which a
+/// search may be limited to. Both are logged, in one log, so that every replica's index follows the store.
 pub trait FingerprintStore: Send + Sync {
     /// Inserts or replaces one shape's fingerprint in a family, if the shape is still stored (true then).
     fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool>;
-    /// Every fingerprint: (family, shape id, values).
-    fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>>;
-    /// The end of the log of fingerprint changes (every put, and every removed shape), for [`fingerprint_changes`].
+    /// Every fingerprint, one at a time: (family, shape id, values).
+    fn for_each_fingerprint(&self, f: &mut dyn FnMut(&str, &str, &[f64])) -> std::io::Result<()>;
+    /// The fingerprints of a family for some shapes (those stored), by shape id.
+    fn fingerprints_of(&self, family: &str, shape_ids: &[String]) -> std::io::Result<HashMap<String, Vec<f64>>>;
+    /// Sets a stored shape's tags (replacing its earlier ones; false: the shape is not stored).
+    fn set_tags(&self, shape_id: &str, tags: &[String]) -> std::io::Result<bool>;
+    /// A shape's tags, sorted.
+    fn tags_of(&self, shape_id: &str) -> std::io::Result<Vec<String>>;
+    /// Every (shape id, tag), one at a time.
+    fn for_each_tag(&self, f: &mut dyn FnMut(&str, &str)) -> std::io::Result<()>;
+    /// The end of the log of changes (every fingerprint put, every removed shape, every change of tags), for
+    /// [`fingerprint_changes`].
     ///
     /// [`fingerprint_changes`]: FingerprintStore::fingerprint_changes
     fn fingerprint_log_end(&self) -> std::io::Result<i64>;
-    /// The changes logged after position `after`, in order, and the position of the last: (family, shape id,
-    /// values) for a fingerprint kept, (empty, shape id, None) for a removed shape. Other replicas' indexes follow
-    /// the store through it.
+    /// The changes logged after position `after`, in order, and the position of the last. Other replicas'
+    /// indexes follow the store through it.
     fn fingerprint_changes(&self, after: i64) -> std::io::Result<(Vec<FingerprintChange>, i64)>;
 }
 
-/// One entry of the fingerprint log: a fingerprint kept (`values`), or a removed shape (`None`).
-pub type FingerprintChange = (String, String, Option<Vec<f64>>);
+/// One entry of the change log.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FingerprintChange {
+    Kept { family: String, shape_id: String, values: Vec<f64> },
+    Removed { shape_id: String },
+    Tagged { shape_id: String, tags: Vec<String> },
+}
+
+/// The log's row for a change of tags: this family (no fingerprint family starts with `#`) and the tags, one a
+/// line, in the fingerprint's column.
+pub(crate) const TAGS_ENTRY: &str = "#tags";
+
+impl FingerprintChange {
+    /// A log row (family, shape id, blob) read back.
+    pub(crate) fn of_row(family: String, shape_id: String, blob: Option<&[u8]>) -> FingerprintChange {
+        match blob {
+            Some(b) if family == TAGS_ENTRY => FingerprintChange::Tagged {
+                shape_id,
+                tags: String::from_utf8_lossy(b).split('\n').filter(|t| !t.is_empty()).map(str::to_string).collect(),
+            },
+            Some(b) => FingerprintChange::Kept { family, shape_id, values: f64s_of(b) },
+            None => FingerprintChange::Removed { shape_id },
+        }
+    }
+}
+
+/// Tags as the log's blob holds them.
+pub(crate) fn tags_blob(tags: &[String]) -> Vec<u8> {
+    tags.join("\n").into_bytes()
+}
 
 pub(crate) fn f64s_of(blob: &[u8]) -> Vec<f64> {
     blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))).collect()

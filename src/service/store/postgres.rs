@@ -56,6 +56,7 @@ const MIGRATIONS: &[(i32, &str)] = &[
         "CREATE TABLE fingerprint_log (
              seq bigserial PRIMARY KEY, family text NOT NULL, shape_id text NOT NULL, fingerprint bytea);",
     ),
+    (3, "CREATE TABLE shape_tags (shape_id text NOT NULL, tag text NOT NULL, PRIMARY KEY (shape_id, tag));"),
 ];
 
 /// The advisory lock that serializes migrations (and queue admissions, as a transaction lock of its own key).
@@ -366,6 +367,7 @@ impl ShapeStore for Postgres {
             let n = tx.execute("DELETE FROM shapes WHERE id = $1", &[&key]).await.map_err(pg)?;
             tx.execute("DELETE FROM blobs WHERE kind = 'shape' AND id = $1", &[&key]).await.map_err(pg)?;
             tx.execute("DELETE FROM fingerprints WHERE shape_id = $1", &[&key]).await.map_err(pg)?;
+            tx.execute("DELETE FROM shape_tags WHERE shape_id = $1", &[&key]).await.map_err(pg)?;
             if n > 0 {
                 tx.execute("INSERT INTO fingerprint_log (family, shape_id) VALUES ('', $1)", &[&key])
                     .await
@@ -434,12 +436,93 @@ impl FingerprintStore for Postgres {
             Ok(n > 0)
         })
     }
-    fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>> {
-        self.run(|pool| async move {
+    fn for_each_fingerprint(&self, f: &mut dyn FnMut(&str, &str, &[f64])) -> std::io::Result<()> {
+        // Pages in key order, so that a large table is never held whole.
+        const PAGE: i64 = 10_000;
+        let mut after = (String::new(), String::new());
+        loop {
+            let key = after.clone();
+            let rows = self.run(move |pool| async move {
+                let c = pool.get().await.map_err(pg)?;
+                c.query(
+                    "SELECT family, shape_id, fingerprint FROM fingerprints WHERE (family, shape_id) > ($1, $2)
+                     ORDER BY family, shape_id LIMIT $3",
+                    &[&key.0, &key.1, &PAGE],
+                )
+                .await
+                .map_err(pg)
+            })?;
+            for r in &rows {
+                f(r.get(0), r.get(1), &f64s_of(r.get(2)));
+            }
+            match rows.last() {
+                Some(r) if rows.len() as i64 == PAGE => after = (r.get(0), r.get(1)),
+                _ => return Ok(()),
+            }
+        }
+    }
+    fn fingerprints_of(&self, family: &str, shape_ids: &[String]) -> std::io::Result<HashMap<String, Vec<f64>>> {
+        let (family, ids) = (family.to_string(), shape_ids.to_vec());
+        self.run(move |pool| async move {
             let c = pool.get().await.map_err(pg)?;
-            let rows = c.query("SELECT family, shape_id, fingerprint FROM fingerprints", &[]).await.map_err(pg)?;
-            Ok(rows.iter().map(|r| (r.get(0), r.get(1), f64s_of(r.get(2)))).collect())
+            let rows = c
+                .query(
+                    "SELECT shape_id, fingerprint FROM fingerprints WHERE family = $1 AND shape_id = ANY($2)",
+                    &[&family, &ids],
+                )
+                .await
+                .map_err(pg)?;
+            Ok(rows.iter().map(|r| (r.get(0), f64s_of(r.get(1)))).collect())
         })
+    }
+    fn set_tags(&self, shape_id: &str, tags: &[String]) -> std::io::Result<bool> {
+        let (shape_id, tags) = (shape_id.to_string(), tags.to_vec());
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            tx.execute("SELECT pg_advisory_xact_lock($1)", &[&LOG_LOCK]).await.map_err(pg)?;
+            let stored = tx
+                .query_opt("SELECT 1 FROM shapes WHERE id = $1 FOR KEY SHARE", &[&shape_id])
+                .await
+                .map_err(pg)?
+                .is_some();
+            if !stored {
+                return Ok(false);
+            }
+            tx.execute("DELETE FROM shape_tags WHERE shape_id = $1", &[&shape_id]).await.map_err(pg)?;
+            tx.execute("INSERT INTO shape_tags (shape_id, tag) SELECT $1, unnest($2::text[])", &[&shape_id, &tags])
+                .await
+                .map_err(pg)?;
+            tx.execute(
+                "INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES ($1, $2, $3)",
+                &[&TAGS_ENTRY, &shape_id, &tags_blob(&tags)],
+            )
+            .await
+            .map_err(pg)?;
+            tx.commit().await.map_err(pg)?;
+            Ok(true)
+        })
+    }
+    fn tags_of(&self, shape_id: &str) -> std::io::Result<Vec<String>> {
+        let shape_id = shape_id.to_string();
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let rows = c
+                .query("SELECT tag FROM shape_tags WHERE shape_id = $1 ORDER BY tag", &[&shape_id])
+                .await
+                .map_err(pg)?;
+            Ok(rows.iter().map(|r| r.get(0)).collect())
+        })
+    }
+    fn for_each_tag(&self, f: &mut dyn FnMut(&str, &str)) -> std::io::Result<()> {
+        let rows = self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            c.query("SELECT shape_id, tag FROM shape_tags", &[]).await.map_err(pg)
+        })?;
+        for r in &rows {
+            f(r.get(0), r.get(1));
+        }
+        Ok(())
     }
     fn fingerprint_log_end(&self) -> std::io::Result<i64> {
         self.run(|pool| async move {
@@ -458,8 +541,10 @@ impl FingerprintStore for Postgres {
                 .await
                 .map_err(pg)?;
             let end = rows.last().map_or(after, |r| r.get(0));
-            let changes =
-                rows.iter().map(|r| (r.get(1), r.get(2), r.get::<_, Option<&[u8]>>(3).map(f64s_of))).collect();
+            let changes = rows
+                .iter()
+                .map(|r| FingerprintChange::of_row(r.get(1), r.get(2), r.get::<_, Option<&[u8]>>(3)))
+                .collect();
             Ok((changes, end))
         })
     }

@@ -113,7 +113,9 @@ impl Database {
                  PRIMARY KEY (family, shape_id));
              CREATE TABLE IF NOT EXISTS fingerprint_log (
                  seq INTEGER PRIMARY KEY AUTOINCREMENT, family TEXT NOT NULL, shape_id TEXT NOT NULL,
-                 fingerprint BLOB);",
+                 fingerprint BLOB);
+             CREATE TABLE IF NOT EXISTS shape_tags (
+                 shape_id TEXT NOT NULL, tag TEXT NOT NULL, PRIMARY KEY (shape_id, tag));",
         )
         .map_err(db_err)?;
         migrate_jobs(&conn)?;
@@ -229,6 +231,7 @@ impl ShapeStore for Database {
             let tx = c.transaction().map_err(db_err)?;
             let n = tx.execute("DELETE FROM shapes WHERE id = ?1", [id]).map_err(db_err)?;
             tx.execute("DELETE FROM fingerprints WHERE shape_id = ?1", [id]).map_err(db_err)?;
+            tx.execute("DELETE FROM shape_tags WHERE shape_id = ?1", [id]).map_err(db_err)?;
             if n > 0 {
                 tx.execute("INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES ('', ?1, NULL)", [id])
                     .map_err(db_err)?;
@@ -271,12 +274,78 @@ impl FingerprintStore for Database {
         tx.commit().map_err(db_err)?;
         Ok(n > 0)
     }
-    fn load_fingerprints(&self) -> std::io::Result<Vec<(String, String, Vec<f64>)>> {
+    fn for_each_fingerprint(&self, f: &mut dyn FnMut(&str, &str, &[f64])) -> std::io::Result<()> {
         let c = self.conn();
         let mut st = c.prepare("SELECT family, shape_id, fingerprint FROM fingerprints").map_err(db_err)?;
-        let rows =
-            st.query_map([], |r| Ok((r.get(0)?, r.get(1)?, f64s_of(&r.get::<_, Vec<u8>>(2)?)))).map_err(db_err)?;
+        let mut rows = st.query([]).map_err(db_err)?;
+        let mut values = vec![];
+        while let Some(r) = rows.next().map_err(db_err)? {
+            let (family, id) = (r.get_ref(0).map_err(db_err)?, r.get_ref(1).map_err(db_err)?);
+            let (family, id) =
+                (family.as_str().map_err(std::io::Error::other)?, id.as_str().map_err(std::io::Error::other)?);
+            let blob = r.get_ref(2).map_err(db_err)?.as_blob().map_err(std::io::Error::other)?;
+            values.clear();
+            values.extend(blob.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))));
+            f(family, id, &values);
+        }
+        Ok(())
+    }
+    fn fingerprints_of(&self, family: &str, shape_ids: &[String]) -> std::io::Result<HashMap<String, Vec<f64>>> {
+        let c = self.conn();
+        let mut st = c
+            .prepare_cached("SELECT fingerprint FROM fingerprints WHERE family = ?1 AND shape_id = ?2")
+            .map_err(db_err)?;
+        let mut out = HashMap::new();
+        for id in shape_ids {
+            let blob: Option<Vec<u8>> =
+                st.query_row(rusqlite::params![family, id], |r| r.get(0)).optional().map_err(db_err)?;
+            if let Some(b) = blob {
+                out.insert(id.clone(), f64s_of(&b));
+            }
+        }
+        Ok(out)
+    }
+    fn set_tags(&self, shape_id: &str, tags: &[String]) -> std::io::Result<bool> {
+        let _id = self.id_lock(shape_id);
+        let mut c = self.conn();
+        let tx = c.transaction().map_err(db_err)?;
+        let stored = tx
+            .query_row("SELECT 1 FROM shapes WHERE id = ?1", [shape_id], |_| Ok(()))
+            .optional()
+            .map_err(db_err)?
+            .is_some();
+        if !stored {
+            return Ok(false);
+        }
+        tx.execute("DELETE FROM shape_tags WHERE shape_id = ?1", [shape_id]).map_err(db_err)?;
+        for t in tags {
+            tx.execute("INSERT INTO shape_tags (shape_id, tag) VALUES (?1, ?2)", [shape_id, t]).map_err(db_err)?;
+        }
+        tx.execute(
+            "INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES (?1, ?2, ?3)",
+            rusqlite::params![TAGS_ENTRY, shape_id, tags_blob(tags)],
+        )
+        .map_err(db_err)?;
+        tx.commit().map_err(db_err)?;
+        Ok(true)
+    }
+    fn tags_of(&self, shape_id: &str) -> std::io::Result<Vec<String>> {
+        let c = self.conn();
+        let mut st = c.prepare_cached("SELECT tag FROM shape_tags WHERE shape_id = ?1 ORDER BY tag").map_err(db_err)?;
+        let rows = st.query_map([shape_id], |r| r.get(0)).map_err(db_err)?;
         rows.collect::<Result<_, _>>().map_err(db_err)
+    }
+    fn for_each_tag(&self, f: &mut dyn FnMut(&str, &str)) -> std::io::Result<()> {
+        let c = self.conn();
+        let mut st = c.prepare("SELECT shape_id, tag FROM shape_tags").map_err(db_err)?;
+        let mut rows = st.query([]).map_err(db_err)?;
+        while let Some(r) = rows.next().map_err(db_err)? {
+            f(
+                r.get_ref(0).map_err(db_err)?.as_str().map_err(std::io::Error::other)?,
+                r.get_ref(1).map_err(db_err)?.as_str().map_err(std::io::Error::other)?,
+            );
+        }
+        Ok(())
     }
     fn fingerprint_log_end(&self) -> std::io::Result<i64> {
         self.conn().query_row("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", [], |r| r.get(0)).map_err(db_err)
@@ -290,7 +359,7 @@ impl FingerprintStore for Database {
         let rows = st
             .query_map([after], |r| {
                 let blob: Option<Vec<u8>> = r.get(3)?;
-                Ok((r.get::<_, i64>(0)?, (r.get(1)?, r.get(2)?, blob.map(|b| f64s_of(&b)))))
+                Ok((r.get::<_, i64>(0)?, FingerprintChange::of_row(r.get(1)?, r.get(2)?, blob.as_deref())))
             })
             .map_err(db_err)?;
         let mut out = vec![];

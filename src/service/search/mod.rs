@@ -1,0 +1,840 @@
+//! Search for retrieval back ends (`POST /v1/search`): the stored shapes nearest to a given shape or fingerprint
+//! by shape-DNA. Every fingerprint a `shape-dna` job or a comparison computes is kept in the store (by family:
+//! the parameters it was computed with) and in an in-memory index loaded at start, so a search scans contiguous
+//! rows of one family (100,000 fingerprints of 50 values in a few milliseconds; `bench/search.py`).
+
+use super::ids::ShapeId;
+use super::store::{FingerprintChange, FingerprintStore};
+use crate::analysis::{self, Fingerprint, OperatorSpec};
+use kac_core::descriptors::shape_dna::{self, Metric, ShapeDnaOptions};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::sync::RwLock;
+
+pub mod ivf;
+mod snapshot;
+use ivf::Ivf;
+
+/// The nearest stored shapes to a shape or a fingerprint, by shape-DNA.
+#[derive(Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(remote = "Self")]
+pub struct SearchRequest {
+    /// A stored shape to search from (its fingerprint is computed first, as a `shape-dna` job, when the store has
+    /// none of this family); the shape itself is left out of the answer.
+    pub shape_id: Option<String>,
+    /// Or a fingerprint of `k` values computed elsewhere (with the same parameters).
+    pub fingerprint: Option<Vec<f64>>,
+    /// The shape-DNA's options (k, normalization, reweighting, include_zero) at the top level: one type and one
+    /// set of defaults for every request and flag that fingerprints.
+    #[serde(flatten)]
+    pub dna: ShapeDnaOptions,
+    #[serde(default)]
+    pub metric: Metric,
+    /// Nearest shapes returned (default 10, at most 1000).
+    #[serde(default = "default_neighbours")]
+    pub neighbours: usize,
+    /// Only shapes carrying every one of these tags (at most 32).
+    #[serde(default)]
+    pub tags: Vec<String>,
+    /// Compare every fingerprint of the family instead of probing the index's nearest cells (slower on large
+    /// collections; the answer is then exact by construction).
+    #[serde(default)]
+    pub exact: bool,
+    #[serde(default)]
+    pub operator: OperatorSpec,
+}
+
+fn default_neighbours() -> usize {
+    10
+}
+
+kac_core::object_only_serde!(SearchRequest);
+
+impl SearchRequest {
+    pub fn options(&self) -> ShapeDnaOptions {
+        self.dna.clone()
+    }
+    pub fn family(&self) -> String {
+        analysis::fingerprint_family(&self.options(), &self.operator)
+    }
+}
+
+/// A tag: 1 to 64 characters of ASCII letters, digits and `-_.:/` (so a tag is the same in a URL, a JSON body and a
+/// log line). Parsed at the boundary; what does not parse is refused.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+pub struct Tag(String);
+
+/// At most this many tags on one shape, and in one search's filter.
+pub const MAX_TAGS: usize = 32;
+
+impl Tag {
+    pub fn parse(s: &str) -> Result<Tag, String> {
+        let ok = |b: u8| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.' | b':' | b'/');
+        if s.is_empty() || s.len() > 64 || !s.bytes().all(ok) {
+            let shown: String = s.chars().take(70).flat_map(char::escape_debug).collect();
+            return Err(format!("tag '{shown}': a tag is 1 to 64 characters of ASCII letters, digits and - _ . : /"));
+        }
+        Ok(Tag(s.to_string()))
+    }
+    /// Tags given as a list: each parsed, repeats dropped, sorted; at most [`MAX_TAGS`].
+    pub fn parse_all<S: AsRef<str>>(items: &[S]) -> Result<Vec<Tag>, String> {
+        let mut tags = items.iter().map(|s| Tag::parse(s.as_ref())).collect::<Result<Vec<_>, _>>()?;
+        tags.sort();
+        tags.dedup();
+        if tags.len() > MAX_TAGS {
+            return Err(format!("{} tags: at most {MAX_TAGS}", tags.len()));
+        }
+        Ok(tags)
+    }
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+/// The rounding bound of one row stored in single precision: ‖x − x₃₂‖₁ ≤ 2⁻²⁴‖x‖₁ for values in single
+/// precision's normal range (6.0·10⁻⁸ covers 2⁻²⁴ and the rounding of the sum), infinite when a value is outside it
+/// (such a row is always re-ranked from its exact values).
+fn rounding_bound(values: &[f64], stored: &[f32]) -> f32 {
+    let normal =
+        values.iter().all(|v| *v == 0.0 || (v.abs() >= f32::MIN_POSITIVE as f64 && v.abs() <= f32::MAX as f64));
+    if !normal {
+        return f32::INFINITY;
+    }
+    let l1: f64 = stored.iter().map(|v| v.abs() as f64).sum();
+    (6.0e-8 * l1 * (1.0 + 1e-6)) as f32
+}
+
+/// The distance from a query to a row kept in single precision, computed in double precision (four partial sums,
+/// so that the compiler may use vector lanes).
+fn approx_distance(q: &[f64], x: &[f32], metric: Metric) -> f64 {
+    let term = |a: f64, b: f32| -> f64 {
+        let d = a - b as f64;
+        match metric {
+            Metric::Euclidean => d * d,
+            Metric::Manhattan => d.abs(),
+            Metric::Canberra => {
+                let s = a.abs() + (b as f64).abs();
+                if s > 0.0 {
+                    d.abs() / s
+                } else {
+                    0.0
+                }
+            }
+        }
+    };
+    let mut acc = [0.0f64; 4];
+    let (qc, xc) = (q.chunks_exact(4), x.chunks_exact(4));
+    let (qr, xr) = (qc.remainder(), xc.remainder());
+    for (a, b) in qc.zip(xc) {
+        for l in 0..4 {
+            acc[l] += term(a[l], b[l]);
+        }
+    }
+    let tail: f64 = qr.iter().zip(xr).map(|(a, &b)| term(*a, b)).sum();
+    let sum = (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail;
+    if metric == Metric::Euclidean {
+        sum.sqrt()
+    } else {
+        sum
+    }
+}
+
+/// The fingerprints of one family: ids and their rows of `k` values, contiguous, in single precision (the exact
+/// values stay in the store, which the final ranking reads), and their cells once the family is large.
+#[derive(Default)]
+pub(crate) struct Family {
+    pub(crate) k: usize,
+    pub(crate) ids: Vec<ShapeId>,
+    pub(crate) row: HashMap<ShapeId, u32>,
+    pub(crate) vals: Vec<f32>,
+    /// Each row's rounding bound ([`rounding_bound`]).
+    pub(crate) err: Vec<f32>,
+    /// The largest rounding bound held (it never shrinks: a removal leaves it, which only weakens proofs).
+    pub(crate) err_max: f32,
+    pub(crate) ivf: Option<Ivf>,
+}
+
+impl Family {
+    pub(crate) fn len(&self) -> usize {
+        self.ids.len()
+    }
+    fn row_of(&self, r: usize) -> &[f32] {
+        &self.vals[r * self.k..(r + 1) * self.k]
+    }
+    /// Keeps a fingerprint (replacing the shape's earlier one); `train`: files it in a cell, training the cells
+    /// when the family has grown enough (false while a whole table is loaded: [`Family::train`] comes after).
+    fn put(&mut self, id: ShapeId, v: &[f64], train: bool) {
+        if self.ids.is_empty() {
+            self.k = v.len();
+        }
+        if v.len() != self.k || v.is_empty() {
+            return;
+        }
+        let stored: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+        let err = rounding_bound(v, &stored);
+        self.err_max = self.err_max.max(err);
+        match self.row.get(&id) {
+            Some(&r) => {
+                let r = r as usize;
+                self.vals[r * self.k..(r + 1) * self.k].copy_from_slice(&stored);
+                self.err[r] = err;
+                if let Some(ivf) = &mut self.ivf {
+                    ivf.refile(&self.vals, r);
+                }
+            }
+            None => {
+                self.row.insert(id, self.ids.len() as u32);
+                self.ids.push(id);
+                self.vals.extend_from_slice(&stored);
+                self.err.push(err);
+                if !train {
+                    return;
+                }
+                match &mut self.ivf {
+                    Some(ivf) if self.ids.len() < 4 * ivf.trained_rows => {
+                        ivf.push(&self.vals);
+                        if 4 * (self.ids.len() - ivf.packed_rows) > self.ids.len() {
+                            self.pack();
+                        }
+                    }
+                    _ => self.train(faer::Par::Seq),
+                }
+            }
+        }
+    }
+    /// Trains the family's cells afresh when it is large enough to have them (and drops them when it is not).
+    pub(crate) fn train(&mut self, par: faer::Par) {
+        self.ivf =
+            (self.len() >= ivf::MIN_ROWS).then(|| Ivf::train(&self.vals, self.k, ivf::cells_for(self.len()), par));
+        self.pack();
+    }
+    /// Renumbers the rows cell by cell, so that a probe reads each cell's rows from one stretch of memory (rows
+    /// added later go at the end until the next packing: when they are a quarter of the family).
+    fn pack(&mut self) {
+        let Some(ivf) = &mut self.ivf else { return };
+        let order: Vec<u32> = ivf.lists.iter().flatten().copied().collect();
+        let k = self.k;
+        let mut vals = Vec::with_capacity(self.vals.len());
+        let mut ids = Vec::with_capacity(self.ids.len());
+        let mut err = Vec::with_capacity(self.err.len());
+        for &r in &order {
+            let r = r as usize;
+            vals.extend_from_slice(&self.vals[r * k..(r + 1) * k]);
+            ids.push(self.ids[r]);
+            err.push(self.err[r]);
+        }
+        let mut next = 0u32;
+        for (c, list) in ivf.lists.iter_mut().enumerate() {
+            for (p, r) in list.iter_mut().enumerate() {
+                *r = next;
+                ivf.row_cell[next as usize] = c as u32;
+                ivf.row_pos[next as usize] = p as u32;
+                next += 1;
+            }
+        }
+        for (i, id) in ids.iter().enumerate() {
+            self.row.insert(*id, i as u32);
+        }
+        (self.vals, self.ids, self.err) = (vals, ids, err);
+        ivf.packed_rows = self.ids.len();
+    }
+    fn remove(&mut self, id: &ShapeId) {
+        let Some(r) = self.row.remove(id) else { return };
+        let (r, k) = (r as usize, self.k);
+        // The last row moves into the hole.
+        let last = self.ids.len() - 1;
+        if let Some(ivf) = &mut self.ivf {
+            ivf.swap_remove(r);
+        }
+        if r != last {
+            self.vals.copy_within(last * k..(last + 1) * k, r * k);
+            self.err[r] = self.err[last];
+            self.ids[r] = self.ids[last];
+            self.row.insert(self.ids[r], r as u32);
+        }
+        self.ids.pop();
+        self.err.pop();
+        self.vals.truncate(last * k);
+        if self.ivf.as_ref().is_some_and(|i| self.len() < i.trained_rows / 4) {
+            self.train(faer::Par::Seq);
+        }
+    }
+}
+
+/// The rows whose distance may be among the `count` smallest: each row offered with a lower and an upper bound
+/// on its exact distance; kept while its lower bound is at most the `count`-th smallest upper bound seen.
+struct Collector {
+    count: usize,
+    uppers: std::collections::BinaryHeap<u64>,
+    kept: Vec<(f64, u32)>,
+    offered: usize,
+}
+
+impl Collector {
+    fn new(count: usize) -> Self {
+        Collector { count, uppers: Default::default(), kept: vec![], offered: 0 }
+    }
+    /// The `count`-th smallest upper bound so far (∞ before `count` rows).
+    fn bound(&self) -> f64 {
+        if self.uppers.len() < self.count {
+            f64::INFINITY
+        } else {
+            self.uppers.peek().map_or(f64::INFINITY, |b| f64::from_bits(*b))
+        }
+    }
+    fn offer(&mut self, approx: f64, err: f64, row: u32) {
+        self.offered += 1;
+        // Distances are never negative, so their bit patterns order as they do.
+        let (lower, upper) = ((approx - err).max(0.0), approx + err + 1e-12 * approx);
+        if lower > self.bound() {
+            return;
+        }
+        if self.uppers.len() < self.count {
+            self.uppers.push(upper.to_bits());
+        } else if upper < self.bound() {
+            self.uppers.pop();
+            self.uppers.push(upper.to_bits());
+        }
+        self.kept.push((lower, row));
+        if self.kept.len() > 4 * self.count + 64 {
+            let b = self.bound();
+            self.kept.retain(|(l, _)| *l <= b);
+        }
+    }
+    fn rows(mut self) -> Vec<u32> {
+        let b = self.bound();
+        self.kept.retain(|(l, _)| *l <= b);
+        self.kept.into_iter().map(|(_, r)| r).collect()
+    }
+}
+
+/// How a search went.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Every fingerprint of the family (or carrying the tags) was compared.
+    Scan,
+    /// The index's nearest cells were probed.
+    Index,
+}
+
+/// One search.
+pub struct Query<'a> {
+    pub family: &'a str,
+    pub values: &'a [f64],
+    pub metric: Metric,
+    pub count: usize,
+    /// A shape left out of the answer (the query shape).
+    pub exclude: Option<ShapeId>,
+    /// Only shapes carrying every one of these tags.
+    pub tags: &'a [Tag],
+    /// Compare every fingerprint (no index).
+    pub exact: bool,
+    /// The most cells the index probes before it answers without a proof.
+    pub max_cells: usize,
+}
+
+/// A search's answer.
+#[derive(Debug)]
+pub struct Found {
+    /// Nearest first, ties by id: (shape id, exact distance).
+    pub neighbours: Vec<(String, f64)>,
+    /// Fingerprints the family holds.
+    pub searched: usize,
+    /// Fingerprints whose distance was computed.
+    pub probed: usize,
+    /// Whether the neighbours are proven to be the exact ones: a scan, or a probe whose unprobed cells all lie
+    /// farther than the last neighbour.
+    pub exact: bool,
+    pub method: Method,
+}
+
+/// Why a search could not answer.
+#[derive(Debug)]
+pub enum SearchError {
+    /// The query's length is not the family's.
+    Length(String),
+    /// The store could not give the candidates' exact values.
+    Store(std::io::Error),
+}
+
+/// The exact values of some fingerprints of a family, by shape id (those still stored).
+pub type Fetch<'a> = &'a dyn Fn(&str, &[String]) -> std::io::Result<HashMap<String, Vec<f64>>>;
+
+/// Tags by shape and shapes by tag.
+#[derive(Default)]
+pub(crate) struct Tags {
+    pub(crate) by_tag: HashMap<Tag, std::collections::HashSet<ShapeId>>,
+    pub(crate) by_shape: HashMap<ShapeId, Vec<Tag>>,
+}
+
+impl Tags {
+    fn set(&mut self, id: ShapeId, tags: Vec<Tag>) {
+        for old in self.by_shape.remove(&id).unwrap_or_default() {
+            if let Some(set) = self.by_tag.get_mut(&old) {
+                set.remove(&id);
+                if set.is_empty() {
+                    self.by_tag.remove(&old);
+                }
+            }
+        }
+        for t in &tags {
+            self.by_tag.entry(t.clone()).or_default().insert(id);
+        }
+        if !tags.is_empty() {
+            self.by_shape.insert(id, tags);
+        }
+    }
+}
+
+/// The in-memory index of every stored fingerprint, by family, with the shapes' tags, and how far it has followed
+/// the store's log of changes (which other replicas write too).
+#[derive(Default)]
+pub struct Index {
+    pub(crate) families: RwLock<HashMap<String, Family>>,
+    pub(crate) tags: RwLock<Tags>,
+    synced: std::sync::Mutex<i64>,
+    /// Where the index is snapshotted (the embedded store's data directory), and changes since the last snapshot.
+    snapshot: Option<std::path::PathBuf>,
+    changed: std::sync::atomic::AtomicUsize,
+}
+
+/// What loading the index did, for the start-up log and the benchmark.
+#[derive(Debug, Default, Serialize)]
+pub struct LoadReport {
+    /// `snapshot` or `store`.
+    pub from: &'static str,
+    pub fingerprints: usize,
+    pub seconds: f64,
+    /// Why a snapshot present was not used.
+    pub snapshot_refused: Option<String>,
+}
+
+impl Index {
+    /// The index of everything the store holds: from the snapshot at `snapshot` when there is a usable one (then
+    /// the log's changes after it), else from the store's tables (then a snapshot is written).
+    pub fn load(
+        store: &dyn FingerprintStore,
+        snapshot: Option<std::path::PathBuf>,
+    ) -> std::io::Result<(Index, LoadReport)> {
+        let t = std::time::Instant::now();
+        let mut report = LoadReport::default();
+        let end = store.fingerprint_log_end()?;
+        if let Some(path) = &snapshot {
+            match snapshot::read(path, end) {
+                Ok(Some((families, tags, at))) => {
+                    let index = Index {
+                        families: RwLock::new(families),
+                        tags: RwLock::new(tags),
+                        synced: std::sync::Mutex::new(at),
+                        snapshot: snapshot.clone(),
+                        changed: Default::default(),
+                    };
+                    index.sync(store)?;
+                    report.from = "snapshot";
+                    report.fingerprints = index.len();
+                    report.seconds = t.elapsed().as_secs_f64();
+                    return Ok((index, report));
+                }
+                Ok(None) => {}
+                Err(e) => report.snapshot_refused = Some(e.to_string()),
+            }
+        }
+        let mut index = Index { snapshot, ..Default::default() };
+        // The log's end first: a change made while the tables are read is applied again by the next sync, which
+        // is harmless (a put replaces, a removal forgets, tags are set whole).
+        *index.synced.get_mut().unwrap_or_else(|e| e.into_inner()) = end;
+        {
+            let fams = index.families.get_mut().unwrap_or_else(|e| e.into_inner());
+            store.for_each_fingerprint(&mut |family, id, values| {
+                if let Some(id) = ShapeId::parse(id) {
+                    fams.entry(family.to_string()).or_default().put(id, values, false);
+                }
+            })?;
+            for fam in fams.values_mut() {
+                fam.train(faer::Par::rayon(0));
+            }
+            let tags = index.tags.get_mut().unwrap_or_else(|e| e.into_inner());
+            let mut by_shape: HashMap<ShapeId, Vec<Tag>> = HashMap::new();
+            store.for_each_tag(&mut |id, tag| {
+                if let (Some(id), Ok(tag)) = (ShapeId::parse(id), Tag::parse(tag)) {
+                    by_shape.entry(id).or_default().push(tag);
+                }
+            })?;
+            for (id, t) in by_shape {
+                tags.set(id, t);
+            }
+        }
+        index.sync(store)?;
+        report.from = "store";
+        report.fingerprints = index.len();
+        if index.snapshot.is_some() && report.fingerprints > 0 {
+            index.write_snapshot()?;
+        }
+        report.seconds = t.elapsed().as_secs_f64();
+        Ok((index, report))
+    }
+
+    /// Fingerprints held, over every family.
+    pub fn len(&self) -> usize {
+        self.families.read().unwrap_or_else(|e| e.into_inner()).values().map(Family::len).sum()
+    }
+
+    /// Writes the snapshot (when the index has a place for one): the log position it reflects, every family and
+    /// the tags; atomically (a temporary file renamed).
+    pub fn write_snapshot(&self) -> std::io::Result<()> {
+        let Some(path) = &self.snapshot else { return Ok(()) };
+        // The position first, under the sync lock, so that no change below it is missing from what is written.
+        let synced = self.synced.lock().unwrap_or_else(|e| e.into_inner());
+        let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
+        let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
+        self.changed.store(0, std::sync::atomic::Ordering::Relaxed);
+        snapshot::write(path, *synced, &fams, &tags)
+    }
+
+    /// Writes the snapshot if anything changed since the last one.
+    pub fn persist(&self) -> std::io::Result<()> {
+        if self.changed.load(std::sync::atomic::Ordering::Relaxed) > 0 {
+            self.write_snapshot()?;
+        }
+        Ok(())
+    }
+
+    /// Writes a snapshot when a tenth of the index (at least 10,000 fingerprints) changed since the last one.
+    fn maybe_snapshot(&self) {
+        let changed = self.changed.load(std::sync::atomic::Ordering::Relaxed);
+        if self.snapshot.is_some() && changed >= 10_000 && changed >= self.len() / 10 {
+            if let Err(e) = self.write_snapshot() {
+                tracing::warn!(error = %e, "the search index snapshot could not be written");
+            }
+        }
+    }
+
+    /// Applies the changes the store logged since the last sync (fingerprints other replicas computed, shapes
+    /// they removed, tags they set); one indexed query when there are none.
+    pub fn sync(&self, store: &dyn FingerprintStore) -> std::io::Result<()> {
+        let mut synced = self.synced.lock().unwrap_or_else(|e| e.into_inner());
+        let (changes, end) = store.fingerprint_changes(*synced)?;
+        let n = changes.len();
+        for change in changes {
+            match change {
+                FingerprintChange::Kept { family, shape_id, values } => {
+                    self.insert(&Fingerprint { family, shape_id, values })
+                }
+                FingerprintChange::Removed { shape_id } => self.remove_shape(&shape_id),
+                FingerprintChange::Tagged { shape_id, tags } => self.set_tags(&shape_id, &tags),
+            }
+        }
+        *synced = end;
+        drop(synced);
+        if n > 0 {
+            self.maybe_snapshot();
+        }
+        Ok(())
+    }
+    fn insert(&self, f: &Fingerprint) {
+        let Some(id) = ShapeId::parse(&f.shape_id) else { return };
+        let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());
+        fams.entry(f.family.clone()).or_default().put(id, &f.values, true);
+        self.changed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+    /// Keeps a fingerprint: in the store, then in the index; not at all when its shape is no longer stored.
+    pub fn record(&self, store: &dyn FingerprintStore, f: &Fingerprint) -> std::io::Result<()> {
+        if store.put_fingerprint(&f.family, &f.shape_id, &f.values)? {
+            self.insert(f);
+            self.maybe_snapshot();
+        }
+        Ok(())
+    }
+    /// Forgets a deleted shape in every family and its tags (the store drops its rows with the shape).
+    pub fn remove_shape(&self, id: &str) {
+        let Some(id) = ShapeId::parse(id) else { return };
+        for fam in self.families.write().unwrap_or_else(|e| e.into_inner()).values_mut() {
+            fam.remove(&id);
+        }
+        self.tags.write().unwrap_or_else(|e| e.into_inner()).set(id, vec![]);
+        self.changed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+    /// Sets a shape's tags in the index (the store already holds them).
+    pub fn set_tags(&self, id: &str, tags: &[String]) {
+        let Some(id) = ShapeId::parse(id) else { return };
+        let tags = tags.iter().filter_map(|t| Tag::parse(t).ok()).collect();
+        self.tags.write().unwrap_or_else(|e| e.into_inner()).set(id, tags);
+        self.changed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+    /// A shape's tags as this replica's index holds them (sorted).
+    pub fn tags_of(&self, id: &str) -> Vec<String> {
+        let Some(id) = ShapeId::parse(id) else { return vec![] };
+        let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
+        tags.by_shape.get(&id).map(|t| t.iter().map(|t| t.as_str().to_string()).collect()).unwrap_or_default()
+    }
+    /// Whether a family holds a shape's fingerprint.
+    pub fn holds(&self, family: &str, id: &str) -> bool {
+        let Some(id) = ShapeId::parse(id) else { return false };
+        let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
+        fams.get(family).is_some_and(|f| f.row.contains_key(&id))
+    }
+
+    /// The `count` nearest fingerprints of a family to a query (nearest first, ties by id), with exact distances:
+    /// candidates by the single-precision rows (every row, the rows carrying the tags, or the index's nearest
+    /// cells), then every candidate that may be among the nearest re-ranked by its exact values from `fetch`.
+    pub fn nearest(&self, q: &Query, fetch: Fetch) -> Result<Found, SearchError> {
+        let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
+        let Some(fam) = fams.get(q.family).filter(|f| f.len() > 0 && q.count > 0) else {
+            return Ok(Found { neighbours: vec![], searched: 0, probed: 0, exact: true, method: Method::Scan });
+        };
+        if q.values.len() != fam.k {
+            return Err(SearchError::Length(format!(
+                "the fingerprint has {} values; this family's have {}",
+                q.values.len(),
+                fam.k
+            )));
+        }
+        let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
+        let sets: Option<Vec<&std::collections::HashSet<ShapeId>>> =
+            q.tags.iter().map(|t| tags.by_tag.get(t)).collect();
+        let Some(mut sets) = sets else {
+            // A tag no shape carries.
+            return Ok(Found { neighbours: vec![], searched: fam.len(), probed: 0, exact: true, method: Method::Scan });
+        };
+        sets.sort_by_key(|s| s.len());
+        let admits = |id: &ShapeId| Some(id) != q.exclude.as_ref() && sets.iter().all(|s| s.contains(id));
+        let err = |r: usize| match q.metric {
+            // Each term changes by at most 2·2⁻²⁴ under a relative rounding of 2⁻²⁴.
+            Metric::Canberra if fam.err[r].is_finite() => 1.3e-7 * fam.k as f64,
+            _ => fam.err[r] as f64,
+        };
+        let mut c = Collector::new(q.count);
+        let (method, exact) = if let Some(few) = sets.first().filter(|s| s.len() <= ivf::MIN_ROWS.max(fam.len() / 16)) {
+            // A small filter: its members' rows, every one.
+            for id in few.iter() {
+                if let Some(&r) = fam.row.get(id) {
+                    if admits(id) {
+                        let r = r as usize;
+                        c.offer(approx_distance(q.values, fam.row_of(r), q.metric), err(r), r as u32);
+                    }
+                }
+            }
+            (Method::Scan, true)
+        } else if let (Some(ivf), false, false) = (&fam.ivf, q.exact, q.metric == Metric::Canberra) {
+            let mut probed_cells = 0;
+            let mut proven = false;
+            for (bound, cell) in ivf.plan(q.values) {
+                if bound - fam.err_max as f64 > c.bound() {
+                    proven = true;
+                    break;
+                }
+                if probed_cells >= q.max_cells {
+                    break;
+                }
+                probed_cells += 1;
+                for &r in &ivf.lists[cell as usize] {
+                    let r = r as usize;
+                    if admits(&fam.ids[r]) {
+                        c.offer(approx_distance(q.values, fam.row_of(r), q.metric), err(r), r as u32);
+                    }
+                }
+            }
+            // Every cell probed is a proof too.
+            (Method::Index, proven || probed_cells == ivf.cells())
+        } else {
+            for r in 0..fam.len() {
+                if admits(&fam.ids[r]) {
+                    c.offer(approx_distance(q.values, fam.row_of(r), q.metric), err(r), r as u32);
+                }
+            }
+            (Method::Scan, true)
+        };
+        let probed = c.offered;
+        let ids: Vec<String> = c.rows().into_iter().map(|r| fam.ids[r as usize].hex()).collect();
+        let searched = fam.len();
+        drop(tags);
+        drop(fams);
+        let exact_values = fetch(q.family, &ids).map_err(SearchError::Store)?;
+        let mut scored: Vec<(String, f64)> = ids
+            .into_iter()
+            .filter_map(|id| {
+                let v = exact_values.get(&id)?;
+                let d = shape_dna::distance(q.values, v, q.metric).ok()?;
+                Some((id, d))
+            })
+            .collect();
+        scored.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        scored.truncate(q.count);
+        Ok(Found { neighbours: scored, searched, probed, exact, method })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A shape id made from a number.
+    fn sid(i: usize) -> ShapeId {
+        let mut b = [0u8; 32];
+        b[..8].copy_from_slice(&(i as u64).to_be_bytes());
+        ShapeId(b)
+    }
+
+    /// Clustered rows like shape-DNA: ascending values around a few hundred centres.
+    fn rows(n: usize, k: usize, seed: u64) -> Vec<Vec<f64>> {
+        let mut x = seed | 1;
+        let mut rnd = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let centres: Vec<Vec<f64>> = (0..300)
+            .map(|_| {
+                let s = 0.5 + rnd();
+                (0..k).map(|j| s * (j + 1) as f64 * (1.0 + 0.2 * rnd())).collect()
+            })
+            .collect();
+        (0..n)
+            .map(|i| {
+                let c = &centres[(i * 7919) % centres.len()];
+                let w = 0.02 * rnd();
+                c.iter().map(|v| v * (1.0 + w * (rnd() - 0.5))).collect()
+            })
+            .collect()
+    }
+
+    fn brute(
+        all: &HashMap<String, Vec<f64>>,
+        q: &[f64],
+        metric: Metric,
+        count: usize,
+        admit: impl Fn(&str) -> bool,
+    ) -> Vec<(String, f64)> {
+        let mut v: Vec<(String, f64)> = all
+            .iter()
+            .filter(|(id, _)| admit(id))
+            .map(|(id, x)| (id.clone(), shape_dna::distance(q, x, metric).unwrap()))
+            .collect();
+        v.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        v.truncate(count);
+        v
+    }
+
+    fn query<'a>(values: &'a [f64], metric: Metric, tags: &'a [Tag], exact: bool, cells: usize) -> Query<'a> {
+        Query { family: "a", values, metric, count: 10, exclude: Some(sid(3)), tags, exact, max_cells: cells }
+    }
+
+    /// Nearest first with exact distances, ties by id, the excluded shape left out, tags honoured, replaced and
+    /// removed rows seen at once: against sorting every exact distance, by scan and through the cells; and every
+    /// answer the index calls exact is the exact one.
+    #[test]
+    fn searches_agree_with_sorting_every_distance() {
+        let k = 12;
+        let n = ivf::MIN_ROWS + 4000;
+        let index = Index::default();
+        let mut all = HashMap::new();
+        for (i, v) in rows(n, k, 7).into_iter().enumerate() {
+            index.insert(&Fingerprint { family: "a".into(), shape_id: sid(i).hex(), values: v.clone() });
+            all.insert(sid(i).hex(), v);
+        }
+        assert!(index.families.read().unwrap()["a"].ivf.is_some(), "the family has cells");
+        // A replaced row, a removed one, another family apart.
+        let moved = rows(1, k, 99).remove(0);
+        index.insert(&Fingerprint { family: "a".into(), shape_id: sid(10).hex(), values: moved.clone() });
+        all.insert(sid(10).hex(), moved.clone());
+        index.remove_shape(&sid(11).hex());
+        all.remove(&sid(11).hex());
+        index.insert(&Fingerprint { family: "b".into(), shape_id: sid(1).hex(), values: vec![0.0; k] });
+        // Tags: a small one (every 50th shape) and a large one (every other).
+        for i in (0..n).step_by(50) {
+            index.set_tags(&sid(i).hex(), &["few".into(), "half".into()]);
+        }
+        for i in (1..n).step_by(2) {
+            index.set_tags(&sid(i).hex(), &["half".into()]);
+        }
+        let tagged = |id: &str, every: usize| {
+            let i = u64::from_be_bytes(ShapeId::parse(id).unwrap().0[..8].try_into().unwrap()) as usize;
+            i % 50 == 0 || (every == 2 && i % 2 == 1)
+        };
+        let fetch =
+            |_: &str, ids: &[String]| Ok(ids.iter().filter_map(|i| Some((i.clone(), all.get(i)?.clone()))).collect());
+        let not3 = |id: &str| id != sid(3).hex();
+        let queries = rows(40, k, 1234);
+        let (few, half) = ([Tag::parse("few").unwrap()], [Tag::parse("half").unwrap()]);
+        let mut proven = 0;
+        for (qi, q) in queries.iter().enumerate() {
+            for metric in [Metric::Euclidean, Metric::Manhattan, Metric::Canberra] {
+                let want = brute(&all, q, metric, 10, not3);
+                let scan = index.nearest(&query(q, metric, &[], true, 8), &fetch).unwrap();
+                assert_eq!((scan.neighbours.clone(), scan.exact, scan.method), (want.clone(), true, Method::Scan));
+                let got = index.nearest(&query(q, metric, &[], false, 8), &fetch).unwrap();
+                if got.exact {
+                    proven += 1;
+                    assert_eq!(got.neighbours, want, "query {qi}, {metric}: called exact");
+                }
+                assert_eq!(got.searched, n - 1);
+                // All cells: exact, whatever the bounds.
+                let every = index.nearest(&query(q, metric, &[], false, usize::MAX), &fetch).unwrap();
+                assert_eq!((every.neighbours, every.exact), (want, true));
+                let small = index.nearest(&query(q, metric, &few, false, 8), &fetch).unwrap();
+                let want = brute(&all, q, metric, 10, |id| not3(id) && tagged(id, 50));
+                assert_eq!((small.neighbours, small.exact, small.method), (want, true, Method::Scan));
+                let large = index.nearest(&query(q, metric, &half, false, usize::MAX), &fetch).unwrap();
+                let want = brute(&all, q, metric, 10, |id| not3(id) && tagged(id, 2));
+                assert_eq!(large.neighbours, want);
+            }
+        }
+        assert!(proven > 0, "some answers are proven exact by the cells' bounds");
+        let q = &queries[0];
+        assert!(matches!(
+            index.nearest(&query(&q[..3], Metric::Euclidean, &[], false, 8), &fetch),
+            Err(SearchError::Length(_))
+        ));
+        let none = index.nearest(&query(q, Metric::Euclidean, &[Tag::parse("nobody").unwrap()], false, 8), &fetch);
+        assert!(none.unwrap().neighbours.is_empty());
+    }
+
+    /// A snapshot read back answers as the index it was written from; one beyond the store's log, or cut short,
+    /// is refused.
+    #[test]
+    fn a_snapshot_reads_back_as_it_was_written() {
+        let k = 6;
+        let index = Index::default();
+        let mut all = HashMap::new();
+        for (i, v) in rows(ivf::MIN_ROWS + 100, k, 3).into_iter().enumerate() {
+            index.insert(&Fingerprint { family: "a".into(), shape_id: sid(i).hex(), values: v.clone() });
+            all.insert(sid(i).hex(), v);
+        }
+        index.set_tags(&sid(5).hex(), &["x".into()]);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("search-index.bin");
+        let fams = index.families.read().unwrap();
+        snapshot::write(&path, 42, &fams, &index.tags.read().unwrap()).unwrap();
+        let (families, tags, at) = snapshot::read(&path, 42).unwrap().unwrap();
+        assert_eq!(at, 42);
+        let back = Index { families: RwLock::new(families), tags: RwLock::new(tags), ..Default::default() };
+        let fetch =
+            |_: &str, ids: &[String]| Ok(ids.iter().filter_map(|i| Some((i.clone(), all.get(i)?.clone()))).collect());
+        for q in rows(5, k, 77) {
+            for cells in [4, usize::MAX] {
+                let (a, b) = (
+                    index.nearest(&query(&q, Metric::Euclidean, &[], false, cells), &fetch).unwrap(),
+                    back.nearest(&query(&q, Metric::Euclidean, &[], false, cells), &fetch).unwrap(),
+                );
+                assert_eq!((a.neighbours, a.probed, a.exact), (b.neighbours, b.probed, b.exact));
+            }
+        }
+        assert_eq!(back.tags.read().unwrap().by_shape[&sid(5)], vec![Tag::parse("x").unwrap()]);
+        assert!(snapshot::read(&path, 41).is_err(), "a snapshot beyond the log is refused");
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 9]).unwrap();
+        assert!(snapshot::read(&path, 42).is_err(), "a snapshot cut short is refused");
+        assert!(snapshot::read(&dir.path().join("none"), 42).unwrap().is_none());
+    }
+
+    #[test]
+    fn tags_parse_at_the_boundary() {
+        assert_eq!(Tag::parse_all(&["b", "a", "b"]).unwrap(), vec![Tag::parse("a").unwrap(), Tag::parse("b").unwrap()]);
+        for bad in ["", "a b", "é", "x\n", &"y".repeat(65)] {
+            assert!(Tag::parse(bad).is_err(), "{bad:?}");
+        }
+        assert!(Tag::parse_all(&(0..33).map(|i| i.to_string()).collect::<Vec<_>>()).is_err());
+    }
+}

@@ -1,0 +1,231 @@
+//! The search index on disk, so that a start reads one file instead of every fingerprint in the store and training
+//! the cells again: the log position it reflects, each family's ids, single-precision rows, rounding bounds and
+//! cells, and the shapes' tags. Little-endian; written to a temporary file, synced and renamed over the last one.
+//!
+//! A snapshot is used only when its position is not beyond the store's log (a snapshot of another store, or of a
+//! store rolled back, is refused and the index is built from the tables). A table edited by hand, outside the
+//! service and its log, is not seen by a snapshot: remove the file (`search-index.bin`) after such an edit.
+
+use super::ivf::Ivf;
+use super::{Family, Tag, Tags};
+use crate::service::ids::ShapeId;
+use std::collections::HashMap;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::Path;
+
+const MAGIC: &[u8; 8] = b"KACIDX01";
+const END: &[u8; 8] = b"KACIDXOK";
+
+struct W<T: Write>(T);
+impl<T: Write> W<T> {
+    fn bytes(&mut self, b: &[u8]) -> std::io::Result<()> {
+        self.0.write_all(b)
+    }
+    fn u32(&mut self, v: u32) -> std::io::Result<()> {
+        self.bytes(&v.to_le_bytes())
+    }
+    fn u64(&mut self, v: u64) -> std::io::Result<()> {
+        self.bytes(&v.to_le_bytes())
+    }
+    fn f64s(&mut self, v: &[f64]) -> std::io::Result<()> {
+        for c in v.chunks(8192) {
+            let b: Vec<u8> = c.iter().flat_map(|x| x.to_le_bytes()).collect();
+            self.bytes(&b)?;
+        }
+        Ok(())
+    }
+    fn f32s(&mut self, v: &[f32]) -> std::io::Result<()> {
+        for c in v.chunks(16384) {
+            let b: Vec<u8> = c.iter().flat_map(|x| x.to_le_bytes()).collect();
+            self.bytes(&b)?;
+        }
+        Ok(())
+    }
+    fn u32s(&mut self, v: &[u32]) -> std::io::Result<()> {
+        for c in v.chunks(16384) {
+            let b: Vec<u8> = c.iter().flat_map(|x| x.to_le_bytes()).collect();
+            self.bytes(&b)?;
+        }
+        Ok(())
+    }
+    fn text(&mut self, s: &str) -> std::io::Result<()> {
+        self.u32(s.len() as u32)?;
+        self.bytes(s.as_bytes())
+    }
+}
+
+/// Writes the snapshot of `families` and `tags` at log position `at`.
+pub(crate) fn write(path: &Path, at: i64, families: &HashMap<String, Family>, tags: &Tags) -> std::io::Result<()> {
+    let tmp = path.with_extension("tmp");
+    let file = std::fs::File::create(&tmp)?;
+    let mut w = W(BufWriter::with_capacity(1 << 20, file));
+    w.bytes(MAGIC)?;
+    w.u64(at as u64)?;
+    w.u32(families.len() as u32)?;
+    for (name, f) in families {
+        w.text(name)?;
+        w.u32(f.k as u32)?;
+        w.u64(f.len() as u64)?;
+        for id in &f.ids {
+            w.bytes(&id.0)?;
+        }
+        w.f32s(&f.vals)?;
+        w.f32s(&f.err)?;
+        w.f32s(&[f.err_max])?;
+        match &f.ivf {
+            None => w.u32(0)?,
+            Some(ivf) => {
+                w.u32(ivf.cells() as u32)?;
+                w.u64(ivf.trained_rows as u64)?;
+                w.f64s(&[ivf.slack])?;
+                w.f64s(&ivf.centroids)?;
+                w.u32s(&ivf.row_cell)?;
+            }
+        }
+    }
+    w.u64(tags.by_shape.len() as u64)?;
+    for (id, t) in &tags.by_shape {
+        w.bytes(&id.0)?;
+        w.u32(t.len() as u32)?;
+        for tag in t {
+            w.text(tag.as_str())?;
+        }
+    }
+    w.bytes(END)?;
+    let file = w.0.into_inner().map_err(|e| e.into_error())?;
+    file.sync_all()?;
+    std::fs::rename(&tmp, path)?;
+    if let Some(dir) = path.parent() {
+        std::fs::File::open(dir)?.sync_all()?;
+    }
+    Ok(())
+}
+
+struct R<T: Read>(T);
+impl<T: Read> R<T> {
+    fn array<const N: usize>(&mut self) -> std::io::Result<[u8; N]> {
+        let mut b = [0u8; N];
+        self.0.read_exact(&mut b)?;
+        Ok(b)
+    }
+    fn u32(&mut self) -> std::io::Result<u32> {
+        Ok(u32::from_le_bytes(self.array()?))
+    }
+    fn u64(&mut self) -> std::io::Result<u64> {
+        Ok(u64::from_le_bytes(self.array()?))
+    }
+    /// `n` values of `W` bytes each, converted by `f`.
+    fn many<const W: usize, V>(&mut self, n: usize, f: impl Fn([u8; W]) -> V) -> std::io::Result<Vec<V>> {
+        let mut out = Vec::with_capacity(n);
+        let mut buf = vec![0u8; W * 16384];
+        let mut left = n;
+        while left > 0 {
+            let m = left.min(16384);
+            self.0.read_exact(&mut buf[..m * W])?;
+            out.extend(buf[..m * W].chunks_exact(W).map(|c| f(c.try_into().unwrap_or([0; W]))));
+            left -= m;
+        }
+        Ok(out)
+    }
+    fn text(&mut self, max: usize) -> std::io::Result<String> {
+        let n = self.u32()? as usize;
+        if n > max {
+            return Err(bad("a name longer than any the service writes"));
+        }
+        let mut b = vec![0u8; n];
+        self.0.read_exact(&mut b)?;
+        String::from_utf8(b).map_err(|_| bad("a name that is not UTF-8"))
+    }
+}
+
+fn bad(what: &str) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidData, format!("the search index snapshot is damaged: {what}"))
+}
+
+type Loaded = (HashMap<String, Family>, Tags, i64);
+
+/// The snapshot at `path` (None when there is none), refused when it is damaged or beyond the log's end
+/// `log_end`.
+pub(crate) fn read(path: &Path, log_end: i64) -> std::io::Result<Option<Loaded>> {
+    let file = match std::fs::File::open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e),
+    };
+    let size = file.metadata()?.len();
+    let mut r = R(BufReader::with_capacity(1 << 20, file));
+    if &r.array::<8>()? != MAGIC {
+        return Err(bad("not a kac search index (or of another version)"));
+    }
+    let at = r.u64()? as i64;
+    if at > log_end {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("the search index snapshot is at log position {at}, beyond the store's {log_end}: another store's"),
+        ));
+    }
+    let mut families = HashMap::new();
+    let nfam = r.u32()?;
+    for _ in 0..nfam {
+        let name = r.text(256)?;
+        let k = r.u32()? as usize;
+        let n = r.u64()? as usize;
+        // Sizes checked against the file before anything that large is allocated.
+        if k == 0 || (n as u64).saturating_mul(32 + 4 * k as u64 + 8) > size {
+            return Err(bad("a family larger than the file"));
+        }
+        let ids: Vec<ShapeId> = r.many::<32, _>(n, ShapeId)?;
+        let vals = r.many::<4, _>(n * k, f32::from_le_bytes)?;
+        let err = r.many::<4, _>(n, f32::from_le_bytes)?;
+        let err_max = f32::from_le_bytes(r.array()?);
+        let cells = r.u32()? as usize;
+        let ivf = if cells == 0 {
+            None
+        } else {
+            let trained_rows = r.u64()? as usize;
+            let slack = f64::from_le_bytes(r.array()?);
+            if (cells as u64).saturating_mul(8 * k as u64) > size {
+                return Err(bad("more cells than the file holds"));
+            }
+            let centroids = r.many::<8, _>(cells * k, f64::from_le_bytes)?;
+            let row_cell = r.many::<4, _>(n, u32::from_le_bytes)?;
+            let mut lists = vec![vec![]; cells];
+            let mut row_pos = Vec::with_capacity(n);
+            for (row, &c) in row_cell.iter().enumerate() {
+                let list = lists.get_mut(c as usize).ok_or_else(|| bad("a row in a cell that does not exist"))?;
+                row_pos.push(list.len() as u32);
+                list.push(row as u32);
+            }
+            Some(Ivf { k, centroids, lists, row_cell, row_pos, slack, trained_rows, packed_rows: n })
+        };
+        let mut row = HashMap::with_capacity(n);
+        for (i, id) in ids.iter().enumerate() {
+            row.insert(*id, i as u32);
+        }
+        if row.len() != n {
+            return Err(bad("an id held twice"));
+        }
+        families.insert(name, Family { k, ids, row, vals, err, err_max, ivf });
+    }
+    let mut tags = Tags::default();
+    let shapes = r.u64()?;
+    if shapes.saturating_mul(36) > size {
+        return Err(bad("more tagged shapes than the file holds"));
+    }
+    for _ in 0..shapes {
+        let id = ShapeId(r.array()?);
+        let count = r.u32()? as usize;
+        if count > super::MAX_TAGS {
+            return Err(bad("a shape with more tags than allowed"));
+        }
+        let mut t = Vec::with_capacity(count);
+        for _ in 0..count {
+            t.push(Tag::parse(&r.text(64)?).map_err(|e| bad(&e))?);
+        }
+        tags.set(id, t);
+    }
+    if &r.array::<8>()? != END {
+        return Err(bad("its end is missing"));
+    }
+    Ok(Some((families, tags, at)))
+}
