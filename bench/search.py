@@ -176,7 +176,11 @@ def fill(data, family, base, rows, seed, pick):
                 picked[j] = chunk_rows[j - done].copy()
             x = np.concatenate([head[real_at[c]:real_at[c + 1]], chunk_rows])
             x = x[rng.permutation(len(x))]
-            db.executemany(sql, zip(itertools.repeat(family), ids(at, len(x)), blobs(x)))
+            idx = ids(at, len(x))
+            db.executemany(sql, zip(itertools.repeat(family), idx, blobs(x)))
+            # every hundredth shape carries the tag "one-percent" (for the filtered searches)
+            db.executemany("INSERT INTO shape_tags (shape_id, tag) VALUES (?, 'one-percent')",
+                           [(idx[i],) for i in range(len(idx)) if (at + i) % 100 == 0])
             done += len(chunk_rows)
             at += len(x)
             if at // 1_000_000 > (at - len(x)) // 1_000_000:
@@ -197,10 +201,12 @@ def queries(real_held, synthetic_rows, count, n_synthetic, rng):
     return [qs[i] for i in rng.permutation(len(qs))]
 
 
-def search(base, fp, n, exact=False):
+def search(base, fp, n, exact=False, tags=None):
     body = dict(Q, fingerprint=fp, neighbours=10)
     if exact:
         body["exact"] = True
+    if tags:
+        body["tags"] = tags
     t = time.perf_counter()
     st, r = call(base, "POST", "/v1/search", body, timeout=600)
     secs = time.perf_counter() - t
@@ -247,6 +253,9 @@ def run(a, kac, n, base_real, held):
             indexed = [search(base, fp, n) for _, fp in qs]
             n_exact = len(qs) if a.exact_queries is None else min(a.exact_queries, len(qs))
             exact = [search(base, fp, n, exact=True) for _, fp in qs[:n_exact]]
+            one = ["one-percent"]
+            tagged = [search(base, fp, n, tags=one) for _, fp in qs]
+            tagged_exact = [search(base, fp, n, exact=True, tags=one) for _, fp in qs[:n_exact]]
             serve_mb = peak_mb(p)
         finally:
             stop(p)
@@ -256,6 +265,8 @@ def run(a, kac, n, base_real, held):
             got = {x["shape_id"] for x in ri["neighbours"]}
             want = {x["shape_id"] for x in re["neighbours"]}
             recall[kind].append(len(got & want) / max(1, len(want)))
+        tagged_recall = [len({x["shape_id"] for x in ri["neighbours"]} & {x["shape_id"] for x in re["neighbours"]})
+                         / max(1, len(re["neighbours"])) for (_, ri), (_, re) in zip(tagged, tagged_exact)]
         marked = [r["exact"] for _, r in indexed if "exact" in r]
         probed = [r["probed"] for _, r in indexed if "probed" in r]
         ms = lambda xs: {"p50": round(1000 * pct(xs, 0.5), 2), "p99": round(1000 * pct(xs, 0.99), 2)}
@@ -273,7 +284,10 @@ def run(a, kac, n, base_real, held):
                 "indexed_ms": ms([s for s, _ in indexed]), "exact_scan_ms": ms([s for s, _ in exact]),
                 "recall_at_10": {"real": mean(recall["real"]), "synthetic": mean(recall["synthetic"]),
                                  "min": min(recall["real"] + recall["synthetic"], default=None)},
-                "exact_fraction": mean(marked), "mean_probed": mean(probed)}
+                "exact_fraction": mean(marked), "mean_probed": mean(probed),
+                "tag_1_percent": {"ms": ms([s for s, _ in tagged]), "exact_scan_ms": ms([s for s, _ in tagged_exact]),
+                                  "recall_at_10": mean(tagged_recall),
+                                  "method": sorted({r.get("method") for _, r in tagged} - {None})}}
     finally:
         if a.keep:
             log("  kept " + work)

@@ -349,4 +349,26 @@ fn a_search_on_one_replica_sees_fingerprints_and_removals_made_on_another() {
     let r = search(&ids[2]);
     assert_eq!(r["searched"], 2, "{r}");
     assert!(!r.to_string().contains(&ids[0]), "{r}");
+    // Tags set through A limit B's searches at once; a replica started later reads them from the tables.
+    let (st, t, _) =
+        call(agent().put(&a.url(&format!("/v1/shapes/{}/tags", ids[1]))).send_json(json!({ "tags": ["kept"] })))
+            .unwrap();
+    assert_eq!(st, 200, "{t}");
+    let within = |r: &Replica, tag: &str| {
+        let body = json!({ "shape_id": ids[2], "k": 5, "tags": [tag] });
+        let (st, r, _) = call(agent().post(&r.url("/v1/search")).send_json(body)).unwrap();
+        assert_eq!(st, 200, "{r}");
+        r["neighbours"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|n| n["shape_id"].as_str().unwrap().to_string())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(within(&b, "kept"), vec![ids[1].clone()]);
+    assert!(within(&b, "other").is_empty());
+    let c = Replica::start(Some(&url), &["--workers", "1"]);
+    assert_eq!(within(&c, "kept"), vec![ids[1].clone()]);
+    let (_, shape, _) = call(agent().get(&c.url(&format!("/v1/shapes/{}", ids[1]))).call()).unwrap();
+    assert_eq!(shape["tags"], json!(["kept"]));
 }

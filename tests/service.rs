@@ -1212,7 +1212,10 @@ fn a_collection_is_uploaded_in_bulk_tagged_and_searched_within_a_tag() {
     assert!(got[2].1 >= 400 && files[2]["problem"]["type"].is_string(), "{}", files[2]);
     assert_eq!(got[3..], [("c.off", 201), ("more.zip/inner/long.off", 201), ("more.zip/broken.off", got[5].1)]);
     assert!(got[5].1 >= 400, "{}", files[5]);
-    assert_eq!((r.body["created"].as_u64(), r.body["failed"].as_u64()), (Some(4), Some(2)));
+    assert_eq!(
+        (r.body["created"].as_u64(), r.body["failed"].as_u64(), r.body["unstarted"].as_u64()),
+        (Some(4), Some(2), Some(0))
+    );
     let ids: Vec<String> =
         [0, 1, 3, 4].iter().map(|&i| files[i]["shape"]["id"].as_str().unwrap().to_string()).collect();
     for i in [0, 1, 3, 4] {
@@ -1271,4 +1274,11 @@ fn a_collection_is_uploaded_in_bulk_tagged_and_searched_within_a_tag() {
     let (ct3, bad) = multipart(&[("options", None, br#"{"tags": ["ok"], "colour": 1}"#), ("file", Some("a.off"), &a)]);
     let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct3).send_bytes(&bad));
     assert_eq!((r.status, r.body["field"].as_str()), (422, Some("colour")), "{}", r.body);
+    // A queue too small for the upload's jobs: every file stored, those whose job could not start counted.
+    let s = Server::start(&["--workers", "1", "--queue-capacity", "1", "--test-job-delay-ms", "1500"]);
+    let (ct4, three) =
+        multipart(&[("file", Some("a.off"), &a), ("file", Some("b.off"), &b), ("file", Some("c.off"), &c)]);
+    let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct4).send_bytes(&three));
+    assert_eq!((r.body["created"].as_u64(), r.body["unstarted"].as_u64()), (Some(3), Some(2)), "{}", r.body);
+    assert_eq!(r.body["files"][2]["problem"]["code"], "queue-full", "{}", r.body);
 }

@@ -123,7 +123,11 @@ pub struct BulkFile {
 pub struct BulkResult {
     pub created: usize,
     pub existing: usize,
+    /// Files not stored (each with its `problem`).
     pub failed: usize,
+    /// Files stored whose fingerprint job could not start (the queue full, say; each with its `problem`): send them
+    /// again (a stored shape answers 200 and gets its job then).
+    pub unstarted: usize,
     pub files: Vec<BulkFile>,
 }
 
@@ -185,7 +189,7 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
             )));
         }
     }
-    let mut out = BulkResult { created: 0, existing: 0, failed: 0, files: vec![] };
+    let mut out = BulkResult { created: 0, existing: 0, failed: 0, unstarted: 0, files: vec![] };
     for (name, bytes) in files {
         let up = Upload::file(bytes, Some(name.clone()));
         let (created, shape) = match ingest(&st, up).await {
@@ -217,7 +221,10 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         })();
         let (job, problem) = match started {
             Ok(job) => (job, None),
-            Err(e) => (None, Some(e.problem().1)),
+            Err(e) => {
+                out.unstarted += 1;
+                (None, Some(e.problem().1))
+            }
         };
         let file = BulkFile {
             name,

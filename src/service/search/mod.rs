@@ -91,6 +91,40 @@ impl Tag {
     }
 }
 
+/// Hashing for shape ids, which are SHA-256 digests already: the first 16 bytes folded and mixed (murmur3's
+/// finalizer) instead of SipHash over all 32, which the scans of a tag's shapes and the loading of millions of ids
+/// spend most of their time in otherwise.
+#[derive(Default, Clone, Copy)]
+pub(crate) struct IdHasher(u64);
+
+impl std::hash::Hasher for IdHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        let mut x = self.0;
+        for c in bytes.chunks(8).take(2) {
+            let mut b = [0u8; 8];
+            b[..c.len()].copy_from_slice(c);
+            x ^= u64::from_le_bytes(b);
+            x = x.rotate_left(29);
+        }
+        self.0 = x;
+    }
+    fn write_usize(&mut self, n: usize) {
+        self.0 ^= n as u64;
+    }
+    fn finish(&self) -> u64 {
+        let mut h = self.0;
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+        h ^ (h >> 33)
+    }
+}
+
+pub(crate) type Ids = std::hash::BuildHasherDefault<IdHasher>;
+pub(crate) type IdMap<V> = HashMap<ShapeId, V, Ids>;
+pub(crate) type IdSet = std::collections::HashSet<ShapeId, Ids>;
+
 /// The rounding bound of one row stored in single precision: ‖x − x₃₂‖₁ ≤ 2⁻²⁴‖x‖₁ for values in single
 /// precision's normal range (6.0·10⁻⁸ covers 2⁻²⁴ and the rounding of the sum), infinite when a value is outside it
 /// (such a row is always re-ranked from its exact values).
@@ -145,7 +179,7 @@ fn approx_distance(q: &[f64], x: &[f32], metric: Metric) -> f64 {
 pub(crate) struct Family {
     pub(crate) k: usize,
     pub(crate) ids: Vec<ShapeId>,
-    pub(crate) row: HashMap<ShapeId, u32>,
+    pub(crate) row: IdMap<u32>,
     pub(crate) vals: Vec<f32>,
     /// Each row's rounding bound ([`rounding_bound`]).
     pub(crate) err: Vec<f32>,
@@ -364,8 +398,8 @@ pub type Fetch<'a> = &'a dyn Fn(&str, &[String]) -> std::io::Result<HashMap<Stri
 /// Tags by shape and shapes by tag.
 #[derive(Default)]
 pub(crate) struct Tags {
-    pub(crate) by_tag: HashMap<Tag, std::collections::HashSet<ShapeId>>,
-    pub(crate) by_shape: HashMap<ShapeId, Vec<Tag>>,
+    pub(crate) by_tag: HashMap<Tag, IdSet>,
+    pub(crate) by_shape: IdMap<Vec<Tag>>,
 }
 
 impl Tags {
@@ -484,12 +518,18 @@ impl Index {
     /// the tags; atomically (a temporary file renamed).
     pub fn write_snapshot(&self) -> std::io::Result<()> {
         let Some(path) = &self.snapshot else { return Ok(()) };
-        // The position first, under the sync lock, so that no change below it is missing from what is written.
+        // The position and the read locks under the sync lock, so that no change at or below the position is
+        // missing from what is written; the sync lock is let go before the (long) write, so that searches, which
+        // read the log first, go on while it is written. A change the index holds beyond the position is applied
+        // again from the log at the next start, which is harmless (a put replaces, a removal forgets, tags are set
+        // whole).
         let synced = self.synced.lock().unwrap_or_else(|e| e.into_inner());
         let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
         let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
+        let at = *synced;
+        drop(synced);
         self.changed.store(0, std::sync::atomic::Ordering::Relaxed);
-        snapshot::write(path, *synced, &fams, &tags)
+        snapshot::write(path, at, &fams, &tags)
     }
 
     /// Writes the snapshot if anything changed since the last one.
@@ -591,8 +631,7 @@ impl Index {
             )));
         }
         let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
-        let sets: Option<Vec<&std::collections::HashSet<ShapeId>>> =
-            q.tags.iter().map(|t| tags.by_tag.get(t)).collect();
+        let sets: Option<Vec<&IdSet>> = q.tags.iter().map(|t| tags.by_tag.get(t)).collect();
         let Some(mut sets) = sets else {
             // A tag no shape carries.
             return Ok(Found { neighbours: vec![], searched: fam.len(), probed: 0, exact: true, method: Method::Scan });
@@ -606,14 +645,16 @@ impl Index {
         };
         let mut c = Collector::new(q.count);
         let (method, exact) = if let Some(few) = sets.first().filter(|s| s.len() <= ivf::MIN_ROWS.max(fam.len() / 16)) {
-            // A small filter: its members' rows, every one.
-            for id in few.iter() {
-                if let Some(&r) = fam.row.get(id) {
-                    if admits(id) {
-                        let r = r as usize;
-                        c.offer(approx_distance(q.values, fam.row_of(r), q.metric), err(r), r as u32);
-                    }
-                }
+            // A small filter: its members' rows, every one, in memory order.
+            let mut rows: Vec<u32> = few
+                .iter()
+                .filter(|id| Some(*id) != q.exclude.as_ref() && sets[1..].iter().all(|s| s.contains(id)))
+                .filter_map(|id| fam.row.get(id).copied())
+                .collect();
+            rows.sort_unstable();
+            for r in rows {
+                let r = r as usize;
+                c.offer(approx_distance(q.values, fam.row_of(r), q.metric), err(r), r as u32);
             }
             (Method::Scan, true)
         } else if let (Some(ivf), false, false) = (&fam.ivf, q.exact, q.metric == Metric::Canberra) {

@@ -198,7 +198,7 @@ pub(crate) fn read(path: &Path, log_end: i64) -> std::io::Result<Option<Loaded>>
             }
             Some(Ivf { k, centroids, lists, row_cell, row_pos, slack, trained_rows, packed_rows: n })
         };
-        let mut row = HashMap::with_capacity(n);
+        let mut row = super::IdMap::with_capacity_and_hasher(n, Default::default());
         for (i, id) in ids.iter().enumerate() {
             row.insert(*id, i as u32);
         }
