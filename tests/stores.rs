@@ -104,7 +104,22 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert!(b.fingerprints.put_fingerprint("fam", &id, &[1.0, 2.5]).unwrap());
     assert!(b.fingerprints.put_fingerprint("fam", &id, &[1.0, 3.5]).unwrap());
     assert!(!b.fingerprints.put_fingerprint("fam", "not-stored", &[1.0]).unwrap());
-    assert_eq!(other.fingerprints.load_fingerprints().unwrap(), vec![("fam".into(), id.clone(), vec![1.0, 3.5])]);
+    let all = |f: &dyn kac::service::store::FingerprintStore| {
+        let mut v = vec![];
+        f.for_each_fingerprint(&mut |fam, id, x| v.push((fam.to_string(), id.to_string(), x.to_vec()))).unwrap();
+        v
+    };
+    assert_eq!(all(&*other.fingerprints), vec![("fam".into(), id.clone(), vec![1.0, 3.5])]);
+    let got = other.fingerprints.fingerprints_of("fam", &[id.clone(), "not-stored".into()]).unwrap();
+    assert_eq!((got.len(), &got[&id]), (1, &vec![1.0, 3.5]));
+    // Tags: set whole on stored shapes only, read back sorted by another connection, logged.
+    assert!(b.fingerprints.set_tags(&id, &["b".into(), "a".into()]).unwrap());
+    assert!(!b.fingerprints.set_tags("not-stored", &["a".into()]).unwrap());
+    assert_eq!(other.fingerprints.tags_of(&id).unwrap(), ["a", "b"]);
+    let mut pairs = vec![];
+    other.fingerprints.for_each_tag(&mut |s, t| pairs.push((s.to_string(), t.to_string()))).unwrap();
+    pairs.sort();
+    assert_eq!(pairs, [(id.clone(), "a".to_string()), (id.clone(), "b".to_string())]);
 
     // Results: written once; a second write of the id changes nothing; read back by a fresh store, numbers exact
     // (NaN included), body and ETag the same; a large one (several blob chunks, a streamed body) as well.
@@ -139,14 +154,17 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert!(b.shapes.remove(&sid).unwrap());
     assert!(!b.shapes.remove(&sid).unwrap());
     assert!(reopen().shapes.get(&sid).unwrap().is_none());
-    assert!(reopen().fingerprints.load_fingerprints().unwrap().is_empty());
+    assert!(all(&*reopen().fingerprints).is_empty());
+    assert!(reopen().fingerprints.tags_of(&id).unwrap().is_empty(), "tags go with the shape");
     let (changes, end) = reopen().fingerprints.fingerprint_changes(log).unwrap();
+    use kac::service::store::FingerprintChange as C;
     assert_eq!(
         changes,
         vec![
-            ("fam".to_string(), id.clone(), Some(vec![1.0, 2.5])),
-            ("fam".to_string(), id.clone(), Some(vec![1.0, 3.5])),
-            (String::new(), id.clone(), None),
+            C::Kept { family: "fam".into(), shape_id: id.clone(), values: vec![1.0, 2.5] },
+            C::Kept { family: "fam".into(), shape_id: id.clone(), values: vec![1.0, 3.5] },
+            C::Tagged { shape_id: id.clone(), tags: vec!["b".into(), "a".into()] },
+            C::Removed { shape_id: id.clone() },
         ]
     );
     assert_eq!(b.fingerprints.fingerprint_log_end().unwrap(), end);

@@ -156,12 +156,16 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         .map_err(|e| ApiError::invalid_request(format!("multipart: {}", e.body_text())))?;
     let mut files: Vec<(String, Bytes)> = vec![];
     let mut options = BulkOptions { fingerprint: default_fingerprint(), ..Default::default() };
+    // What the request's archives may expand to, together: the body limit (or 64 MiB) once.
+    let mut budget = st.config.max_body_bytes.max(64 << 20);
     while let Some(field) = mp.next_field().await.map_err(|e| multipart_error(&st, &e))? {
         let name = field.name().unwrap_or("").to_string();
         let filename = field.file_name().map(str::to_string);
         let data = field.bytes().await.map_err(|e| multipart_error(&st, &e))?;
         match filename {
-            Some(f) if f.to_ascii_lowercase().ends_with(".zip") => files.extend(unzip(&f, &data)?),
+            Some(f) if f.to_ascii_lowercase().ends_with(".zip") => {
+                files.extend(unzip(&f, &data, MAX_BULK_FILES - files.len().min(MAX_BULK_FILES), &mut budget)?)
+            }
             Some(f) => files.push((f, data)),
             None if name == "options" => {
                 let v: Value = serde_json::from_slice(&data)
@@ -206,10 +210,9 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         } else {
             out.existing += 1;
         }
+        // Tags first (a failure is reported, and the job still starts).
+        let tagged = if tags.is_empty() { Ok(vec![]) } else { add_tags(&st, &shape.id, &tags) };
         let started = (|| -> Result<Option<JobResource>, ApiError> {
-            if !tags.is_empty() {
-                add_tags(&st, &shape.id, &tags)?;
-            }
             let Some(fp) = &options.fingerprint else { return Ok(None) };
             let analysis = Analysis::ShapeDna {
                 options: fp.dna.clone(),
@@ -219,13 +222,16 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
             let (job, _) = jobs::submit(&st.jobs, &st.config, shape.clone(), analysis)?;
             Ok(Some(job_resource(&job)))
         })();
-        let (job, problem) = match started {
+        let (job, mut problem) = match started {
             Ok(job) => (job, None),
             Err(e) => {
                 out.unstarted += 1;
                 (None, Some(e.problem().1))
             }
         };
+        if let Err(e) = tagged {
+            problem = problem.or(Some(e.problem().1));
+        }
         let file = BulkFile {
             name,
             status: if created { 201 } else { 200 },
@@ -249,17 +255,16 @@ fn multipart_error(st: &AppState, e: &axum::extract::multipart::MultipartError) 
 }
 
 /// The files of a zip archive (directories skipped), named `archive/inner`; an entry that cannot be read is
-/// refused with the archive, as is one larger than the archive allows for (a zip bomb).
-fn unzip(archive: &str, data: &[u8]) -> Result<Vec<(String, Bytes)>, ApiError> {
+/// refused with the archive, as is an archive of more than `room` files or expanding beyond what is left of the
+/// request's `budget` of expanded bytes (a zip bomb), counted as read.
+fn unzip(archive: &str, data: &[u8], room: usize, budget: &mut usize) -> Result<Vec<(String, Bytes)>, ApiError> {
     use std::io::Read;
     let bad =
         |e: &dyn std::fmt::Display| ApiError::invalid_request(format!("{archive}: not a readable zip archive: {e}"));
     let mut z = zip::ZipArchive::new(std::io::Cursor::new(data)).map_err(|e| bad(&e))?;
-    if z.len() > MAX_BULK_FILES {
-        return Err(ApiError::invalid_request(format!("{archive}: more than {MAX_BULK_FILES} files")));
+    if z.len() > room {
+        return Err(ApiError::invalid_request(format!("{archive}: more than {MAX_BULK_FILES} files in the upload")));
     }
-    // Expanded, an archive may hold at most 20 times its size (or 64 MiB), counted as read, not as declared.
-    let mut budget = (20 * data.len()).max(64 << 20);
     let mut out = vec![];
     for i in 0..z.len() {
         let f = z.by_index(i).map_err(|e| bad(&e))?;
@@ -268,13 +273,14 @@ fn unzip(archive: &str, data: &[u8]) -> Result<Vec<(String, Bytes)>, ApiError> {
         }
         let name = format!("{archive}/{}", f.name());
         let mut buf = vec![];
-        f.take(budget as u64 + 1).read_to_end(&mut buf).map_err(|e| bad(&e))?;
-        if buf.len() > budget {
+        f.take(*budget as u64 + 1).read_to_end(&mut buf).map_err(|e| bad(&e))?;
+        if buf.len() > *budget {
             return Err(ApiError::invalid_request(format!(
-                "{archive}: expands beyond 20 times its size; send its files as parts instead"
+                "{archive}: the upload's archives expand beyond --max-body-bytes (or 64 MiB) together; send fewer \
+                 files at a time"
             )));
         }
-        budget -= buf.len();
+        *budget -= buf.len();
         out.push((name, Bytes::from(buf)));
     }
     Ok(out)

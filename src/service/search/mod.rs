@@ -227,7 +227,7 @@ impl Family {
                 match &mut self.ivf {
                     Some(ivf) if self.ids.len() < 4 * ivf.trained_rows => {
                         ivf.push(&self.vals);
-                        if 4 * (self.ids.len() - ivf.packed_rows) > self.ids.len() {
+                        if 4 * self.ids.len().saturating_sub(ivf.packed_rows) > self.ids.len() {
                             self.pack();
                         }
                     }
@@ -301,12 +301,15 @@ struct Collector {
     count: usize,
     uppers: std::collections::BinaryHeap<u64>,
     kept: Vec<(f64, u32)>,
+    /// When `kept` is next pruned (twice its size after the last pruning, so that many rows within rounding of the
+    /// bound never make pruning quadratic).
+    prune_at: usize,
     offered: usize,
 }
 
 impl Collector {
     fn new(count: usize) -> Self {
-        Collector { count, uppers: Default::default(), kept: vec![], offered: 0 }
+        Collector { count, uppers: Default::default(), kept: vec![], prune_at: 4 * count + 64, offered: 0 }
     }
     /// The `count`-th smallest upper bound so far (∞ before `count` rows).
     fn bound(&self) -> f64 {
@@ -330,9 +333,10 @@ impl Collector {
             self.uppers.push(upper.to_bits());
         }
         self.kept.push((lower, row));
-        if self.kept.len() > 4 * self.count + 64 {
+        if self.kept.len() > self.prune_at {
             let b = self.bound();
             self.kept.retain(|(l, _)| *l <= b);
+            self.prune_at = (2 * self.kept.len()).max(4 * self.count + 64);
         }
     }
     fn rows(mut self) -> Vec<u32> {
@@ -431,6 +435,8 @@ pub struct Index {
     /// Where the index is snapshotted (the embedded store's data directory), and changes since the last snapshot.
     snapshot: Option<std::path::PathBuf>,
     changed: std::sync::atomic::AtomicUsize,
+    /// Held while a snapshot is written: one writer at a time.
+    writing: std::sync::Mutex<()>,
 }
 
 /// What loading the index did, for the start-up log and the benchmark.
@@ -463,6 +469,7 @@ impl Index {
                         synced: std::sync::Mutex::new(at),
                         snapshot: snapshot.clone(),
                         changed: Default::default(),
+                        writing: Default::default(),
                     };
                     index.sync(store)?;
                     report.from = "snapshot";
@@ -509,6 +516,10 @@ impl Index {
         Ok((index, report))
     }
 
+    /// Whether the index holds no fingerprint.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
     /// Fingerprints held, over every family.
     pub fn len(&self) -> usize {
         self.families.read().unwrap_or_else(|e| e.into_inner()).values().map(Family::len).sum()
@@ -518,6 +529,8 @@ impl Index {
     /// the tags; atomically (a temporary file renamed).
     pub fn write_snapshot(&self) -> std::io::Result<()> {
         let Some(path) = &self.snapshot else { return Ok(()) };
+        // Another thread writing one already: this one's changes go into the next.
+        let Ok(_writing) = self.writing.try_lock() else { return Ok(()) };
         // The position and the read locks under the sync lock, so that no change at or below the position is
         // missing from what is written; the sync lock is let go before the (long) write, so that searches, which
         // read the log first, go on while it is written. A change the index holds beyond the position is applied
@@ -692,6 +705,7 @@ impl Index {
         drop(tags);
         drop(fams);
         let exact_values = fetch(q.family, &ids).map_err(SearchError::Store)?;
+        let n_candidates = ids.len();
         let mut scored: Vec<(String, f64)> = ids
             .into_iter()
             .filter_map(|id| {
@@ -700,6 +714,9 @@ impl Index {
                 Some((id, d))
             })
             .collect();
+        // A candidate the store no longer holds (removed on another replica, or a fingerprint kept in the index as
+        // its shape was deleted) may have crowded out another: the answer is then not proven.
+        let exact = exact && scored.len() == n_candidates;
         scored.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         scored.truncate(q.count);
         Ok(Found { neighbours: scored, searched, probed, exact, method })
@@ -792,7 +809,7 @@ mod tests {
         }
         let tagged = |id: &str, every: usize| {
             let i = u64::from_be_bytes(ShapeId::parse(id).unwrap().0[..8].try_into().unwrap()) as usize;
-            i % 50 == 0 || (every == 2 && i % 2 == 1)
+            i.is_multiple_of(50) || (every == 2 && !i.is_multiple_of(2))
         };
         let fetch =
             |_: &str, ids: &[String]| Ok(ids.iter().filter_map(|i| Some((i.clone(), all.get(i)?.clone()))).collect());
