@@ -151,7 +151,8 @@ pub(crate) async fn search(
             }
             f.clone()
         }
-        (Some(id), None) => match stored_fingerprint(&st, &family, id)? {
+        // The id parses before any store sees it (404 for what is not an id).
+        (Some(id), None) => match stored_fingerprint(&st, &family, &crate::service::ids::shape_id(id)?.hex())? {
             Some(f) => f,
             None => {
                 let shape = stored_shape(&st, id)?;
