@@ -1269,9 +1269,10 @@ fn a_collection_is_uploaded_in_bulk_tagged_and_searched_within_a_tag() {
     let r = reply(agent().put(&s.url(&format!("/v1/shapes/{unknown}/tags"))).send_json(json!({ "tags": ["x"] })));
     assert_problem(&r, 404, "not-found");
     assert_problem(&search(json!({ "fingerprint": vec![1.0; 8], "k": 8, "tags": ["é"] })), 400, "invalid-request");
-    let r = reply(agent().post(&s.url("/v1/shapes/bulk")).send_bytes(&a));
+    // (Small bodies, or the refusing part last: a refusal answers before the rest of the body is read.)
+    let r = reply(agent().post(&s.url("/v1/shapes/bulk")).send_bytes(b"OFF"));
     assert_problem(&r, 400, "invalid-request");
-    let (ct3, bad) = multipart(&[("options", None, br#"{"tags": ["ok"], "colour": 1}"#), ("file", Some("a.off"), &a)]);
+    let (ct3, bad) = multipart(&[("file", Some("a.off"), &a), ("options", None, br#"{"tags": ["ok"], "colour": 1}"#)]);
     let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct3).send_bytes(&bad));
     assert_eq!((r.status, r.body["field"].as_str()), (422, Some("colour")), "{}", r.body);
     // A queue too small for the upload's jobs: every file stored, those whose job could not start counted.

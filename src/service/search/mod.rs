@@ -186,6 +186,15 @@ pub(crate) struct Family {
     /// The largest rounding bound held (it never shrinks: a removal leaves it, which only weakens proofs).
     pub(crate) err_max: f32,
     pub(crate) ivf: Option<Ivf>,
+    /// The rows of the shapes carrying each small tag, copied contiguous, so that a search within the tag reads one
+    /// stretch of memory ([`Family::tag_add`]).
+    pub(crate) subs: HashMap<Tag, Family>,
+    /// Tags held by too many of the family's shapes for a copy: searched through the cells with a filter.
+    pub(crate) large: std::collections::HashSet<Tag>,
+    /// Rows copied into `subs`, over every tag.
+    pub(crate) sub_rows: usize,
+    /// The rows a load announced (reserved once the values' length is known).
+    pub(crate) expect: usize,
 }
 
 impl Family {
@@ -198,19 +207,24 @@ impl Family {
     /// Keeps a fingerprint (replacing the shape's earlier one); `train`: files it in a cell, training the cells
     /// when the family has grown enough (false while a whole table is loaded: [`Family::train`] comes after).
     fn put(&mut self, id: ShapeId, v: &[f64], train: bool) {
-        if self.ids.is_empty() {
-            self.k = v.len();
-        }
-        if v.len() != self.k || v.is_empty() {
-            return;
-        }
         let stored: Vec<f32> = v.iter().map(|&x| x as f32).collect();
         let err = rounding_bound(v, &stored);
+        self.put_stored(id, &stored, err, train);
+    }
+    /// [`Family::put`] of values already rounded, with their rounding bound.
+    fn put_stored(&mut self, id: ShapeId, stored: &[f32], err: f32, train: bool) {
+        if self.ids.is_empty() {
+            self.k = stored.len();
+            self.vals.reserve_exact(self.expect * self.k);
+        }
+        if stored.len() != self.k || stored.is_empty() {
+            return;
+        }
         self.err_max = self.err_max.max(err);
         match self.row.get(&id) {
             Some(&r) => {
                 let r = r as usize;
-                self.vals[r * self.k..(r + 1) * self.k].copy_from_slice(&stored);
+                self.vals[r * self.k..(r + 1) * self.k].copy_from_slice(stored);
                 self.err[r] = err;
                 if let Some(ivf) = &mut self.ivf {
                     ivf.refile(&self.vals, r);
@@ -219,7 +233,7 @@ impl Family {
             None => {
                 self.row.insert(id, self.ids.len() as u32);
                 self.ids.push(id);
-                self.vals.extend_from_slice(&stored);
+                self.vals.extend_from_slice(stored);
                 self.err.push(err);
                 if !train {
                     return;
@@ -236,6 +250,40 @@ impl Family {
             }
         }
     }
+    /// Copies a shape's row into its tag's contiguous copy, unless the tag is held by too many of the family's
+    /// shapes (more than 16,384 and a sixteenth of them); when the copies together would hold more rows than the
+    /// family, the largest are dropped. A tag without a copy is searched through the cells.
+    fn tag_add(&mut self, tag: &Tag, id: &ShapeId) {
+        if self.large.contains(tag) {
+            return;
+        }
+        let Some(&r) = self.row.get(id) else { return };
+        let r = r as usize;
+        let (stored, err) = (self.row_of(r).to_vec(), self.err[r]);
+        let (limit, total) = (ivf::MIN_ROWS.max(self.len() / 16), self.len().max(ivf::MIN_ROWS));
+        let sub = self.subs.entry(tag.clone()).or_default();
+        let before = sub.len();
+        sub.put_stored(*id, &stored, err, false);
+        self.sub_rows += sub.len() - before;
+        if sub.len() > limit {
+            self.sub_rows -= sub.len();
+            self.subs.remove(tag);
+            self.large.insert(tag.clone());
+        }
+        // Over the budget: the largest copies go first.
+        while self.sub_rows > total {
+            let Some(big) = self.subs.iter().max_by_key(|(_, s)| s.len()).map(|(t, _)| t.clone()) else { break };
+            self.sub_rows -= self.subs.remove(&big).map_or(0, |s| s.len());
+            self.large.insert(big);
+        }
+    }
+    fn tag_remove(&mut self, tag: &Tag, id: &ShapeId) {
+        if let Some(sub) = self.subs.get_mut(tag) {
+            let before = sub.len();
+            sub.remove(id, &[]);
+            self.sub_rows -= before - sub.len();
+        }
+    }
     /// Trains the family's cells afresh when it is large enough to have them (and drops them when it is not).
     pub(crate) fn train(&mut self, par: faer::Par) {
         self.ivf =
@@ -248,14 +296,28 @@ impl Family {
         let Some(ivf) = &mut self.ivf else { return };
         let order: Vec<u32> = ivf.lists.iter().flatten().copied().collect();
         let k = self.k;
-        let mut vals = Vec::with_capacity(self.vals.len());
-        let mut ids = Vec::with_capacity(self.ids.len());
-        let mut err = Vec::with_capacity(self.err.len());
-        for &r in &order {
-            let r = r as usize;
-            vals.extend_from_slice(&self.vals[r * k..(r + 1) * k]);
-            ids.push(self.ids[r]);
-            err.push(self.err[r]);
+        // In place, cycle by cycle (row j takes old row order[j]), so that the rows are never held twice.
+        let mut done = vec![false; order.len()];
+        let mut row = vec![0f32; k];
+        for i in 0..order.len() {
+            if done[i] {
+                continue;
+            }
+            row.copy_from_slice(&self.vals[i * k..(i + 1) * k]);
+            let (id, err) = (self.ids[i], self.err[i]);
+            let mut j = i;
+            loop {
+                done[j] = true;
+                let src = order[j] as usize;
+                if src == i {
+                    self.vals[j * k..(j + 1) * k].copy_from_slice(&row);
+                    (self.ids[j], self.err[j]) = (id, err);
+                    break;
+                }
+                self.vals.copy_within(src * k..(src + 1) * k, j * k);
+                (self.ids[j], self.err[j]) = (self.ids[src], self.err[src]);
+                j = src;
+            }
         }
         let mut next = 0u32;
         for (c, list) in ivf.lists.iter_mut().enumerate() {
@@ -266,13 +328,15 @@ impl Family {
                 next += 1;
             }
         }
-        for (i, id) in ids.iter().enumerate() {
+        for (i, id) in self.ids.iter().enumerate() {
             self.row.insert(*id, i as u32);
         }
-        (self.vals, self.ids, self.err) = (vals, ids, err);
         ivf.packed_rows = self.ids.len();
     }
-    fn remove(&mut self, id: &ShapeId) {
+    fn remove(&mut self, id: &ShapeId, tags: &[Tag]) {
+        for t in tags {
+            self.tag_remove(t, id);
+        }
         let Some(r) = self.row.remove(id) else { return };
         let (r, k) = (r as usize, self.k);
         // The last row moves into the hole.
@@ -471,6 +535,7 @@ impl Index {
                         changed: Default::default(),
                         writing: Default::default(),
                     };
+                    index.copy_tags();
                     index.sync(store)?;
                     report.from = "snapshot";
                     report.fingerprints = index.len();
@@ -487,6 +552,15 @@ impl Index {
         *index.synced.get_mut().unwrap_or_else(|e| e.into_inner()) = end;
         {
             let fams = index.families.get_mut().unwrap_or_else(|e| e.into_inner());
+            // Each family's arrays reserved at their final size: grown by doubling they would be held twice while
+            // copied.
+            for (family, n) in store.fingerprint_counts()? {
+                let fam = fams.entry(family).or_default();
+                fam.expect = n;
+                fam.ids.reserve_exact(n);
+                fam.err.reserve_exact(n);
+                fam.row.reserve(n);
+            }
             store.for_each_fingerprint(&mut |family, id, values| {
                 if let Some(id) = ShapeId::parse(id) {
                     fams.entry(family.to_string()).or_default().put(id, values, false);
@@ -506,6 +580,7 @@ impl Index {
                 tags.set(id, t);
             }
         }
+        index.copy_tags();
         index.sync(store)?;
         report.from = "store";
         report.fingerprints = index.len();
@@ -519,6 +594,19 @@ impl Index {
     /// Whether the index holds no fingerprint.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+    /// Builds every family's copies of its small tags' rows from the tags (after a load: the copies are not in the
+    /// snapshot).
+    fn copy_tags(&self) {
+        let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());
+        let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
+        for fam in fams.values_mut() {
+            for (tag, ids) in &tags.by_tag {
+                for id in ids {
+                    fam.tag_add(tag, id);
+                }
+            }
+        }
     }
     /// Fingerprints held, over every family.
     pub fn len(&self) -> usize {
@@ -588,7 +676,12 @@ impl Index {
     fn insert(&self, f: &Fingerprint) {
         let Some(id) = ShapeId::parse(&f.shape_id) else { return };
         let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());
-        fams.entry(f.family.clone()).or_default().put(id, &f.values, true);
+        let fam = fams.entry(f.family.clone()).or_default();
+        fam.put(id, &f.values, true);
+        let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
+        for t in tags.by_shape.get(&id).into_iter().flatten() {
+            fam.tag_add(t, &id);
+        }
         self.changed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
     /// Keeps a fingerprint: in the store, then in the index; not at all when its shape is no longer stored.
@@ -602,17 +695,31 @@ impl Index {
     /// Forgets a deleted shape in every family and its tags (the store drops its rows with the shape).
     pub fn remove_shape(&self, id: &str) {
         let Some(id) = ShapeId::parse(id) else { return };
-        for fam in self.families.write().unwrap_or_else(|e| e.into_inner()).values_mut() {
-            fam.remove(&id);
+        let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());
+        let mut tags = self.tags.write().unwrap_or_else(|e| e.into_inner());
+        let held = tags.by_shape.get(&id).cloned().unwrap_or_default();
+        for fam in fams.values_mut() {
+            fam.remove(&id, &held);
         }
-        self.tags.write().unwrap_or_else(|e| e.into_inner()).set(id, vec![]);
+        tags.set(id, vec![]);
         self.changed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
     /// Sets a shape's tags in the index (the store already holds them).
     pub fn set_tags(&self, id: &str, tags: &[String]) {
         let Some(id) = ShapeId::parse(id) else { return };
-        let tags = tags.iter().filter_map(|t| Tag::parse(t).ok()).collect();
-        self.tags.write().unwrap_or_else(|e| e.into_inner()).set(id, tags);
+        let new: Vec<Tag> = tags.iter().filter_map(|t| Tag::parse(t).ok()).collect();
+        let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());
+        let mut tags = self.tags.write().unwrap_or_else(|e| e.into_inner());
+        let old = tags.by_shape.get(&id).cloned().unwrap_or_default();
+        for fam in fams.values_mut() {
+            for t in old.iter().filter(|t| !new.contains(t)) {
+                fam.tag_remove(t, &id);
+            }
+            for t in new.iter().filter(|t| !old.contains(t)) {
+                fam.tag_add(t, &id);
+            }
+        }
+        tags.set(id, new);
         self.changed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
     /// A shape's tags as this replica's index holds them (sorted).
@@ -651,13 +758,23 @@ impl Index {
         };
         sets.sort_by_key(|s| s.len());
         let admits = |id: &ShapeId| Some(id) != q.exclude.as_ref() && sets.iter().all(|s| s.contains(id));
-        let err = |r: usize| match q.metric {
+        let sub_err = |table: &Family, r: usize| match q.metric {
             // Each term changes by at most 2·2⁻²⁴ under a relative rounding of 2⁻²⁴.
-            Metric::Canberra if fam.err[r].is_finite() => 1.3e-7 * fam.k as f64,
-            _ => fam.err[r] as f64,
+            Metric::Canberra if table.err[r].is_finite() => 1.3e-7 * table.k as f64,
+            _ => table.err[r] as f64,
         };
+        let err = |r: usize| sub_err(fam, r);
         let mut c = Collector::new(q.count);
-        let (method, exact) = if let Some(few) = sets.first().filter(|s| s.len() <= ivf::MIN_ROWS.max(fam.len() / 16)) {
+        let copy = q.tags.iter().filter_map(|t| fam.subs.get(t)).min_by_key(|s| s.len());
+        let (method, exact) = if let Some(sub) = copy {
+            // A small tag's rows, contiguous.
+            for r in 0..sub.len() {
+                if admits(&sub.ids[r]) {
+                    c.offer(approx_distance(q.values, sub.row_of(r), q.metric), sub_err(sub, r), r as u32);
+                }
+            }
+            (Method::Scan, true)
+        } else if let Some(few) = sets.first().filter(|s| s.len() <= ivf::MIN_ROWS.max(fam.len() / 16)) {
             // A small filter: its members' rows, every one, in memory order.
             let mut rows: Vec<u32> = few
                 .iter()
@@ -700,7 +817,8 @@ impl Index {
             (Method::Scan, true)
         };
         let probed = c.offered;
-        let ids: Vec<String> = c.rows().into_iter().map(|r| fam.ids[r as usize].hex()).collect();
+        let table = copy.unwrap_or(fam);
+        let ids: Vec<String> = c.rows().into_iter().map(|r| table.ids[r as usize].hex()).collect();
         let searched = fam.len();
         drop(tags);
         drop(fams);
@@ -793,29 +911,54 @@ mod tests {
             all.insert(sid(i).hex(), v);
         }
         assert!(index.families.read().unwrap()["a"].ivf.is_some(), "the family has cells");
-        // A replaced row, a removed one, another family apart.
+        // Tags: a small one (every 50th shape), a larger one (those and the odd ones), both copied contiguous; and
+        // one on nine shapes in ten, too many for a copy (searched through the cells with a filter).
+        let tags_of = |i: usize| {
+            let mut t: Vec<String> = vec![];
+            if i.is_multiple_of(50) {
+                t.push("few".into());
+            }
+            if i.is_multiple_of(50) || !i.is_multiple_of(2) {
+                t.push("half".into());
+            }
+            if !i.is_multiple_of(10) {
+                t.push("most".into());
+            }
+            t
+        };
+        for i in 0..n {
+            index.set_tags(&sid(i).hex(), &tags_of(i));
+        }
+        {
+            let fams = index.families.read().unwrap();
+            let (a, t) = (&fams["a"], |s: &str| Tag::parse(s).unwrap());
+            assert!(a.subs.contains_key(&t("few")) && a.subs.contains_key(&t("half")), "small tags are copied");
+            assert!(a.large.contains(&t("most")), "too many for a copy");
+        }
+        // A replaced row (tagged: its copies follow), a removed one, another family apart.
         let moved = rows(1, k, 99).remove(0);
-        index.insert(&Fingerprint { family: "a".into(), shape_id: sid(10).hex(), values: moved.clone() });
-        all.insert(sid(10).hex(), moved.clone());
-        index.remove_shape(&sid(11).hex());
-        all.remove(&sid(11).hex());
+        index.insert(&Fingerprint { family: "a".into(), shape_id: sid(50).hex(), values: moved.clone() });
+        all.insert(sid(50).hex(), moved.clone());
+        index.remove_shape(&sid(51).hex());
+        all.remove(&sid(51).hex());
         index.insert(&Fingerprint { family: "b".into(), shape_id: sid(1).hex(), values: vec![0.0; k] });
-        // Tags: a small one (every 50th shape) and a large one (every other).
-        for i in (0..n).step_by(50) {
-            index.set_tags(&sid(i).hex(), &["few".into(), "half".into()]);
-        }
-        for i in (1..n).step_by(2) {
-            index.set_tags(&sid(i).hex(), &["half".into()]);
-        }
-        let tagged = |id: &str, every: usize| {
+        // A shape moved out of two tags, another into all three.
+        index.set_tags(&sid(100).hex(), &["half".to_string()]);
+        index.set_tags(&sid(7).hex(), &["few".to_string(), "half".to_string(), "most".to_string()]);
+        let tagged = |id: &str, tag: &str| {
             let i = u64::from_be_bytes(ShapeId::parse(id).unwrap().0[..8].try_into().unwrap()) as usize;
-            i.is_multiple_of(50) || (every == 2 && !i.is_multiple_of(2))
+            match i {
+                100 => tag == "half",
+                7 => true,
+                _ => tags_of(i).iter().any(|t| t == tag),
+            }
         };
         let fetch =
             |_: &str, ids: &[String]| Ok(ids.iter().filter_map(|i| Some((i.clone(), all.get(i)?.clone()))).collect());
         let not3 = |id: &str| id != sid(3).hex();
         let queries = rows(40, k, 1234);
-        let (few, half) = ([Tag::parse("few").unwrap()], [Tag::parse("half").unwrap()]);
+        let (few, half, most) =
+            ([Tag::parse("few").unwrap()], [Tag::parse("half").unwrap()], [Tag::parse("most").unwrap()]);
         let mut proven = 0;
         for (qi, q) in queries.iter().enumerate() {
             for metric in [Metric::Euclidean, Metric::Manhattan, Metric::Canberra] {
@@ -832,11 +975,18 @@ mod tests {
                 let every = index.nearest(&query(q, metric, &[], false, usize::MAX), &fetch).unwrap();
                 assert_eq!((every.neighbours, every.exact), (want, true));
                 let small = index.nearest(&query(q, metric, &few, false, 8), &fetch).unwrap();
-                let want = brute(&all, q, metric, 10, |id| not3(id) && tagged(id, 50));
+                let want = brute(&all, q, metric, 10, |id| not3(id) && tagged(id, "few"));
                 assert_eq!((small.neighbours, small.exact, small.method), (want, true, Method::Scan));
-                let large = index.nearest(&query(q, metric, &half, false, usize::MAX), &fetch).unwrap();
-                let want = brute(&all, q, metric, 10, |id| not3(id) && tagged(id, 2));
+                let larger = index.nearest(&query(q, metric, &half, false, 8), &fetch).unwrap();
+                let want = brute(&all, q, metric, 10, |id| not3(id) && tagged(id, "half"));
+                assert_eq!((larger.neighbours, larger.exact), (want, true));
+                let large = index.nearest(&query(q, metric, &most, false, usize::MAX), &fetch).unwrap();
+                let want = brute(&all, q, metric, 10, |id| not3(id) && tagged(id, "most"));
                 assert_eq!(large.neighbours, want);
+                let two = [few[0].clone(), most[0].clone()];
+                let both = index.nearest(&query(q, metric, &two, false, 8), &fetch).unwrap();
+                let want = brute(&all, q, metric, 10, |id| not3(id) && tagged(id, "few") && tagged(id, "most"));
+                assert_eq!(both.neighbours, want);
             }
         }
         assert!(proven > 0, "some answers are proven exact by the cells' bounds");

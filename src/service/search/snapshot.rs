@@ -205,7 +205,7 @@ pub(crate) fn read(path: &Path, log_end: i64) -> std::io::Result<Option<Loaded>>
         if row.len() != n {
             return Err(bad("an id held twice"));
         }
-        families.insert(name, Family { k, ids, row, vals, err, err_max, ivf });
+        families.insert(name, Family { k, ids, row, vals, err, err_max, ivf, ..Default::default() });
     }
     let mut tags = Tags::default();
     let shapes = r.u64()?;

@@ -152,6 +152,8 @@ pub trait ShapeStore: Send + Sync {
 pub trait FingerprintStore: Send + Sync {
     /// Inserts or replaces one shape's fingerprint in a family, if the shape is still stored (true then).
     fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool>;
+    /// How many fingerprints each family holds.
+    fn fingerprint_counts(&self) -> std::io::Result<Vec<(String, usize)>>;
     /// Every fingerprint, one at a time: (family, shape id, values).
     fn for_each_fingerprint(&self, f: &mut dyn FnMut(&str, &str, &[f64])) -> std::io::Result<()>;
     /// The fingerprints of a family for some shapes (those stored), by shape id.

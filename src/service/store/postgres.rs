@@ -436,6 +436,13 @@ impl FingerprintStore for Postgres {
             Ok(n > 0)
         })
     }
+    fn fingerprint_counts(&self) -> std::io::Result<Vec<(String, usize)>> {
+        self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let rows = c.query("SELECT family, COUNT(*) FROM fingerprints GROUP BY family", &[]).await.map_err(pg)?;
+            Ok(rows.iter().map(|r| (r.get(0), r.get::<_, i64>(1) as usize)).collect())
+        })
+    }
     fn for_each_fingerprint(&self, f: &mut dyn FnMut(&str, &str, &[f64])) -> std::io::Result<()> {
         // Pages in key order, so that a large table is never held whole.
         const PAGE: i64 = 10_000;

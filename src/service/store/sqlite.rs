@@ -274,6 +274,12 @@ impl FingerprintStore for Database {
         tx.commit().map_err(db_err)?;
         Ok(n > 0)
     }
+    fn fingerprint_counts(&self) -> std::io::Result<Vec<(String, usize)>> {
+        let c = self.conn();
+        let mut st = c.prepare("SELECT family, COUNT(*) FROM fingerprints GROUP BY family").map_err(db_err)?;
+        let rows = st.query_map([], |r| Ok((r.get(0)?, r.get::<_, i64>(1)? as usize))).map_err(db_err)?;
+        rows.collect::<Result<_, _>>().map_err(db_err)
+    }
     fn for_each_fingerprint(&self, f: &mut dyn FnMut(&str, &str, &[f64])) -> std::io::Result<()> {
         let c = self.conn();
         let mut st = c.prepare("SELECT family, shape_id, fingerprint FROM fingerprints").map_err(db_err)?;
