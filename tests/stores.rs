@@ -113,9 +113,25 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     let got = other.fingerprints.fingerprints_of("fam", &[id.clone(), "not-stored".into()]).unwrap();
     assert_eq!((got.len(), &got[&id]), (1, &vec![1.0, 3.5]));
     // Tags: set whole on stored shapes only, read back sorted by another connection, logged.
-    assert!(b.fingerprints.set_tags(&id, &["b".into(), "a".into()]).unwrap());
-    assert!(!b.fingerprints.set_tags("not-stored", &["a".into()]).unwrap());
+    use kac::service::store::{TagEdit, TagsOutcome};
+    let set = |t: &[&str]| TagEdit::Replace(t.iter().map(|s| s.to_string()).collect());
+    assert_eq!(
+        b.fingerprints.set_tags(&id, &set(&["b", "a"])).unwrap(),
+        TagsOutcome::Set(vec!["a".into(), "b".into()])
+    );
+    assert_eq!(b.fingerprints.set_tags("not-stored", &set(&["a"])).unwrap(), TagsOutcome::NotStored);
     assert_eq!(other.fingerprints.tags_of(&id).unwrap(), ["a", "b"]);
+    // Added, in one transaction: the union, or nothing when it would be too many.
+    let add = |t: &[&str], max| TagEdit::Add { tags: t.iter().map(|s| s.to_string()).collect(), max };
+    assert_eq!(
+        b.fingerprints.set_tags(&id, &add(&["c", "a"], 3)).unwrap(),
+        TagsOutcome::Set(vec!["a".into(), "b".into(), "c".into()])
+    );
+    assert_eq!(b.fingerprints.set_tags(&id, &add(&["d"], 3)).unwrap(), TagsOutcome::TooMany(4));
+    assert_eq!(
+        b.fingerprints.set_tags(&id, &set(&["b", "a"])).unwrap(),
+        TagsOutcome::Set(vec!["a".into(), "b".into()])
+    );
     let mut pairs = vec![];
     other.fingerprints.for_each_tag(&mut |s, t| pairs.push((s.to_string(), t.to_string()))).unwrap();
     pairs.sort();
@@ -163,7 +179,9 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
         vec![
             C::Kept { family: "fam".into(), shape_id: id.clone(), values: vec![1.0, 2.5] },
             C::Kept { family: "fam".into(), shape_id: id.clone(), values: vec![1.0, 3.5] },
-            C::Tagged { shape_id: id.clone(), tags: vec!["b".into(), "a".into()] },
+            C::Tagged { shape_id: id.clone(), tags: vec!["a".into(), "b".into()] },
+            C::Tagged { shape_id: id.clone(), tags: vec!["a".into(), "b".into(), "c".into()] },
+            C::Tagged { shape_id: id.clone(), tags: vec!["a".into(), "b".into()] },
             C::Removed { shape_id: id.clone() },
         ]
     );
@@ -277,6 +295,6 @@ fn replicas_starting_together_migrate_once() {
     assert_eq!(opened.len(), 3);
     assert_eq!(
         cluster.query("migrate", "SELECT string_agg(version::text, ',' ORDER BY version) FROM schema_migrations"),
-        "1,2"
+        "1,2,3"
     );
 }

@@ -3,6 +3,8 @@
 
 use super::shapes::{ingest, shape_resource, ShapeResource, Upload};
 use super::*;
+use crate::service::search::MAX_TAGS;
+use crate::service::store::{TagEdit, TagsOutcome};
 use kac_core::descriptors::shape_dna::ShapeDnaOptions;
 
 /// A shape's tags.
@@ -50,28 +52,28 @@ pub(crate) async fn put_tags(
 ) -> Result<Json<ShapeTags>, ApiError> {
     let req: TagsBody = strict_body(&st, body, "TagsBody")?;
     let tags = Tag::parse_all(&req.tags).map_err(ApiError::invalid_request)?;
-    let tags: Vec<String> = tags.iter().map(|t| t.as_str().to_string()).collect();
-    set_tags(&st, &id.hex(), &tags)?;
+    let tags = edit_tags(&st, &id.hex(), TagEdit::Replace(tags.iter().map(|t| t.as_str().to_string()).collect()))?;
     Ok(Json(ShapeTags { id: id.hex(), tags }))
 }
 
-/// Sets a shape's tags in the store, then in this replica's index.
-pub(crate) fn set_tags(st: &AppState, id: &str, tags: &[String]) -> Result<(), ApiError> {
-    if !st.fingerprints.set_tags(id, tags).map_err(store_error)? {
-        return Err(ApiError::NotFound { what: "shape", id: id.to_string() });
+/// Edits a shape's tags in the store, then in this replica's index; the tags it carries now.
+pub(crate) fn edit_tags(st: &AppState, id: &str, edit: TagEdit) -> Result<Vec<String>, ApiError> {
+    match st.fingerprints.set_tags(id, &edit).map_err(store_error)? {
+        TagsOutcome::Set(tags) => {
+            st.index.set_tags(id, &tags);
+            Ok(tags)
+        }
+        TagsOutcome::NotStored => Err(ApiError::NotFound { what: "shape", id: id.to_string() }),
+        TagsOutcome::TooMany(n) => Err(ApiError::invalid_request(format!(
+            "the shape would carry {n} tags, at most {MAX_TAGS}: its tags are unchanged (the shape itself is stored)"
+        ))),
     }
-    st.index.set_tags(id, tags);
-    Ok(())
 }
 
 /// Adds tags to a shape's (an upload's `tags`: the same content uploaded with other tags carries both).
 pub(crate) fn add_tags(st: &AppState, id: &str, tags: &[Tag]) -> Result<Vec<String>, ApiError> {
-    let mut all = st.fingerprints.tags_of(id).map_err(store_error)?;
-    all.extend(tags.iter().map(|t| t.as_str().to_string()));
-    let all: Vec<String> =
-        Tag::parse_all(&all).map_err(ApiError::invalid_request)?.iter().map(|t| t.as_str().to_string()).collect();
-    set_tags(st, id, &all)?;
-    Ok(all)
+    let tags = tags.iter().map(|t| t.as_str().to_string()).collect();
+    edit_tags(st, id, TagEdit::Add { tags, max: MAX_TAGS })
 }
 
 /// The fingerprint a bulk upload computes for each shape.

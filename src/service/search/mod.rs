@@ -495,7 +495,8 @@ impl Tags {
 pub struct Index {
     pub(crate) families: RwLock<HashMap<String, Family>>,
     pub(crate) tags: RwLock<Tags>,
-    synced: std::sync::Mutex<i64>,
+    /// The log position applied, and the shape id of the entry there.
+    synced: std::sync::Mutex<(i64, String)>,
     /// Where the index is snapshotted (the embedded store's data directory), and changes since the last snapshot.
     snapshot: Option<std::path::PathBuf>,
     changed: std::sync::atomic::AtomicUsize,
@@ -525,7 +526,8 @@ impl Index {
         let mut report = LoadReport::default();
         let end = store.fingerprint_log_end()?;
         if let Some(path) = &snapshot {
-            match snapshot::read(path, end) {
+            let entry = |seq: i64| store.fingerprint_log_entry(seq);
+            match snapshot::read(path, end, &entry) {
                 Ok(Some((families, tags, at))) => {
                     let index = Index {
                         families: RwLock::new(families),
@@ -549,7 +551,8 @@ impl Index {
         let mut index = Index { snapshot, ..Default::default() };
         // The log's end first: a change made while the tables are read is applied again by the next sync, which
         // is harmless (a put replaces, a removal forgets, tags are set whole).
-        *index.synced.get_mut().unwrap_or_else(|e| e.into_inner()) = end;
+        *index.synced.get_mut().unwrap_or_else(|e| e.into_inner()) =
+            (end, store.fingerprint_log_entry(end)?.unwrap_or_default());
         {
             let fams = index.families.get_mut().unwrap_or_else(|e| e.into_inner());
             // Each family's arrays reserved at their final size: grown by doubling they would be held twice while
@@ -627,10 +630,10 @@ impl Index {
         let synced = self.synced.lock().unwrap_or_else(|e| e.into_inner());
         let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
         let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
-        let at = *synced;
+        let at = synced.clone();
         drop(synced);
         self.changed.store(0, std::sync::atomic::Ordering::Relaxed);
-        snapshot::write(path, at, &fams, &tags)
+        snapshot::write(path, &at, &fams, &tags)
     }
 
     /// Writes the snapshot if anything changed since the last one.
@@ -655,7 +658,8 @@ impl Index {
     /// they removed, tags they set); one indexed query when there are none.
     pub fn sync(&self, store: &dyn FingerprintStore) -> std::io::Result<()> {
         let mut synced = self.synced.lock().unwrap_or_else(|e| e.into_inner());
-        let (changes, end) = store.fingerprint_changes(*synced)?;
+        let (changes, end) = store.fingerprint_changes(synced.0)?;
+        let last = changes.last().map(|c| c.shape_id().to_string());
         let n = changes.len();
         for change in changes {
             match change {
@@ -666,7 +670,9 @@ impl Index {
                 FingerprintChange::Tagged { shape_id, tags } => self.set_tags(&shape_id, &tags),
             }
         }
-        *synced = end;
+        if let Some(last) = last {
+            *synced = (end, last);
+        }
         drop(synced);
         if n > 0 {
             self.maybe_snapshot();
@@ -1014,9 +1020,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("search-index.bin");
         let fams = index.families.read().unwrap();
-        snapshot::write(&path, 42, &fams, &index.tags.read().unwrap()).unwrap();
-        let (families, tags, at) = snapshot::read(&path, 42).unwrap().unwrap();
-        assert_eq!(at, 42);
+        let log = |seq: i64| Ok((seq == 42).then(|| sid(9).hex()));
+        snapshot::write(&path, &(42, sid(9).hex()), &fams, &index.tags.read().unwrap()).unwrap();
+        let (families, tags, at) = snapshot::read(&path, 42, &log).unwrap().unwrap();
+        assert_eq!(at, (42, sid(9).hex()));
         let back = Index { families: RwLock::new(families), tags: RwLock::new(tags), ..Default::default() };
         let fetch =
             |_: &str, ids: &[String]| Ok(ids.iter().filter_map(|i| Some((i.clone(), all.get(i)?.clone()))).collect());
@@ -1030,11 +1037,13 @@ mod tests {
             }
         }
         assert_eq!(back.tags.read().unwrap().by_shape[&sid(5)], vec![Tag::parse("x").unwrap()]);
-        assert!(snapshot::read(&path, 41).is_err(), "a snapshot beyond the log is refused");
+        assert!(snapshot::read(&path, 41, &log).is_err(), "a snapshot beyond the log is refused");
+        let other = |_: i64| Ok(Some(sid(8).hex()));
+        assert!(snapshot::read(&path, 50, &other).is_err(), "a snapshot of another store's log is refused");
         let bytes = std::fs::read(&path).unwrap();
         std::fs::write(&path, &bytes[..bytes.len() - 9]).unwrap();
-        assert!(snapshot::read(&path, 42).is_err(), "a snapshot cut short is refused");
-        assert!(snapshot::read(&dir.path().join("none"), 42).unwrap().is_none());
+        assert!(snapshot::read(&path, 42, &log).is_err(), "a snapshot cut short is refused");
+        assert!(snapshot::read(&dir.path().join("none"), 42, &log).unwrap().is_none());
     }
 
     #[test]

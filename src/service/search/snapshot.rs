@@ -2,8 +2,9 @@
 //! the cells again: the log position it reflects, each family's ids, single-precision rows, rounding bounds and
 //! cells, and the shapes' tags. Little-endian; written to a temporary file, synced and renamed over the last one.
 //!
-//! A snapshot is used only when its position is not beyond the store's log (a snapshot of another store, or of a
-//! store rolled back, is refused and the index is built from the tables). A table edited by hand, outside the
+//! A snapshot is used only when its position is not beyond the store's log and the log's entry there is the one it
+//! recorded (a snapshot of another store, or of a store rolled back, is refused and the index is built from the
+//! tables). A table edited by hand, outside the
 //! service and its log, is not seen by a snapshot: remove the file (`search-index.bin`) after such an edit.
 
 use super::ivf::Ivf;
@@ -13,7 +14,7 @@ use std::collections::HashMap;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"KACIDX01";
+const MAGIC: &[u8; 8] = b"KACIDX02";
 const END: &[u8; 8] = b"KACIDXOK";
 
 struct W<T: Write>(T);
@@ -55,12 +56,18 @@ impl<T: Write> W<T> {
 }
 
 /// Writes the snapshot of `families` and `tags` at log position `at`.
-pub(crate) fn write(path: &Path, at: i64, families: &HashMap<String, Family>, tags: &Tags) -> std::io::Result<()> {
+pub(crate) fn write(
+    path: &Path,
+    at: &(i64, String),
+    families: &HashMap<String, Family>,
+    tags: &Tags,
+) -> std::io::Result<()> {
     let tmp = path.with_extension("tmp");
     let file = std::fs::File::create(&tmp)?;
     let mut w = W(BufWriter::with_capacity(1 << 20, file));
     w.bytes(MAGIC)?;
-    w.u64(at as u64)?;
+    w.u64(at.0 as u64)?;
+    w.text(&at.1)?;
     w.u32(families.len() as u32)?;
     for (name, f) in families {
         w.text(name)?;
@@ -142,11 +149,15 @@ fn bad(what: &str) -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::InvalidData, format!("the search index snapshot is damaged: {what}"))
 }
 
-type Loaded = (HashMap<String, Family>, Tags, i64);
+type Loaded = (HashMap<String, Family>, Tags, (i64, String));
 
-/// The snapshot at `path` (None when there is none), refused when it is damaged or beyond the log's end
-/// `log_end`.
-pub(crate) fn read(path: &Path, log_end: i64) -> std::io::Result<Option<Loaded>> {
+/// The snapshot at `path` (None when there is none), refused when it is damaged, beyond the log's end `log_end`, or
+/// of another log (`entry`: the shape id of the store's log entry at a position).
+pub(crate) fn read(
+    path: &Path,
+    log_end: i64,
+    entry: &dyn Fn(i64) -> std::io::Result<Option<String>>,
+) -> std::io::Result<Option<Loaded>> {
     let file = match std::fs::File::open(path) {
         Ok(f) => f,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
@@ -158,10 +169,19 @@ pub(crate) fn read(path: &Path, log_end: i64) -> std::io::Result<Option<Loaded>>
         return Err(bad("not a kac search index (or of another version)"));
     }
     let at = r.u64()? as i64;
+    let at_id = r.text(64)?;
     if at > log_end {
         return Err(std::io::Error::new(
             std::io::ErrorKind::InvalidData,
             format!("the search index snapshot is at log position {at}, beyond the store's {log_end}: another store's"),
+        ));
+    }
+    if at > 0 && entry(at)?.as_deref() != Some(at_id.as_str()) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "the search index snapshot's log entry {at} is not the store's: another store's, or one rolled back"
+            ),
         ));
     }
     let mut families = HashMap::new();
@@ -227,5 +247,5 @@ pub(crate) fn read(path: &Path, log_end: i64) -> std::io::Result<Option<Loaded>>
     if &r.array::<8>()? != END {
         return Err(bad("its end is missing"));
     }
-    Ok(Some((families, tags, at)))
+    Ok(Some((families, tags, (at, at_id))))
 }

@@ -158,8 +158,9 @@ pub trait FingerprintStore: Send + Sync {
     fn for_each_fingerprint(&self, f: &mut dyn FnMut(&str, &str, &[f64])) -> std::io::Result<()>;
     /// The fingerprints of a family for some shapes (those stored), by shape id.
     fn fingerprints_of(&self, family: &str, shape_ids: &[String]) -> std::io::Result<HashMap<String, Vec<f64>>>;
-    /// Sets a stored shape's tags (replacing its earlier ones; false: the shape is not stored).
-    fn set_tags(&self, shape_id: &str, tags: &[String]) -> std::io::Result<bool>;
+    /// Replaces a stored shape's tags, or adds to them, in one transaction (so that edits made at once, on any
+    /// replica, are never lost); logged with the whole set that results.
+    fn set_tags(&self, shape_id: &str, edit: &TagEdit) -> std::io::Result<TagsOutcome>;
     /// A shape's tags, sorted.
     fn tags_of(&self, shape_id: &str) -> std::io::Result<Vec<String>>;
     /// Every (shape id, tag), one at a time.
@@ -169,9 +170,49 @@ pub trait FingerprintStore: Send + Sync {
     ///
     /// [`fingerprint_changes`]: FingerprintStore::fingerprint_changes
     fn fingerprint_log_end(&self) -> std::io::Result<i64>;
+    /// The shape id of the log's entry at position `seq` (None: there is none), which tells a snapshot of this
+    /// store from one of another store or of a store rolled back.
+    fn fingerprint_log_entry(&self, seq: i64) -> std::io::Result<Option<String>>;
     /// The changes logged after position `after`, in order, and the position of the last. Other replicas'
     /// indexes follow the store through it.
     fn fingerprint_changes(&self, after: i64) -> std::io::Result<(Vec<FingerprintChange>, i64)>;
+}
+
+/// An edit of a shape's tags.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TagEdit {
+    Replace(Vec<String>),
+    /// These added to the shape's, unless the shape would then carry more than `max`.
+    Add {
+        tags: Vec<String>,
+        max: usize,
+    },
+}
+
+/// What an edit of tags did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TagsOutcome {
+    /// The shape's tags now (sorted).
+    Set(Vec<String>),
+    NotStored,
+    /// The shape would carry this many: nothing changed.
+    TooMany(usize),
+}
+
+impl TagEdit {
+    /// The tags a shape carrying `current` carries after the edit (sorted, each once), or how many it would.
+    pub(crate) fn apply(&self, mut current: Vec<String>) -> Result<Vec<String>, usize> {
+        match self {
+            TagEdit::Replace(t) => current = t.clone(),
+            TagEdit::Add { tags, .. } => current.extend(tags.iter().cloned()),
+        }
+        current.sort();
+        current.dedup();
+        match self {
+            TagEdit::Add { max, .. } if current.len() > *max => Err(current.len()),
+            _ => Ok(current),
+        }
+    }
 }
 
 /// One entry of the change log.
@@ -187,6 +228,13 @@ pub enum FingerprintChange {
 pub(crate) const TAGS_ENTRY: &str = "#tags";
 
 impl FingerprintChange {
+    pub fn shape_id(&self) -> &str {
+        match self {
+            FingerprintChange::Kept { shape_id, .. }
+            | FingerprintChange::Removed { shape_id }
+            | FingerprintChange::Tagged { shape_id, .. } => shape_id,
+        }
+    }
     /// A log row (family, shape id, blob) read back.
     pub(crate) fn of_row(family: String, shape_id: String, blob: Option<&[u8]>) -> FingerprintChange {
         match blob {

@@ -482,11 +482,12 @@ impl FingerprintStore for Postgres {
             Ok(rows.iter().map(|r| (r.get(0), f64s_of(r.get(1)))).collect())
         })
     }
-    fn set_tags(&self, shape_id: &str, tags: &[String]) -> std::io::Result<bool> {
-        let (shape_id, tags) = (shape_id.to_string(), tags.to_vec());
+    fn set_tags(&self, shape_id: &str, edit: &TagEdit) -> std::io::Result<TagsOutcome> {
+        let (shape_id, edit) = (shape_id.to_string(), edit.clone());
         self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
             let tx = c.transaction().await.map_err(pg)?;
+            // The log's lock also orders edits of tags: one at a time, read and written in one transaction.
             tx.execute("SELECT pg_advisory_xact_lock($1)", &[&LOG_LOCK]).await.map_err(pg)?;
             let stored = tx
                 .query_opt("SELECT 1 FROM shapes WHERE id = $1 FOR KEY SHARE", &[&shape_id])
@@ -494,8 +495,13 @@ impl FingerprintStore for Postgres {
                 .map_err(pg)?
                 .is_some();
             if !stored {
-                return Ok(false);
+                return Ok(TagsOutcome::NotStored);
             }
+            let rows = tx.query("SELECT tag FROM shape_tags WHERE shape_id = $1", &[&shape_id]).await.map_err(pg)?;
+            let tags = match edit.apply(rows.iter().map(|r| r.get(0)).collect()) {
+                Ok(t) => t,
+                Err(n) => return Ok(TagsOutcome::TooMany(n)),
+            };
             tx.execute("DELETE FROM shape_tags WHERE shape_id = $1", &[&shape_id]).await.map_err(pg)?;
             tx.execute("INSERT INTO shape_tags (shape_id, tag) SELECT $1, unnest($2::text[])", &[&shape_id, &tags])
                 .await
@@ -507,7 +513,7 @@ impl FingerprintStore for Postgres {
             .await
             .map_err(pg)?;
             tx.commit().await.map_err(pg)?;
-            Ok(true)
+            Ok(TagsOutcome::Set(tags))
         })
     }
     fn tags_of(&self, shape_id: &str) -> std::io::Result<Vec<String>> {
@@ -535,6 +541,13 @@ impl FingerprintStore for Postgres {
         self.run(|pool| async move {
             let c = pool.get().await.map_err(pg)?;
             Ok(c.query_one("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", &[]).await.map_err(pg)?.get(0))
+        })
+    }
+    fn fingerprint_log_entry(&self, seq: i64) -> std::io::Result<Option<String>> {
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let row = c.query_opt("SELECT shape_id FROM fingerprint_log WHERE seq = $1", &[&seq]).await.map_err(pg)?;
+            Ok(row.map(|r| r.get(0)))
         })
     }
     fn fingerprint_changes(&self, after: i64) -> std::io::Result<(Vec<FingerprintChange>, i64)> {

@@ -311,7 +311,7 @@ impl FingerprintStore for Database {
         }
         Ok(out)
     }
-    fn set_tags(&self, shape_id: &str, tags: &[String]) -> std::io::Result<bool> {
+    fn set_tags(&self, shape_id: &str, edit: &TagEdit) -> std::io::Result<TagsOutcome> {
         let _id = self.id_lock(shape_id);
         let mut c = self.conn();
         let tx = c.transaction().map_err(db_err)?;
@@ -321,19 +321,28 @@ impl FingerprintStore for Database {
             .map_err(db_err)?
             .is_some();
         if !stored {
-            return Ok(false);
+            return Ok(TagsOutcome::NotStored);
         }
+        let current: Vec<String> = {
+            let mut st = tx.prepare("SELECT tag FROM shape_tags WHERE shape_id = ?1").map_err(db_err)?;
+            let rows = st.query_map([shape_id], |r| r.get(0)).map_err(db_err)?;
+            rows.collect::<Result<_, _>>().map_err(db_err)?
+        };
+        let tags = match edit.apply(current) {
+            Ok(t) => t,
+            Err(n) => return Ok(TagsOutcome::TooMany(n)),
+        };
         tx.execute("DELETE FROM shape_tags WHERE shape_id = ?1", [shape_id]).map_err(db_err)?;
-        for t in tags {
+        for t in &tags {
             tx.execute("INSERT INTO shape_tags (shape_id, tag) VALUES (?1, ?2)", [shape_id, t]).map_err(db_err)?;
         }
         tx.execute(
             "INSERT INTO fingerprint_log (family, shape_id, fingerprint) VALUES (?1, ?2, ?3)",
-            rusqlite::params![TAGS_ENTRY, shape_id, tags_blob(tags)],
+            rusqlite::params![TAGS_ENTRY, shape_id, tags_blob(&tags)],
         )
         .map_err(db_err)?;
         tx.commit().map_err(db_err)?;
-        Ok(true)
+        Ok(TagsOutcome::Set(tags))
     }
     fn tags_of(&self, shape_id: &str) -> std::io::Result<Vec<String>> {
         let c = self.conn();
@@ -355,6 +364,12 @@ impl FingerprintStore for Database {
     }
     fn fingerprint_log_end(&self) -> std::io::Result<i64> {
         self.conn().query_row("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", [], |r| r.get(0)).map_err(db_err)
+    }
+    fn fingerprint_log_entry(&self, seq: i64) -> std::io::Result<Option<String>> {
+        self.conn()
+            .query_row("SELECT shape_id FROM fingerprint_log WHERE seq = ?1", [seq], |r| r.get(0))
+            .optional()
+            .map_err(db_err)
     }
     fn fingerprint_changes(&self, after: i64) -> std::io::Result<(Vec<FingerprintChange>, i64)> {
         let c = self.conn();
