@@ -37,6 +37,8 @@ pub struct Ivf {
     pub trained_rows: usize,
     /// How many rows the family held when its rows were last renumbered cell by cell.
     pub packed_rows: usize,
+    /// The largest row norm the slack covers.
+    pub xmax: f64,
 }
 
 /// A deterministic generator for sampling (xorshift64*).
@@ -59,14 +61,14 @@ fn row(vals: &[f32], k: usize, r: usize) -> &[f32] {
 
 /// The nearest centroid to each of `rows` (indices into `vals`), by ‖x‖² + ‖c‖² − 2 x·c with the products in one
 /// matrix product a block; and the largest ‖x‖ seen.
-fn assign(vals: &[f32], k: usize, rows: &[usize], centroids: &[f64], par: Par) -> (Vec<u32>, f64) {
+pub(crate) fn assign(vals: &[f32], k: usize, rows: &[usize], centroids: &[f64], par: Par) -> (Vec<u32>, f64) {
     let cells = centroids.len() / k;
     let c = Mat::<f64>::from_fn(cells, k, |i, j| centroids[i * k + j]);
     let cnorm: Vec<f64> = (0..cells).map(|i| centroids[i * k..(i + 1) * k].iter().map(|v| v * v).sum()).collect();
     let mut out = Vec::with_capacity(rows.len());
     let mut xmax = 0.0f64;
     const BLOCK: usize = 2048;
-    let mut g = Mat::<f64>::zeros(BLOCK, cells);
+    let mut g = Mat::<f64>::zeros(BLOCK.min(rows.len()), cells);
     for chunk in rows.chunks(BLOCK) {
         let x = Mat::<f64>::from_fn(chunk.len(), k, |i, j| vals[chunk[i] * k + j] as f64);
         let mut gb = g.as_mut().subrows_mut(0, chunk.len());
@@ -87,61 +89,81 @@ fn assign(vals: &[f32], k: usize, rows: &[usize], centroids: &[f64], par: Par) -
     (out, xmax)
 }
 
+/// The rows k-means trains on: every row, or 40 a cell drawn (seeded by `n`, so the same rows give the same cells).
+pub(crate) fn sample_rows(n: usize, cells: usize) -> Vec<usize> {
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ n as u64);
+    if n <= 40 * cells {
+        (0..n).collect()
+    } else {
+        (0..40 * cells).map(|_| rng.below(n)).collect()
+    }
+}
+
+/// `cells` centroids by Lloyd's k-means (10 rounds) over the `sample` rows of `vals`, started from distinct sample
+/// rows; an emptied cell starts again from a random sample row.
+pub(crate) fn centroids(vals: &[f32], k: usize, sample: &[usize], cells: usize, par: Par) -> Vec<f64> {
+    let mut rng = Rng(0x2545_F491_4F6C_DD1D ^ sample.len() as u64);
+    let mut centroids = Vec::with_capacity(cells * k);
+    for i in 0..cells {
+        let r = sample[(i * sample.len()) / cells];
+        centroids.extend(row(vals, k, r).iter().map(|&v| v as f64));
+    }
+    for _ in 0..10 {
+        let (cell, _) = assign(vals, k, sample, &centroids, par);
+        let mut sum = vec![0.0f64; cells * k];
+        let mut count = vec![0usize; cells];
+        for (&r, &c) in sample.iter().zip(&cell) {
+            count[c as usize] += 1;
+            for (s, &v) in sum[c as usize * k..(c as usize + 1) * k].iter_mut().zip(row(vals, k, r)) {
+                *s += v as f64;
+            }
+        }
+        for c in 0..cells {
+            let target = &mut centroids[c * k..(c + 1) * k];
+            if count[c] == 0 {
+                let r = sample[rng.below(sample.len())];
+                for (t, &v) in target.iter_mut().zip(row(vals, k, r)) {
+                    *t = v as f64;
+                }
+            } else {
+                for (t, s) in target.iter_mut().zip(&sum[c * k..(c + 1) * k]) {
+                    *t = s / count[c] as f64;
+                }
+            }
+        }
+    }
+    centroids
+}
+
 impl Ivf {
     /// Trains `cells` centroids by Lloyd's k-means on a sample of the rows (40 a cell, seeded, so the same rows
     /// give the same cells) and assigns every row.
     pub fn train(vals: &[f32], k: usize, cells: usize, par: Par) -> Ivf {
         let n = vals.len() / k;
         let cells = cells.clamp(1, n.max(1));
-        let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ n as u64);
-        let sample: Vec<usize> =
-            if n <= 40 * cells { (0..n).collect() } else { (0..40 * cells).map(|_| rng.below(n)).collect() };
-        // Start from distinct sample rows.
-        let mut centroids = Vec::with_capacity(cells * k);
-        for i in 0..cells {
-            let r = sample[(i * sample.len()) / cells];
-            centroids.extend(row(vals, k, r).iter().map(|&v| v as f64));
-        }
-        for _ in 0..10 {
-            let (cell, _) = assign(vals, k, &sample, &centroids, par);
-            let mut sum = vec![0.0f64; cells * k];
-            let mut count = vec![0usize; cells];
-            for (&r, &c) in sample.iter().zip(&cell) {
-                count[c as usize] += 1;
-                for (s, &v) in sum[c as usize * k..(c as usize + 1) * k].iter_mut().zip(row(vals, k, r)) {
-                    *s += v as f64;
-                }
-            }
-            for c in 0..cells {
-                let target = &mut centroids[c * k..(c + 1) * k];
-                if count[c] == 0 {
-                    // An empty cell starts again from a random sample row.
-                    let r = sample[rng.below(sample.len())];
-                    for (t, &v) in target.iter_mut().zip(row(vals, k, r)) {
-                        *t = v as f64;
-                    }
-                } else {
-                    for (t, s) in target.iter_mut().zip(&sum[c * k..(c + 1) * k]) {
-                        *t = s / count[c] as f64;
-                    }
-                }
-            }
-        }
+        let sample = sample_rows(n, cells);
+        let centroids = centroids(vals, k, &sample, cells, par);
+        let all: Vec<usize> = (0..n).collect();
+        let (cell, xmax) = assign(vals, k, &all, &centroids, par);
+        Ivf::from_assignment(k, centroids, cell, xmax, n)
+    }
+
+    /// The cells of `cell.len()` rows, each row's cell given; `xmax`: the largest row norm assigned.
+    pub fn from_assignment(k: usize, centroids: Vec<f64>, cell: Vec<u32>, xmax: f64, trained_rows: usize) -> Ivf {
+        let cells = centroids.len() / k;
+        let n = cell.len();
         let mut ivf = Ivf {
             k,
             centroids,
             lists: vec![vec![]; cells],
-            row_cell: vec![],
-            row_pos: vec![],
+            row_cell: cell,
+            row_pos: vec![0; n],
             slack: 0.0,
-            trained_rows: n,
+            trained_rows,
             packed_rows: 0,
+            xmax: -1.0,
         };
-        let all: Vec<usize> = (0..n).collect();
-        let (cell, xmax) = assign(vals, k, &all, &ivf.centroids, par);
         ivf.widen_slack(xmax);
-        ivf.row_cell = cell;
-        ivf.row_pos = vec![0; n];
         for r in 0..n {
             let c = ivf.row_cell[r] as usize;
             ivf.row_pos[r] = ivf.lists[c].len() as u32;
@@ -157,19 +179,38 @@ impl Ivf {
     /// Grows the assignment slack to cover a row of norm `xmax`: the rounding of ‖c‖² − 2x·c in double precision
     /// over k terms, at most 2(k + 2)ε(‖c‖² + 2‖x‖‖c‖) between two centroids.
     fn widen_slack(&mut self, xmax: f64) {
+        if xmax <= self.xmax {
+            return;
+        }
+        self.xmax = xmax;
         let k = self.k;
         let cmax =
             self.centroids.chunks_exact(k).map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt()).fold(0.0, f64::max);
-        let s = 4.0 * (k as f64 + 2.0) * f64::EPSILON * (cmax * cmax + 2.0 * xmax * cmax);
+        // Also covers the direct distances of one row (k differences squared and summed: at most (k + 2)ε of the
+        // same terms).
+        let s = 4.0 * (k as f64 + 2.0) * f64::EPSILON * (cmax * cmax + 2.0 * xmax * cmax + xmax * xmax);
         self.slack = self.slack.max(s);
+    }
+
+    /// The cell of one row: its nearest centroid, by ‖x − c‖² directly (a product of one row is dominated by its
+    /// set-up); and the row's norm, for the slack.
+    fn nearest_cell(&self, x: &[f32]) -> (usize, f64) {
+        let k = self.k;
+        let mut best = (f64::INFINITY, 0usize);
+        for (j, c) in self.centroids.chunks_exact(k).enumerate() {
+            let d: f64 = c.iter().zip(x).map(|(a, &b)| (a - b as f64) * (a - b as f64)).sum();
+            if d < best.0 {
+                best = (d, j);
+            }
+        }
+        (best.1, x.iter().map(|&v| v as f64 * v as f64).sum::<f64>().sqrt())
     }
 
     /// Files a new row (the last of `vals`) in its nearest cell.
     pub fn push(&mut self, vals: &[f32]) {
         let r = vals.len() / self.k - 1;
-        let (cell, xmax) = assign(vals, self.k, &[r], &self.centroids, Par::Seq);
+        let (c, xmax) = self.nearest_cell(&vals[r * self.k..]);
         self.widen_slack(xmax);
-        let c = cell[0] as usize;
         self.row_cell.push(c as u32);
         self.row_pos.push(self.lists[c].len() as u32);
         self.lists[c].push(r as u32);
@@ -178,9 +219,8 @@ impl Ivf {
     /// Files row `r` again after its values changed.
     pub fn refile(&mut self, vals: &[f32], r: usize) {
         self.unlist(r);
-        let (cell, xmax) = assign(vals, self.k, &[r], &self.centroids, Par::Seq);
+        let (c, xmax) = self.nearest_cell(&vals[r * self.k..(r + 1) * self.k]);
         self.widen_slack(xmax);
-        let c = cell[0] as usize;
         self.row_cell[r] = c as u32;
         self.row_pos[r] = self.lists[c].len() as u32;
         self.lists[c].push(r as u32);

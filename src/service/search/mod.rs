@@ -91,20 +91,30 @@ impl Tag {
     }
 }
 
-/// Hashing for shape ids, which are SHA-256 digests already: the first 16 bytes folded and mixed (murmur3's
-/// finalizer) instead of SipHash over all 32, which the scans of a tag's shapes and the loading of millions of ids
-/// spend most of their time in otherwise.
-#[derive(Default, Clone, Copy)]
+/// Hashing for shape ids, which are SHA-256 digests already: their four 8-byte words folded with a key drawn once
+/// per process, then mixed (murmur3's finalizer), instead of SipHash, which the scans of a tag's shapes and the
+/// loading of millions of ids spend most of their time in otherwise. The key keeps ids chosen to collide (whose
+/// contents someone searched for) from being chosen once for every server.
+#[derive(Clone, Copy)]
 pub(crate) struct IdHasher(u64);
+
+impl Default for IdHasher {
+    fn default() -> Self {
+        static KEY: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+        IdHasher(*KEY.get_or_init(|| {
+            use std::hash::{BuildHasher, Hasher};
+            std::collections::hash_map::RandomState::new().build_hasher().finish()
+        }))
+    }
+}
 
 impl std::hash::Hasher for IdHasher {
     fn write(&mut self, bytes: &[u8]) {
         let mut x = self.0;
-        for c in bytes.chunks(8).take(2) {
+        for c in bytes.chunks(8) {
             let mut b = [0u8; 8];
             b[..c.len()].copy_from_slice(c);
-            x ^= u64::from_le_bytes(b);
-            x = x.rotate_left(29);
+            x = (x ^ u64::from_le_bytes(b)).wrapping_mul(0x9E37_79B9_7F4A_7C15).rotate_left(31);
         }
         self.0 = x;
     }
@@ -195,7 +205,16 @@ pub(crate) struct Family {
     pub(crate) sub_rows: usize,
     /// The rows a load announced (reserved once the values' length is known).
     pub(crate) expect: usize,
+    /// While the cells are trained again off the lock ([`retrain`]): the rows whose contents changed since it began.
+    pub(crate) journal: Option<Vec<u32>>,
+    /// The family grew or shrank fourfold since its cells were trained, and is too large to train them again under
+    /// its lock: [`retrain`] does it on a thread of its own.
+    pub(crate) wants_training: bool,
 }
+
+/// Families up to this many rows train their cells again at once, under the lock (a fraction of a second); larger
+/// ones on a thread of their own while searches go on.
+pub const INLINE_TRAINING: usize = 1 << 17;
 
 impl Family {
     pub(crate) fn len(&self) -> usize {
@@ -229,19 +248,26 @@ impl Family {
                 if let Some(ivf) = &mut self.ivf {
                     ivf.refile(&self.vals, r);
                 }
+                self.note(r);
             }
             None => {
                 self.row.insert(id, self.ids.len() as u32);
                 self.ids.push(id);
                 self.vals.extend_from_slice(stored);
                 self.err.push(err);
+                self.note(self.ids.len() - 1);
                 if !train {
                     return;
                 }
+                let n = self.ids.len();
+                let retraining = self.journal.is_some();
                 match &mut self.ivf {
-                    Some(ivf) if self.ids.len() < 4 * ivf.trained_rows => {
+                    Some(ivf) if n < 4 * ivf.trained_rows || retraining || n > INLINE_TRAINING => {
                         ivf.push(&self.vals);
-                        if 4 * self.ids.len().saturating_sub(ivf.packed_rows) > self.ids.len() {
+                        if n >= 4 * ivf.trained_rows && !retraining {
+                            self.wants_training = true;
+                        }
+                        if 4 * n.saturating_sub(ivf.packed_rows) > n {
                             self.pack();
                         }
                     }
@@ -284,8 +310,18 @@ impl Family {
             self.sub_rows -= before - sub.len();
         }
     }
+    /// Records that row `r`'s contents changed, while the cells are trained again.
+    fn note(&mut self, r: usize) {
+        if let Some(j) = &mut self.journal {
+            j.push(r as u32);
+        }
+    }
     /// Trains the family's cells afresh when it is large enough to have them (and drops them when it is not).
     pub(crate) fn train(&mut self, par: faer::Par) {
+        if self.journal.is_some() {
+            // A training off the lock is under way; its result replaces the cells.
+            return;
+        }
         self.ivf =
             (self.len() >= ivf::MIN_ROWS).then(|| Ivf::train(&self.vals, self.k, ivf::cells_for(self.len()), par));
         self.pack();
@@ -293,6 +329,10 @@ impl Family {
     /// Renumbers the rows cell by cell, so that a probe reads each cell's rows from one stretch of memory (rows
     /// added later go at the end until the next packing: when they are a quarter of the family).
     fn pack(&mut self) {
+        if self.journal.is_some() {
+            // Rows keep their numbers while the cells are trained again.
+            return;
+        }
         let Some(ivf) = &mut self.ivf else { return };
         let order: Vec<u32> = ivf.lists.iter().flatten().copied().collect();
         let k = self.k;
@@ -353,9 +393,99 @@ impl Family {
         self.ids.pop();
         self.err.pop();
         self.vals.truncate(last * k);
+        self.note(r);
         if self.ivf.as_ref().is_some_and(|i| self.len() < i.trained_rows / 4) {
-            self.train(faer::Par::Seq);
+            if self.len() > INLINE_TRAINING {
+                self.wants_training = true;
+            } else {
+                self.train(faer::Par::Seq);
+            }
         }
+    }
+}
+
+type Families = RwLock<HashMap<String, Family>>;
+
+/// A training of a family's cells under way, off its lock: new centroids from a sample, then every row assigned to
+/// them a chunk at a time under the read lock, then the rows changed meanwhile assigned again and the cells swapped
+/// in under the write lock.
+pub(crate) struct Retraining {
+    name: String,
+    k: usize,
+    centroids: Vec<f64>,
+    cell: Vec<u32>,
+    xmax: f64,
+}
+
+/// Starts a training of family `name`'s cells: opens its journal and trains centroids on a copy of a sample of its
+/// rows (off the lock). None when the family is too small to have cells, or is being trained already.
+pub(crate) fn begin_retraining(fams: &Families, name: &str, par: faer::Par) -> Option<Retraining> {
+    let (k, sample, cells) = {
+        let mut g = fams.write().unwrap_or_else(|e| e.into_inner());
+        let fam = g.get_mut(name)?;
+        fam.wants_training = false;
+        if fam.journal.is_some() || fam.len() < ivf::MIN_ROWS {
+            return None;
+        }
+        fam.journal = Some(vec![]);
+        let cells = ivf::cells_for(fam.len());
+        let mut sample = vec![];
+        for r in ivf::sample_rows(fam.len(), cells) {
+            sample.extend_from_slice(fam.row_of(r));
+        }
+        (fam.k, sample, cells)
+    };
+    let m = sample.len() / k;
+    let centroids = ivf::centroids(&sample, k, &(0..m).collect::<Vec<_>>(), cells.min(m), par);
+    Some(Retraining { name: name.to_string(), k, centroids, cell: vec![], xmax: 0.0 })
+}
+
+/// Assigns the next `chunk` rows to the new centroids under the read lock; false once every row has been.
+pub(crate) fn retraining_step(fams: &Families, t: &mut Retraining, chunk: usize, par: faer::Par) -> bool {
+    let g = fams.read().unwrap_or_else(|e| e.into_inner());
+    let Some(fam) = g.get(&t.name) else { return false };
+    let (from, len) = (t.cell.len(), fam.len());
+    if from >= len {
+        return false;
+    }
+    let rows: Vec<usize> = (from..(from + chunk).min(len)).collect();
+    let (cell, xmax) = ivf::assign(&fam.vals, t.k, &rows, &t.centroids, par);
+    t.cell.extend(cell);
+    t.xmax = t.xmax.max(xmax);
+    true
+}
+
+/// Swaps the new cells in under the write lock, once the rows that changed since the training began (the journal's)
+/// and those added after the pass are assigned again; then renumbers the rows cell by cell.
+pub(crate) fn finish_retraining(fams: &Families, t: Retraining, par: faer::Par) {
+    let mut g = fams.write().unwrap_or_else(|e| e.into_inner());
+    let Some(fam) = g.get_mut(&t.name) else { return };
+    let journal = fam.journal.take().unwrap_or_default();
+    let len = fam.len();
+    if len < ivf::MIN_ROWS {
+        fam.train(par);
+        return;
+    }
+    let mut cell = t.cell;
+    cell.truncate(len);
+    let mut again: Vec<usize> = journal.into_iter().map(|r| r as usize).filter(|&r| r < cell.len()).collect();
+    again.extend(cell.len()..len);
+    again.sort_unstable();
+    again.dedup();
+    cell.resize(len, 0);
+    let (cells, xmax) = ivf::assign(&fam.vals, t.k, &again, &t.centroids, par);
+    for (&r, c) in again.iter().zip(cells) {
+        cell[r] = c;
+    }
+    fam.ivf = Some(Ivf::from_assignment(t.k, t.centroids, cell, t.xmax.max(xmax), len));
+    fam.pack();
+}
+
+/// A whole training off the lock (8,192 rows a step).
+fn retrain(fams: &Families, name: &str, par: faer::Par) {
+    if let Some(mut t) = begin_retraining(fams, name, par) {
+        while retraining_step(fams, &mut t, 8192, par) {}
+        finish_retraining(fams, t, par);
     }
 }
 
@@ -493,7 +623,9 @@ impl Tags {
 /// the store's log of changes (which other replicas write too).
 #[derive(Default)]
 pub struct Index {
-    pub(crate) families: RwLock<HashMap<String, Family>>,
+    pub(crate) families: std::sync::Arc<RwLock<HashMap<String, Family>>>,
+    /// A training off the lock is running (one at a time).
+    retraining: std::sync::Arc<std::sync::atomic::AtomicBool>,
     pub(crate) tags: RwLock<Tags>,
     /// The log position applied, and the shape id of the entry there.
     synced: std::sync::Mutex<(i64, String)>,
@@ -530,7 +662,8 @@ impl Index {
             match snapshot::read(path, end, &entry) {
                 Ok(Some((families, tags, at))) => {
                     let index = Index {
-                        families: RwLock::new(families),
+                        families: std::sync::Arc::new(RwLock::new(families)),
+                        retraining: Default::default(),
                         tags: RwLock::new(tags),
                         synced: std::sync::Mutex::new(at),
                         snapshot: snapshot.clone(),
@@ -554,7 +687,7 @@ impl Index {
         *index.synced.get_mut().unwrap_or_else(|e| e.into_inner()) =
             (end, store.fingerprint_log_entry(end)?.unwrap_or_default());
         {
-            let fams = index.families.get_mut().unwrap_or_else(|e| e.into_inner());
+            let mut fams = index.families.write().unwrap_or_else(|e| e.into_inner());
             // Each family's arrays reserved at their final size: grown by doubling they would be held twice while
             // copied.
             for (family, n) in store.fingerprint_counts()? {
@@ -572,6 +705,7 @@ impl Index {
             for fam in fams.values_mut() {
                 fam.train(faer::Par::rayon(0));
             }
+            drop(fams);
             let tags = index.tags.get_mut().unwrap_or_else(|e| e.into_inner());
             let mut by_shape: HashMap<ShapeId, Vec<Tag>> = HashMap::new();
             store.for_each_tag(&mut |id, tag| {
@@ -609,6 +743,28 @@ impl Index {
                     fam.tag_add(tag, id);
                 }
             }
+        }
+    }
+    /// Starts, on a thread of its own, the training of a family's cells that one wants (one at a time).
+    fn maybe_retrain(&self) {
+        use std::sync::atomic::Ordering::SeqCst;
+        let name = {
+            let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
+            fams.iter().find(|(_, f)| f.wants_training && f.journal.is_none()).map(|(n, _)| n.clone())
+        };
+        let Some(name) = name else { return };
+        if self.retraining.swap(true, SeqCst) {
+            return;
+        }
+        let (fams, running) = (self.families.clone(), self.retraining.clone());
+        let started = std::thread::Builder::new().name("kac-index-training".into()).spawn(move || {
+            let t = std::time::Instant::now();
+            retrain(&fams, &name, faer::Par::Seq);
+            tracing::info!(family = %name, seconds = t.elapsed().as_secs_f64(), "search index cells trained again");
+            running.store(false, SeqCst);
+        });
+        if started.is_err() {
+            self.retraining.store(false, SeqCst);
         }
     }
     /// Fingerprints held, over every family.
@@ -684,11 +840,17 @@ impl Index {
         let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());
         let fam = fams.entry(f.family.clone()).or_default();
         fam.put(id, &f.values, true);
+        let wants = fam.wants_training;
         let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
         for t in tags.by_shape.get(&id).into_iter().flatten() {
             fam.tag_add(t, &id);
         }
         self.changed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        drop(tags);
+        drop(fams);
+        if wants {
+            self.maybe_retrain();
+        }
     }
     /// Keeps a fingerprint: in the store, then in the index; not at all when its shape is no longer stored.
     pub fn record(&self, store: &dyn FingerprintStore, f: &Fingerprint) -> std::io::Result<()> {
@@ -704,11 +866,18 @@ impl Index {
         let mut fams = self.families.write().unwrap_or_else(|e| e.into_inner());
         let mut tags = self.tags.write().unwrap_or_else(|e| e.into_inner());
         let held = tags.by_shape.get(&id).cloned().unwrap_or_default();
+        let mut wants = false;
         for fam in fams.values_mut() {
             fam.remove(&id, &held);
+            wants |= fam.wants_training;
         }
         tags.set(id, vec![]);
         self.changed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        drop(tags);
+        drop(fams);
+        if wants {
+            self.maybe_retrain();
+        }
     }
     /// Sets a shape's tags in the index (the store already holds them).
     pub fn set_tags(&self, id: &str, tags: &[String]) {
@@ -1024,7 +1193,11 @@ mod tests {
         snapshot::write(&path, &(42, sid(9).hex()), &fams, &index.tags.read().unwrap()).unwrap();
         let (families, tags, at) = snapshot::read(&path, 42, &log).unwrap().unwrap();
         assert_eq!(at, (42, sid(9).hex()));
-        let back = Index { families: RwLock::new(families), tags: RwLock::new(tags), ..Default::default() };
+        let back = Index {
+            families: std::sync::Arc::new(RwLock::new(families)),
+            tags: RwLock::new(tags),
+            ..Default::default()
+        };
         let fetch =
             |_: &str, ids: &[String]| Ok(ids.iter().filter_map(|i| Some((i.clone(), all.get(i)?.clone()))).collect());
         for q in rows(5, k, 77) {
@@ -1044,6 +1217,94 @@ mod tests {
         std::fs::write(&path, &bytes[..bytes.len() - 9]).unwrap();
         assert!(snapshot::read(&path, 42, &log).is_err(), "a snapshot cut short is refused");
         assert!(snapshot::read(&dir.path().join("none"), 42, &log).unwrap().is_none());
+    }
+
+    /// Cells trained again off the lock follow every change made while they were trained (rows added, replaced,
+    /// removed before and after the pass reached them, and after it ended): each row in one cell, its nearest
+    /// centroid's, and searches exact against sorting every distance.
+    #[test]
+    fn cells_trained_again_off_the_lock_follow_the_changes_made_meanwhile() {
+        let k = 8;
+        let index = Index::default();
+        let mut all = HashMap::new();
+        let put = |index: &Index, all: &mut HashMap<String, Vec<f64>>, i: usize, v: Vec<f64>| {
+            index.insert(&Fingerprint { family: "a".into(), shape_id: sid(i).hex(), values: v.clone() });
+            all.insert(sid(i).hex(), v);
+        };
+        let drop_row = |index: &Index, all: &mut HashMap<String, Vec<f64>>, i: usize| {
+            index.remove_shape(&sid(i).hex());
+            all.remove(&sid(i).hex());
+        };
+        let base = rows(ivf::MIN_ROWS + 3000, k, 11);
+        for (i, v) in base.iter().enumerate() {
+            put(&index, &mut all, i, v.clone());
+        }
+        let extra = rows(3000, k, 12);
+        let fams = index.families.clone();
+        let mut t = begin_retraining(&fams, "a", faer::Par::Seq).expect("a family with cells");
+        assert!(begin_retraining(&fams, "a", faer::Par::Seq).is_none(), "one training at a time");
+        // Before the pass: added, replaced and removed rows at both ends.
+        for (j, v) in extra.iter().take(500).enumerate() {
+            put(&index, &mut all, 100_000 + j, v.clone());
+        }
+        for i in [0, 1, 5000, ivf::MIN_ROWS + 2990] {
+            put(&index, &mut all, i, extra[2000 + i % 1000].clone());
+        }
+        for i in [2, 3, 4, 7000] {
+            drop_row(&index, &mut all, i);
+        }
+        // During the pass.
+        let mut step = 0;
+        while retraining_step(&fams, &mut t, 2048, faer::Par::Seq) {
+            step += 1;
+            put(&index, &mut all, 200_000 + step, extra[1000 + step].clone());
+            drop_row(&index, &mut all, 10 * step + 1);
+            put(&index, &mut all, 20 * step, extra[1500 + step].clone());
+        }
+        // After it.
+        for (j, v) in extra[2500..2800].iter().enumerate() {
+            put(&index, &mut all, 300_000 + j, v.clone());
+        }
+        drop_row(&index, &mut all, 12_000);
+        finish_retraining(&fams, t, faer::Par::Seq);
+        {
+            let g = fams.read().unwrap();
+            let fam = &g["a"];
+            let ivf = fam.ivf.as_ref().unwrap();
+            assert!(fam.journal.is_none());
+            assert_eq!((ivf.row_cell.len(), fam.len(), all.len()), (fam.len(), all.len(), all.len()));
+            let mut seen = vec![0; fam.len()];
+            for (c, list) in ivf.lists.iter().enumerate() {
+                for (p, &r) in list.iter().enumerate() {
+                    seen[r as usize] += 1;
+                    assert_eq!((ivf.row_cell[r as usize] as usize, ivf.row_pos[r as usize] as usize), (c, p));
+                }
+            }
+            assert!(seen.iter().all(|&s| s == 1), "each row in one cell");
+            for r in 0..fam.len() {
+                let x: Vec<f64> = fam.row_of(r).iter().map(|&v| v as f64).collect();
+                let d = |c: usize| -> f64 {
+                    ivf.centroids[c * k..(c + 1) * k].iter().zip(&x).map(|(a, b)| (a - b) * (a - b)).sum()
+                };
+                let own = d(ivf.row_cell[r] as usize);
+                let best = (0..ivf.cells()).map(d).fold(f64::INFINITY, f64::min);
+                assert!(
+                    own <= best + ivf.slack + 1e-9 * best.max(1.0),
+                    "row {r}: its cell is not its nearest centroid's"
+                );
+            }
+        }
+        let fetch =
+            |_: &str, ids: &[String]| Ok(ids.iter().filter_map(|i| Some((i.clone(), all.get(i)?.clone()))).collect());
+        for q in rows(20, k, 13) {
+            let want = brute(&all, &q, Metric::Euclidean, 10, |id| id != sid(3).hex());
+            let every = index.nearest(&query(&q, Metric::Euclidean, &[], false, usize::MAX), &fetch).unwrap();
+            assert_eq!(every.neighbours, want);
+            let some = index.nearest(&query(&q, Metric::Euclidean, &[], false, 8), &fetch).unwrap();
+            if some.exact {
+                assert_eq!(some.neighbours, want);
+            }
+        }
     }
 
     #[test]

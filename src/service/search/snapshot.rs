@@ -216,7 +216,7 @@ pub(crate) fn read(
                 row_pos.push(list.len() as u32);
                 list.push(row as u32);
             }
-            Some(Ivf { k, centroids, lists, row_cell, row_pos, slack, trained_rows, packed_rows: n })
+            Some(Ivf { k, centroids, lists, row_cell, row_pos, slack, trained_rows, packed_rows: n, xmax: -1.0 })
         };
         let mut row = super::IdMap::with_capacity_and_hasher(n, Default::default());
         for (i, id) in ids.iter().enumerate() {
