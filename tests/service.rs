@@ -1272,6 +1272,9 @@ fn a_collection_is_uploaded_in_bulk_tagged_and_searched_within_a_tag() {
     // (Small bodies, or the refusing part last: a refusal answers before the rest of the body is read.)
     let r = reply(agent().post(&s.url("/v1/shapes/bulk")).send_bytes(b"OFF"));
     assert_problem(&r, 400, "invalid-request");
+    let (ct0, none) = multipart(&[("options", None, br#"{"tags": ["ok"]}"#)]);
+    let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct0).send_bytes(&none));
+    assert_problem(&r, 400, "invalid-request");
     let (ct3, bad) = multipart(&[("file", Some("a.off"), &a), ("options", None, br#"{"tags": ["ok"], "colour": 1}"#)]);
     let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct3).send_bytes(&bad));
     assert_eq!((r.status, r.body["field"].as_str()), (422, Some("colour")), "{}", r.body);

@@ -100,6 +100,11 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
 
     // Fingerprints: kept for stored shapes only, replaced per (family, shape), gone with the shape; every change
     // logged for other replicas' indexes.
+    // An identity drawn once per store: the same through another connection or a reopening.
+    let identity = b.fingerprints.store_identity().unwrap();
+    assert!(identity.len() >= 16, "{identity}");
+    assert_eq!(other.fingerprints.store_identity().unwrap(), identity);
+    assert_eq!(reopen().fingerprints.store_identity().unwrap(), identity);
     let log = b.fingerprints.fingerprint_log_end().unwrap();
     assert!(b.fingerprints.put_fingerprint("fam", &id, &[1.0, 2.5]).unwrap());
     assert!(b.fingerprints.put_fingerprint("fam", &id, &[1.0, 3.5]).unwrap());
@@ -295,6 +300,6 @@ fn replicas_starting_together_migrate_once() {
     assert_eq!(opened.len(), 3);
     assert_eq!(
         cluster.query("migrate", "SELECT string_agg(version::text, ',' ORDER BY version) FROM schema_migrations"),
-        "1,2,3"
+        "1,2,3,4"
     );
 }

@@ -145,7 +145,7 @@ pub const MAX_BULK_FILES: usize = 10_000;
     request_body(content = Vec<u8>, description = "multipart/form-data: file parts (shape files or .zip archives) and an optional 'options' part (JSON BulkOptions)", content_type = "multipart/form-data"),
     responses(
         (status = 200, description = "every file's outcome", body = BulkResult),
-        (status = 400, description = "not multipart, bad options, or too many files", body = crate::service::error::Problem, content_type = "application/problem+json"),
+        (status = 400, description = "not multipart, no file part, bad options, or too many files", body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "too large", body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 422, description = "an unknown field in the options", body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Result<Json<BulkResult>, ApiError> {
@@ -185,6 +185,11 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         if files.len() > MAX_BULK_FILES {
             return Err(ApiError::invalid_request(format!("more than {MAX_BULK_FILES} files in one bulk upload")));
         }
+    }
+    if files.is_empty() {
+        return Err(ApiError::invalid_request(
+            "the bulk upload has no file parts (one part with a file name per shape)",
+        ));
     }
     let tags = Tag::parse_all(&options.tags).map_err(ApiError::invalid_request)?;
     if let Some(fp) = &options.fingerprint {

@@ -631,6 +631,8 @@ pub struct Index {
     synced: std::sync::Mutex<(i64, String)>,
     /// Where the index is snapshotted (the embedded store's data directory), and changes since the last snapshot.
     snapshot: Option<std::path::PathBuf>,
+    /// The store's identity, written in the snapshot.
+    store_id: String,
     changed: std::sync::atomic::AtomicUsize,
     /// Held while a snapshot is written: one writer at a time.
     writing: std::sync::Mutex<()>,
@@ -657,9 +659,10 @@ impl Index {
         let t = std::time::Instant::now();
         let mut report = LoadReport::default();
         let end = store.fingerprint_log_end()?;
+        let store_id = store.store_identity()?;
         if let Some(path) = &snapshot {
             let entry = |seq: i64| store.fingerprint_log_entry(seq);
-            match snapshot::read(path, end, &entry) {
+            match snapshot::read(path, &store_id, end, &entry) {
                 Ok(Some((families, tags, at))) => {
                     let index = Index {
                         families: std::sync::Arc::new(RwLock::new(families)),
@@ -667,6 +670,7 @@ impl Index {
                         tags: RwLock::new(tags),
                         synced: std::sync::Mutex::new(at),
                         snapshot: snapshot.clone(),
+                        store_id: store_id.clone(),
                         changed: Default::default(),
                         writing: Default::default(),
                     };
@@ -681,7 +685,7 @@ impl Index {
                 Err(e) => report.snapshot_refused = Some(e.to_string()),
             }
         }
-        let mut index = Index { snapshot, ..Default::default() };
+        let mut index = Index { snapshot, store_id, ..Default::default() };
         // The log's end first: a change made while the tables are read is applied again by the next sync, which
         // is harmless (a put replaces, a removal forgets, tags are set whole).
         *index.synced.get_mut().unwrap_or_else(|e| e.into_inner()) =
@@ -789,7 +793,7 @@ impl Index {
         let at = synced.clone();
         drop(synced);
         self.changed.store(0, std::sync::atomic::Ordering::Relaxed);
-        snapshot::write(path, &at, &fams, &tags)
+        snapshot::write(path, &self.store_id, &at, &fams, &tags)
     }
 
     /// Writes the snapshot if anything changed since the last one.
@@ -1190,8 +1194,9 @@ mod tests {
         let path = dir.path().join("search-index.bin");
         let fams = index.families.read().unwrap();
         let log = |seq: i64| Ok((seq == 42).then(|| sid(9).hex()));
-        snapshot::write(&path, &(42, sid(9).hex()), &fams, &index.tags.read().unwrap()).unwrap();
-        let (families, tags, at) = snapshot::read(&path, 42, &log).unwrap().unwrap();
+        snapshot::write(&path, "store-a", &(42, sid(9).hex()), &fams, &index.tags.read().unwrap()).unwrap();
+        assert!(snapshot::read(&path, "store-b", 42, &log).is_err(), "another store's snapshot is refused");
+        let (families, tags, at) = snapshot::read(&path, "store-a", 42, &log).unwrap().unwrap();
         assert_eq!(at, (42, sid(9).hex()));
         let back = Index {
             families: std::sync::Arc::new(RwLock::new(families)),
@@ -1210,13 +1215,13 @@ mod tests {
             }
         }
         assert_eq!(back.tags.read().unwrap().by_shape[&sid(5)], vec![Tag::parse("x").unwrap()]);
-        assert!(snapshot::read(&path, 41, &log).is_err(), "a snapshot beyond the log is refused");
+        assert!(snapshot::read(&path, "store-a", 41, &log).is_err(), "a snapshot beyond the log is refused");
         let other = |_: i64| Ok(Some(sid(8).hex()));
-        assert!(snapshot::read(&path, 50, &other).is_err(), "a snapshot of another store's log is refused");
+        assert!(snapshot::read(&path, "store-a", 50, &other).is_err(), "a snapshot of another store's log is refused");
         let bytes = std::fs::read(&path).unwrap();
         std::fs::write(&path, &bytes[..bytes.len() - 9]).unwrap();
-        assert!(snapshot::read(&path, 42, &log).is_err(), "a snapshot cut short is refused");
-        assert!(snapshot::read(&dir.path().join("none"), 42, &log).unwrap().is_none());
+        assert!(snapshot::read(&path, "store-a", 42, &log).is_err(), "a snapshot cut short is refused");
+        assert!(snapshot::read(&dir.path().join("none"), "store-a", 42, &log).unwrap().is_none());
     }
 
     /// Cells trained again off the lock follow every change made while they were trained (rows added, replaced,

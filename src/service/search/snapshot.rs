@@ -14,7 +14,7 @@ use std::collections::HashMap;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"KACIDX02";
+const MAGIC: &[u8; 8] = b"KACIDX03";
 const END: &[u8; 8] = b"KACIDXOK";
 
 struct W<T: Write>(T);
@@ -58,14 +58,20 @@ impl<T: Write> W<T> {
 /// Writes the snapshot of `families` and `tags` at log position `at`.
 pub(crate) fn write(
     path: &Path,
+    store: &str,
     at: &(i64, String),
     families: &HashMap<String, Family>,
     tags: &Tags,
 ) -> std::io::Result<()> {
-    let tmp = path.with_extension("tmp");
+    // One temporary file a process: replicas sharing a directory each publish whole files.
+    let tmp = path.with_extension(format!("{}.tmp", std::process::id()));
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
     let file = std::fs::File::create(&tmp)?;
     let mut w = W(BufWriter::with_capacity(1 << 20, file));
     w.bytes(MAGIC)?;
+    w.text(store)?;
     w.u64(at.0 as u64)?;
     w.text(&at.1)?;
     w.u32(families.len() as u32)?;
@@ -155,6 +161,7 @@ type Loaded = (HashMap<String, Family>, Tags, (i64, String));
 /// of another log (`entry`: the shape id of the store's log entry at a position).
 pub(crate) fn read(
     path: &Path,
+    store: &str,
     log_end: i64,
     entry: &dyn Fn(i64) -> std::io::Result<Option<String>>,
 ) -> std::io::Result<Option<Loaded>> {
@@ -167,6 +174,13 @@ pub(crate) fn read(
     let mut r = R(BufReader::with_capacity(1 << 20, file));
     if &r.array::<8>()? != MAGIC {
         return Err(bad("not a kac search index (or of another version)"));
+    }
+    let of = r.text(256)?;
+    if of != store {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("the search index snapshot is of store {of}, not of this one ({store})"),
+        ));
     }
     let at = r.u64()? as i64;
     let at_id = r.text(64)?;

@@ -28,8 +28,7 @@ pub struct Backend {
     pub fingerprints: Arc<dyn FingerprintStore>,
     pub results: Arc<dyn ResultStore>,
     pub queue: Arc<dyn JobQueue>,
-    /// Where this replica keeps its search index's snapshot (the embedded store's directory; none with a shared
-    /// store, whose replicas build their index from its tables and log).
+    /// Where this replica keeps its search index's snapshot (its data directory, with either store).
     pub index_snapshot: Option<PathBuf>,
 }
 
@@ -51,7 +50,7 @@ pub fn open(config: &super::config::Config) -> std::io::Result<Backend> {
             fingerprints: pg.clone(),
             results: pg.clone(),
             queue: pg,
-            index_snapshot: None,
+            index_snapshot: Some(config.data_dir.join("search-index.bin")),
         });
     }
     Err(std::io::Error::new(
@@ -165,6 +164,9 @@ pub trait FingerprintStore: Send + Sync {
     fn tags_of(&self, shape_id: &str) -> std::io::Result<Vec<String>>;
     /// Every (shape id, tag), one at a time.
     fn for_each_tag(&self, f: &mut dyn FnMut(&str, &str)) -> std::io::Result<()>;
+    /// This store's identity: drawn at random when it was created, so that a search index snapshot of another store
+    /// (or of a store created again) is never read as its own.
+    fn store_identity(&self) -> std::io::Result<String>;
     /// The end of the log of changes (every fingerprint put, every removed shape, every change of tags), for
     /// [`fingerprint_changes`].
     ///

@@ -57,6 +57,11 @@ const MIGRATIONS: &[(i32, &str)] = &[
              seq bigserial PRIMARY KEY, family text NOT NULL, shape_id text NOT NULL, fingerprint bytea);",
     ),
     (3, "CREATE TABLE shape_tags (shape_id text NOT NULL, tag text NOT NULL, PRIMARY KEY (shape_id, tag));"),
+    (
+        4,
+        "CREATE TABLE meta (key text PRIMARY KEY, value text NOT NULL);
+         INSERT INTO meta (key, value) VALUES ('store_id', md5(random()::text || clock_timestamp()::text));",
+    ),
 ];
 
 /// The advisory lock that serializes migrations (and queue admissions, as a transaction lock of its own key).
@@ -541,6 +546,12 @@ impl FingerprintStore for Postgres {
         self.run(|pool| async move {
             let c = pool.get().await.map_err(pg)?;
             Ok(c.query_one("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", &[]).await.map_err(pg)?.get(0))
+        })
+    }
+    fn store_identity(&self) -> std::io::Result<String> {
+        self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            Ok(c.query_one("SELECT value FROM meta WHERE key = 'store_id'", &[]).await.map_err(pg)?.get(0))
         })
     }
     fn fingerprint_log_entry(&self, seq: i64) -> std::io::Result<Option<String>> {

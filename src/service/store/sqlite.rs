@@ -115,7 +115,9 @@ impl Database {
                  seq INTEGER PRIMARY KEY AUTOINCREMENT, family TEXT NOT NULL, shape_id TEXT NOT NULL,
                  fingerprint BLOB);
              CREATE TABLE IF NOT EXISTS shape_tags (
-                 shape_id TEXT NOT NULL, tag TEXT NOT NULL, PRIMARY KEY (shape_id, tag));",
+                 shape_id TEXT NOT NULL, tag TEXT NOT NULL, PRIMARY KEY (shape_id, tag));
+             CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+             INSERT OR IGNORE INTO meta (key, value) VALUES ('store_id', lower(hex(randomblob(16))));",
         )
         .map_err(db_err)?;
         migrate_jobs(&conn)?;
@@ -364,6 +366,9 @@ impl FingerprintStore for Database {
     }
     fn fingerprint_log_end(&self) -> std::io::Result<i64> {
         self.conn().query_row("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", [], |r| r.get(0)).map_err(db_err)
+    }
+    fn store_identity(&self) -> std::io::Result<String> {
+        self.conn().query_row("SELECT value FROM meta WHERE key = 'store_id'", [], |r| r.get(0)).map_err(db_err)
     }
     fn fingerprint_log_entry(&self, seq: i64) -> std::io::Result<Option<String>> {
         self.conn()
