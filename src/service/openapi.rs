@@ -347,7 +347,7 @@ fn name_result_variants(doc: &mut serde_json::Value) {
 fn type_raw_bodies(doc: &mut serde_json::Value) {
     use serde_json::Value;
     let Some(Value::Object(paths)) = doc.pointer_mut("/paths") else { return };
-    for item in paths.values_mut() {
+    for (path, item) in paths.iter_mut() {
         let Value::Object(ops) = item else { continue };
         for op in ops.values_mut() {
             // Request bodies of bytes (utoipa writes `Vec<u8>` as an array of integers): a raw shape is a binary
@@ -383,6 +383,15 @@ fn type_raw_bodies(doc: &mut serde_json::Value) {
                         continue;
                     }
                     media["schema"] = match ct.as_str() {
+                        // A bulk upload: any number of file parts and the options.
+                        "multipart/form-data" if path == "/v1/shapes/bulk" => serde_json::json!({
+                            "type": "object",
+                            "required": ["file"],
+                            "properties": {
+                                "file": { "type": "array", "minItems": 1, "items": { "type": "string", "format": "binary" }, "description": "the shape files (format from each name), or .zip archives of them" },
+                                "options": { "type": "string", "description": "JSON BulkOptions: tags and the fingerprint job" }
+                            }
+                        }),
                         "multipart/form-data" => serde_json::json!({
                             "type": "object",
                             "required": ["file", "analysis"],
