@@ -44,13 +44,14 @@ Prints one JSON line on stdout (progress on stderr). Standard library and numpy.
 
 Usage: bench/.venv/bin/python bench/ingest.py [--n 200] [--batch 25] [--uploaders 1] [--kac target/release/kac]
 """
-import argparse, datetime, json, os, shutil, signal, subprocess, sys, tempfile, threading, time, urllib.request, uuid
+import argparse, datetime, json, os, shutil, subprocess, sys, tempfile, threading, time, urllib.request, uuid
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from kac_http import call, release_kac  # noqa: E402
+from search import peak_mb, stop  # noqa: E402
 
 FP = {"k": 50, "normalization": "area"}
 TAG = "ingest-bench"
@@ -119,22 +120,6 @@ def serve(kac, data, logfile, workers, capacity):
         raise RuntimeError("kac serve exited (%s) before listening" % p.wait())
     threading.Thread(target=lambda: [None for _ in p.stdout], daemon=True).start()
     return p, "http://" + json.loads(line)["listening"]
-
-
-def stop(p):
-    p.send_signal(signal.SIGTERM)
-    try:
-        p.wait(timeout=60)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        p.wait()
-
-
-def peak_mb(p):
-    for line in open("/proc/%d/status" % p.pid):
-        if line.startswith("VmHWM:"):
-            return round(int(line.split()[1]) / 1024)
-    return None
 
 
 def metrics(base):

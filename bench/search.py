@@ -78,17 +78,22 @@ def start(kac, data, logfile=os.devnull):
     return p, base, secs
 
 
-def load_report(logfile):
-    """The fields of the last "search index loaded" log line (from, fingerprints, seconds, refused), if any."""
+def log_fields(logfile, message):
+    """The fields of the last log line with this message (the server logs JSON lines), if any."""
     found = None
     for line in open(logfile, errors="replace"):
         try:
             fields = json.loads(line).get("fields", {})
         except ValueError:
             continue
-        if fields.get("message") == "search index loaded":
+        if fields.get("message") == message:
             found = {k: v for k, v in fields.items() if k != "message"}
     return found
+
+
+def load_report(logfile):
+    """The fields of the last "search index loaded" log line (from, fingerprints, seconds, refused), if any."""
+    return log_fields(logfile, "search index loaded")
 
 
 def stop(p):

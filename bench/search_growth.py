@@ -22,15 +22,8 @@ from kac_http import call, release_kac  # noqa: E402
 
 def trained(logfile):
     """The seconds of the last "cells trained again" log line, if any."""
-    found = None
-    for line in open(logfile, errors="replace"):
-        try:
-            fields = json.loads(line).get("fields", {})
-        except ValueError:
-            continue
-        if fields.get("message") == "search index cells trained again":
-            found = fields.get("seconds")
-    return found
+    fields = S.log_fields(logfile, "search index cells trained again")
+    return fields and fields.get("seconds")
 
 
 def main():

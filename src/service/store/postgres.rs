@@ -402,6 +402,14 @@ impl ShapeStore for Postgres {
     }
 }
 
+/// Takes the log's lock for the transaction, so that log entries are written one transaction at a time (their
+/// numbers in commit order: a replica that has read up to one number has seen every entry below it), and holds the
+/// shape while the transaction writes about it (a removal waits for it); false when the shape is not stored.
+async fn lock_log_and_hold(tx: &tokio_postgres::Transaction<'_>, shape_id: &str) -> PgResult<bool> {
+    tx.execute("SELECT pg_advisory_xact_lock($1)", &[&LOG_LOCK]).await.map_err(pg)?;
+    Ok(tx.query_opt("SELECT 1 FROM shapes WHERE id = $1 FOR KEY SHARE", &[&shape_id]).await.map_err(pg)?.is_some())
+}
+
 impl FingerprintStore for Postgres {
     fn put_fingerprint(&self, family: &str, shape_id: &str, values: &[f64]) -> std::io::Result<bool> {
         let blob: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
@@ -409,16 +417,7 @@ impl FingerprintStore for Postgres {
         self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
             let tx = c.transaction().await.map_err(pg)?;
-            // Log entries one transaction at a time, so their numbers are in commit order and a replica that has
-            // read up to one number has seen every entry below it.
-            tx.execute("SELECT pg_advisory_xact_lock($1)", &[&LOG_LOCK]).await.map_err(pg)?;
-            // The shape stays while its fingerprint is written (a removal waits for this transaction).
-            let stored = tx
-                .query_opt("SELECT 1 FROM shapes WHERE id = $1 FOR KEY SHARE", &[&shape_id])
-                .await
-                .map_err(pg)?
-                .is_some();
-            if !stored {
+            if !lock_log_and_hold(&tx, &shape_id).await? {
                 return Ok(false);
             }
             let n = tx
@@ -493,13 +492,7 @@ impl FingerprintStore for Postgres {
             let mut c = pool.get().await.map_err(pg)?;
             let tx = c.transaction().await.map_err(pg)?;
             // The log's lock also orders edits of tags: one at a time, read and written in one transaction.
-            tx.execute("SELECT pg_advisory_xact_lock($1)", &[&LOG_LOCK]).await.map_err(pg)?;
-            let stored = tx
-                .query_opt("SELECT 1 FROM shapes WHERE id = $1 FOR KEY SHARE", &[&shape_id])
-                .await
-                .map_err(pg)?
-                .is_some();
-            if !stored {
+            if !lock_log_and_hold(&tx, &shape_id).await? {
                 return Ok(TagsOutcome::NotStored);
             }
             let rows = tx.query("SELECT tag FROM shape_tags WHERE shape_id = $1", &[&shape_id]).await.map_err(pg)?;
