@@ -271,6 +271,8 @@ impl Family {
                             self.pack();
                         }
                     }
+                    // Too few rows for cells: scanned whole.
+                    None if n < ivf::MIN_ROWS => {}
                     _ => self.train(faer::Par::Seq),
                 }
             }
@@ -906,12 +908,6 @@ impl Index {
         let Some(id) = ShapeId::parse(id) else { return vec![] };
         let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
         tags.by_shape.get(&id).map(|t| t.iter().map(|t| t.as_str().to_string()).collect()).unwrap_or_default()
-    }
-    /// Whether a family holds a shape's fingerprint.
-    pub fn holds(&self, family: &str, id: &str) -> bool {
-        let Some(id) = ShapeId::parse(id) else { return false };
-        let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
-        fams.get(family).is_some_and(|f| f.row.contains_key(&id))
     }
 
     /// The `count` nearest fingerprints of a family to a query (nearest first, ties by id), with exact distances:
