@@ -16,7 +16,14 @@ mirror map fits every intrinsic descriptor as well as the true one) against a ro
 Error: the mean geodesic distance on the source (heat method, `kac geodesic`) between each sampled target vertex's
 match and its true match, over √area; 100 target vertices sampled evenly.
 
-Usage: python3 bench/correspondence.py [--pyfm-python /path/to/venv/bin/python]
+Public pose pairs (`--pose-pairs DIR`): near-isometric poses of one body whose vertices correspond by index, as
+their datasets define ground truth; the target's vertices are shuffled too. DIR holds `faust/tr_reg_00{0,1}.off`
+(MPI-FAUST registrations, 6,890 vertices; Bogo et al. 2014) and `tosca/{cat,dog}{0,1}.off` (TOSCA high-resolution,
+27,894 and 25,290 vertices, with small holes; Bronstein et al. 2008), the pairs missing from it skipped. The files are
+not in the repository (their licences allow research use, not redistribution): BENCHMARKS.md says where the copies
+measured came from.
+
+Usage: python3 bench/correspondence.py [--pyfm-python /path/to/venv/bin/python] [--pose-pairs DIR]
 (pyFM: `pip install pyfmaps`; by default the running interpreter must import pyFM.)
 """
 import argparse, json, math, os, subprocess, sys, tempfile, time
@@ -102,6 +109,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--pyfm-python", default=sys.executable)
     ap.add_argument("--samples", type=int, default=100)
+    ap.add_argument("--pose-pairs", default=None, help="a directory of public pose pairs (see the docstring)")
+    ap.add_argument("--only-pose-pairs", action="store_true", help="skip the generated pairs")
     a = ap.parse_args()
     kac = release_kac()
     work = tempfile.mkdtemp()
@@ -132,10 +141,27 @@ def main():
             return np.stack([r0 * np.sin(x / r0), y, r0 * (1 - np.cos(x / r0))], axis=1)
 
         pairs.append(("drum, bent and stretched", dv, df, bend, 3))
+    # Each entry: name, source vertices and faces, the target's vertices and faces (vertex i of the target is
+    # vertex i of the source), the shuffle's seed.
+    pairs = [(name, v, f, motion(v), f, seed) for name, v, f, motion, seed in pairs]
+    if a.only_pose_pairs:
+        pairs = []
+    if a.pose_pairs:
+        for name, x, y, seed in (("FAUST, subject 0, poses 0 and 1", "faust/tr_reg_000.off", "faust/tr_reg_001.off", 5),
+                                 ("TOSCA cat, poses 0 and 1", "tosca/cat0.off", "tosca/cat1.off", 6),
+                                 ("TOSCA dog, poses 0 and 1", "tosca/dog0.off", "tosca/dog1.off", 7)):
+            x, y = os.path.join(a.pose_pairs, x), os.path.join(a.pose_pairs, y)
+            if not (os.path.exists(x) and os.path.exists(y)):
+                print("skipped (not in %s): %s" % (a.pose_pairs, name), file=sys.stderr)
+                continue
+            (v, f), (w, g) = read_off(x), read_off(y)
+            if len(v) != len(w) or not np.array_equal(f, g):
+                sys.exit("%s and %s do not correspond vertex by vertex" % (x, y))
+            pairs.append((name, v, f, w, g, seed))
     rows = []
-    for name, v, f, motion, seed in pairs:
+    for name, v, f, moved, moved_f, seed in pairs:
         src, tgt = os.path.join(work, "a.off"), os.path.join(work, "b.off")
-        tv, tf, perm = shuffled(v, f, motion, seed)
+        tv, tf, perm = shuffled(moved, moved_f, lambda p: p, seed)
         write_off(src, v, f)
         write_off(tgt, tv, tf)
         m_path = os.path.join(work, "map.npy")
