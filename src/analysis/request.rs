@@ -6,7 +6,7 @@ use kac_core::operators::manifold::CloudNormalization;
 use kac_core::operators::p2::Midpoints;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
-pub const ALGORITHM_VERSION: u32 = 8;
+pub const ALGORITHM_VERSION: u32 = 9;
 
 /// Which operator to build (see `kac_core::operators`): one type for the service's `operator` object and the
 /// CLI's operator flags (`--operator`, `--mass`, `--boundary`, `--dirichlet-vertices`, `--neighbours`, `--time`,
