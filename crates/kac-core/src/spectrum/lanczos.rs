@@ -728,6 +728,8 @@ pub fn eigs_block_lanczos(
             // vertices, k = 100, the basis is 1.6 GB, the factor 0.5 GB and the eigenvectors 0.8 GB).
             let (factor_nnz, ldlt) = (chol.factor_nnz(), chol.is_ldlt());
             drop(chol);
+            // So are the basis columns past the last one copied out (about half the basis).
+            super::release_columns(&mut v, src.iter().map(|&c| c + 1).max().unwrap_or(0));
             let mut vectors = super::zeros_checked(n, want, &control)?;
             for (j, &from) in idx.iter().enumerate() {
                 if j % 64 == 0 {
