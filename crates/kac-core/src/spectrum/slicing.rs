@@ -224,7 +224,27 @@ pub(crate) fn solve(
         (lanczos::eigs_block_lanczos(pair, &os, Some(sym), slice_control, &run), t.elapsed().as_secs_f64())
     };
     let results: Vec<(Result<Option<Spectrum>, EigenError>, f64)> = if parallel {
-        (0..slices.len()).into_par_iter().with_max_len(1).map(run_slice).collect()
+        // One queue, the top slice first: it holds the k-th eigenvalue, often inside a cluster it must see whole, and
+        // takes the most block steps (164k sphere, k = 1000, 8 slices: 99 steps and 9.7 s against 44 to 65 and
+        // 4.9 to 8.3 s). Each worker takes the next slice when it is free, so the longest does not start last
+        // (rayon's halves gave one thread slices 0 to 3 and the other 4 to 7: 26.4 against 30.1 s).
+        let order: Vec<usize> = (0..slices.len()).rev().collect();
+        let next = AtomicUsize::new(0);
+        type Outcome = (Result<Option<Spectrum>, EigenError>, f64);
+        let done: Vec<std::sync::Mutex<Option<Outcome>>> = slices.iter().map(|_| std::sync::Mutex::new(None)).collect();
+        rayon::scope(|scope| {
+            for _ in 0..threads.min(slices.len()) {
+                scope.spawn(|_| {
+                    while let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) {
+                        let r = run_slice(i);
+                        *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                    }
+                });
+            }
+        });
+        done.into_iter()
+            .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).expect("every slice was taken from the queue"))
+            .collect()
     } else {
         let mut out = Vec::with_capacity(slices.len());
         for i in 0..slices.len() {
