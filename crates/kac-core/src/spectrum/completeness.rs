@@ -171,10 +171,10 @@ pub(crate) fn verify_and_repair(
             let stats = std::mem::take(&mut s.stats);
             *s = dense_with_zero_modes(pair, zeros, blocks, k, control)?;
             s.stats = Stats { completeness: Some(Completeness { repairs, ..Completeness::by("dense") }), ..stats };
-            finish(pair, s, z.min(k), control)?;
+            finish(pair, s, z.min(k), options.threads, control)?;
             break;
         };
-        finish(pair, &mut extra, 0, control)?;
+        finish(pair, &mut extra, 0, options.threads, control)?;
         repaired_pairs += extra.values.len().min(missing);
         merge(s, extra);
     }
