@@ -116,14 +116,19 @@ pub fn correspondence(
     // areas): the source gets up to twice as many.
     let k_source = if options.partial { 2 * k } else { k };
     // Both spectra side by side, each on half the threads: a solve of this size gains little from a second thread
-    // (measured at 6,500 vertices, k = 100: 0.32 s on one, 0.29 s on two), two solves nearly twice.
+    // (measured at 6,500 vertices, k = 100: 0.32 s on one, 0.29 s on two), two solves nearly twice. A side that
+    // fails does not stop the other: its error comes when both are done.
     let total = if hooks.threads == 0 { rayon::current_num_threads() } else { hooks.threads };
     let solve = |v: &Validated, k: usize, threads: usize| {
         let reused = std::cell::Cell::new(false);
         let e = eigenpairs(v, operator, solver, k.min(v.shape.vertex_count()), Hooks { threads, ..hooks }, &reused)?;
         Ok::<_, AnalysisError>((e, reused.get()))
     };
-    let ((es, source_reused), (et, target_reused)) = if total >= 2 {
+    let ((es, source_reused), (et, target_reused)) = if source.id == target.id && k_source == k {
+        // One shape against itself: one solve serves both sides.
+        let one = solve(source, k, total)?;
+        (one.clone(), one)
+    } else if total >= 2 {
         let (a, b) = rayon::join(|| solve(source, k_source, total / 2), || solve(target, k, total - total / 2));
         (a?, b?)
     } else {

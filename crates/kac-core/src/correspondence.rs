@@ -19,7 +19,8 @@
 //!
 //! Vertex maps come from C by nearest neighbours in the spectral embedding: π(y) = argmin_x ‖Φ_S[x] Cᵀ − Φ_T[y]‖
 //! (T → S), and σ(x) = argmin_y ‖Φ_T[y] C − Φ_S[x]‖ (S → T; Cᵀ inverts C for near-isometries, where C is nearly
-//! orthogonal). The search is exact: distances by blocks of matrix products.
+//! orthogonal). The search goes through every row, by tiles of matrix products in single precision: a row within
+//! single-precision rounding of the nearest may be chosen in its place (see [`nearest_rows`]).
 
 use crate::descriptors::signatures::{self, WksOptions};
 use crate::descriptors::{Basis, DescriptorError};
@@ -266,7 +267,7 @@ struct Orienter<'a> {
     k: usize,
 }
 
-/// The largest ratio of `enclosure`'s bound to the signed volume for which a surface counts as enclosing a volume.
+/// The largest ratio of [`outward_sign`]'s bound to the signed volume for which a surface counts as enclosing a volume.
 /// Measured: 10⁻¹⁵ for closed meshes, 0.010 to 0.014 for TOSCA's cat and dog (small holes at the paws), infinite
 /// for a flat sheet, about 1.5 for a hemisphere.
 const ENCLOSURE_RATIO: f64 = 0.1;
@@ -537,6 +538,9 @@ pub fn nearest_rows(data: MatRef<'_, f64>, query: MatRef<'_, f64>) -> (Vec<u32>,
     const QUERY_ROWS: usize = 64;
     const DATA_ROWS: usize = 1024;
     let (n, q, d) = (data.nrows(), query.nrows(), data.ncols());
+    if n == 0 {
+        return (vec![0; q], vec![f64::INFINITY; q]);
+    }
     let single = |m: MatRef<'_, f64>| Mat::<f32>::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)] as f32);
     let (data32, query32) = (single(data), single(query));
     let dn: Vec<f32> = (0..n).map(|i| (0..d).map(|j| data32[(i, j)].powi(2)).sum()).collect();

@@ -230,21 +230,27 @@ pub(crate) fn solve(
         // (rayon's halves gave one thread slices 0 to 3 and the other 4 to 7: 26.4 against 30.1 s).
         let order: Vec<usize> = (0..slices.len()).rev().collect();
         let next = AtomicUsize::new(0);
+        let failed = std::sync::atomic::AtomicBool::new(false);
         type Outcome = (Result<Option<Spectrum>, EigenError>, f64);
         let done: Vec<std::sync::Mutex<Option<Outcome>>> = slices.iter().map(|_| std::sync::Mutex::new(None)).collect();
         rayon::scope(|scope| {
             for _ in 0..threads.min(slices.len()) {
                 scope.spawn(|_| {
-                    while let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    // After a failure the rest is not started (the plan falls back to one run, or the stop ends it).
+                    while !failed.load(Ordering::Relaxed) {
+                        let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
                         let r = run_slice(i);
+                        if !matches!(r.0, Ok(Some(_))) {
+                            failed.store(true, Ordering::Relaxed);
+                        }
                         *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
                     }
                 });
             }
         });
-        done.into_iter()
-            .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).expect("every slice was taken from the queue"))
-            .collect()
+        // Slices never started (after a failure) are left out: the failure is in the list, and ends the solve
+        // below as in the sequential path.
+        done.into_iter().filter_map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner())).collect()
     } else {
         let mut out = Vec::with_capacity(slices.len());
         for i in 0..slices.len() {
