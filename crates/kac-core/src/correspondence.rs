@@ -24,12 +24,14 @@
 
 use crate::descriptors::signatures::{self, WksOptions};
 use crate::descriptors::{Basis, DescriptorError};
+use crate::geometry::vec3::{add, cross, dot, sub};
 use crate::geometry::TriangleMesh;
 use crate::operators::sparse::{matvec, SparsePair};
 use crate::spectrum::{Control, EigenError};
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
 use faer::{Accum, Mat, MatMut, MatRef, Par, Side};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// One side of a correspondence: its eigenpairs (M-orthonormal), its operator (for M) and, for a triangle mesh, the
@@ -280,10 +282,6 @@ const ENCLOSURE_RATIO: f64 = 0.1;
 /// partial scan, which may be wound either way, has no outward side (None), and the orientation term is left out:
 /// it would otherwise favour the mirror map.
 fn outward_sign(mesh: &TriangleMesh) -> Option<f64> {
-    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let cross =
-        |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     let p = &mesh.vertices;
     if p.is_empty() {
         return None;
@@ -296,7 +294,7 @@ fn outward_sign(mesh: &TriangleMesh) -> Option<f64> {
         let (a, b, c) = (at(f[0]), at(f[1]), at(f[2]));
         volume6 += dot(a, cross(b, c));
         let n = cross(sub(b, a), sub(c, a));
-        area2 = [area2[0] + n[0], area2[1] + n[1], area2[2] + n[2]];
+        area2 = add(area2, n);
     }
     let lo = [0, 1, 2].map(|c| p.iter().map(|q| q[c]).fold(f64::INFINITY, f64::min));
     let hi = [0, 1, 2].map(|c| p.iter().map(|q| q[c]).fold(f64::NEG_INFINITY, f64::max));
@@ -322,11 +320,6 @@ fn oriented<'a>(
 
 impl<'a> Orienter<'a> {
     fn new(mesh: &'a TriangleMesh, sign: f64, side: &SpectralShape<'a>, k: usize) -> Self {
-        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-        let cross = |a: [f64; 3], b: [f64; 3]| {
-            [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-        };
-        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         let p = &mesh.vertices;
         let phi = side.basis.vectors.subcols(0, k);
         let (mut lumped, mut grads, mut normals) = (Mat::<f64>::zeros(mesh.faces.len(), k), vec![], vec![]);
@@ -358,10 +351,6 @@ impl<'a> Orienter<'a> {
     /// H gathers w_T,q lumped_T over the faces at v (one product of n × k, not of faces × k).
     fn op(&self, f: MatRef<'_, f64>) -> Mat<f64> {
         let k = self.k;
-        let cross = |a: [f64; 3], b: [f64; 3]| {
-            [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-        };
-        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         let n = self.phi.nrows();
         // Row-major n × k, gathered face by face.
         let mut h = vec![0.0f64; n * k];
@@ -534,7 +523,6 @@ fn fit(
 /// vertices) went to memory and back, which cost more than the products. (Trees do not prune in the 30 to 200
 /// dimensions of a spectral embedding: a clustered search with triangle-inequality bounds measured twice as slow.)
 pub fn nearest_rows(data: MatRef<'_, f64>, query: MatRef<'_, f64>) -> (Vec<u32>, Vec<f64>) {
-    use rayon::prelude::*;
     const QUERY_ROWS: usize = 64;
     const DATA_ROWS: usize = 1024;
     let (n, q, d) = (data.nrows(), query.nrows(), data.ncols());
@@ -653,12 +641,8 @@ fn leading<'a>(side: &SpectralShape<'a>, k: usize) -> MatRef<'a, f64> {
 
 /// The vertex maps of C (k_T × k_S) both ways, with their costs.
 fn vertex_maps(s: &SpectralShape<'_>, t: &SpectralShape<'_>, c: &Mat<f64>) -> (Vec<u32>, Vec<f64>, Vec<u32>, Vec<f64>) {
-    let (kt, ks) = (c.nrows(), c.ncols());
     let (ts, ts_cost) = pull_back(s, t, c);
-    // S → T: target rows Φ_T C (n_T × k_S) searched from source rows Φ_S.
-    let mut t_emb = Mat::zeros(t.n(), ks);
-    matmul(t_emb.as_mut(), Accum::Replace, leading(t, kt), c.as_ref(), 1.0, Par::Seq);
-    let (st, st_cost) = nearest_rows(t_emb.as_ref(), leading(s, ks));
+    let (st, st_cost) = push_forward(s, t, c);
     (ts, ts_cost, st, st_cost)
 }
 
@@ -770,7 +754,6 @@ pub fn correspond(
         // Φᵀ (M diag f + diag f M) Φ / 2: symmetric, as the multiplication operator is (with a lumped mass the two
         // halves are equal; with a consistent one Φᵀ M diag f Φ alone is not symmetric).
         // Φᵀ M diag f Φ = (M Φ)ᵀ (f ⊙ Φ): the mass applied once per side, the probes in parallel.
-        use rayon::prelude::*;
         let op = |side: &SpectralShape<'_>, m_phi: &Mat<f64>, col: MatRef<'_, f64>, k: usize| {
             let phi = leading(side, k);
             let scaled = Mat::from_fn(side.n(), k, |x, j| col[(x, 0)] * phi[(x, j)]);
@@ -796,7 +779,6 @@ pub fn correspond(
         let reference =
             if ops.is_empty() { 1.0 } else { ops.iter().map(|(x, y, _)| size(x, y)).sum::<f64>() / ops.len() as f64 };
         let (os, ot) = (Orienter::new(ms, sign_s, &ss, ks), Orienter::new(mt, sign_t, &tt, kt));
-        use rayon::prelude::*;
         let pairs: Vec<_> = (0..fs.ncols())
             .into_par_iter()
             .map(|f| {
@@ -867,12 +849,9 @@ pub fn correspond(
                 let (pi, _) = pull_back(&ss, &tt, &c);
                 let forward = map_of_vertices(&ss, &tt, &pi, kt_next, ks_next);
                 if o.bijective {
-                    // The reverse map of the source-to-target matches, Φ_Sᵀ M_S Φ_T[σ] (ks × kt).
-                    let mut t_emb = Mat::zeros(tt.n(), c.ncols());
-                    matmul(t_emb.as_mut(), Accum::Replace, leading(&tt, c.nrows()), c.as_ref(), 1.0, Par::Seq);
-                    let (sigma, _) = nearest_rows(t_emb.as_ref(), leading(&ss, c.ncols()));
-                    let pushed = Mat::from_fn(ss.n(), kt_next, |x, j| tt.basis.vectors[(sigma[x] as usize, j)]);
-                    let backward = ss.coefficients(ks_next, pushed.as_ref());
+                    // The reverse map of the source-to-target matches σ, Φ_Sᵀ M_S Φ_T[σ] (ks × kt).
+                    let (sigma, _) = push_forward(&ss, &tt, &c);
+                    let backward = map_of_vertices(&tt, &ss, &sigma, ks_next, kt_next);
                     Mat::from_fn(kt_next, ks_next, |i, j| 0.5 * (forward[(i, j)] + backward[(j, i)]))
                 } else {
                     forward
@@ -922,6 +901,15 @@ fn pull_back(s: &SpectralShape<'_>, t: &SpectralShape<'_>, c: &Mat<f64>) -> (Vec
     let mut s_emb = Mat::zeros(s.n(), kt);
     matmul(s_emb.as_mut(), Accum::Replace, leading(s, ks), c.transpose(), 1.0, Par::Seq);
     nearest_rows(s_emb.as_ref(), leading(t, kt))
+}
+
+/// The vertex map S → T of C (k_T × k_S) and each match's cost: target rows Φ_T C (n_T × k_S) searched from source
+/// rows Φ_S.
+fn push_forward(s: &SpectralShape<'_>, t: &SpectralShape<'_>, c: &Mat<f64>) -> (Vec<u32>, Vec<f64>) {
+    let (kt, ks) = (c.nrows(), c.ncols());
+    let mut t_emb = Mat::zeros(t.n(), ks);
+    matmul(t_emb.as_mut(), Accum::Replace, leading(t, kt), c.as_ref(), 1.0, Par::Seq);
+    nearest_rows(t_emb.as_ref(), leading(s, ks))
 }
 
 #[cfg(test)]
@@ -1308,14 +1296,13 @@ mod tests {
 
     /// Against a rotated shuffled copy: with the orientation term the true map, away from the mirror map.
     fn orientation_keeps_the_map(a: &TriangleMesh, mirror: &[u32]) {
-        let a = a.clone();
         let perm = permutation(a.vertices.len(), 17);
-        let b = shuffled(&a, &perm, |[x, y, z]| [-y, x, z + 1.0]);
+        let b = shuffled(a, &perm, |[x, y, z]| [-y, x, z + 1.0]);
         let truth_flipped: Vec<u32> = perm.iter().map(|&x| mirror[x as usize]).collect();
         let base = CorrespondenceOptions { fit_k: 20, refine_k: 60, ..Default::default() };
-        let with = run(&a, &b, 80, &base);
-        let without = run(&a, &b, 80, &CorrespondenceOptions { orientation_weight: 0.0, ..base.clone() });
-        let err = |r: &Correspondence, truth: &[u32]| geodesic_error(&a, &r.target_to_source, truth, 60);
+        let with = run(a, &b, 80, &base);
+        let without = run(a, &b, 80, &CorrespondenceOptions { orientation_weight: 0.0, ..base.clone() });
+        let err = |r: &Correspondence, truth: &[u32]| geodesic_error(a, &r.target_to_source, truth, 60);
         let (w, wf) = (err(&with, &perm), err(&with, &truth_flipped));
         let (o, of) = (err(&without, &perm), err(&without, &truth_flipped));
         eprintln!("with orientation: {w:.4} (mirror {wf:.4}); without: {o:.4} (mirror {of:.4})");
