@@ -450,8 +450,7 @@ pub fn eigs_band(
 
 #[cfg(test)]
 mod tests {
-    /// Released columns read as zeros (or as they were, on a page shared with a kept column) and can be written
-    /// again; the columns before them keep their values.
+    /// New column j is old column idx[j], across cycles of several lengths.
     #[test]
     fn columns_are_permuted_in_place() {
         let (n, k) = (5, 9);
@@ -465,6 +464,8 @@ mod tests {
         }
     }
 
+    /// Released columns read as zeros (or as they were, on a page shared with a kept column) and can be written
+    /// again; the columns before them keep their values.
     #[test]
     fn released_columns_leave_the_others_as_they_were() {
         let (n, m, from) = (3_000, 40, 17);
