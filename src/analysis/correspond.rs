@@ -219,6 +219,15 @@ pub fn correspondence(
             ),
         ));
     }
+    if options.orientation_weight > 0.0 && !r.oriented {
+        warnings.push(Warning::new(
+            "correspondence-orientation-not-applied",
+            "the orientation term was left out: it needs triangle meshes enclosing a volume on both sides (closed, or \
+             with small holes), and one side is an open surface, a cloud or a tetrahedral mesh; a shape with a mirror \
+             symmetry may be matched to its mirror image (set orientation_weight to 0 to ask for no term)"
+                .to_string(),
+        ));
+    }
     let head = ResultHead {
         shape_id: source.id.hex(),
         algorithm_version: ALGORITHM_VERSION,

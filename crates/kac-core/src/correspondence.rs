@@ -179,6 +179,8 @@ pub struct Correspondence {
     pub sizes: Vec<usize>,
     /// ‖CCᵀ − I‖_F / √k_T of the final map (0 for an exact isometry's, or a part's).
     pub orthogonality_defect: f64,
+    /// Whether the orientation term was in the fit (a weight, and triangle meshes enclosing a volume on both sides).
+    pub oriented: bool,
 }
 
 /// Why a correspondence cannot be computed: a parameter or descriptor, or a stop (cancel, timeout).
@@ -693,6 +695,7 @@ pub fn correspond(
         ))?;
     }
     let orientation = oriented(s, t, o);
+    let oriented = orientation.is_some();
     if (o.commutativity_weight > 0.0 || orientation.is_some()) && o.fit_k > MAX_COUPLED_FIT_K {
         Err(DescriptorError::param(
             "fit_k",
@@ -875,6 +878,7 @@ pub fn correspond(
         source_cost: st_cost,
         sizes,
         orthogonality_defect: defect,
+        oriented,
     })
 }
 
