@@ -1,6 +1,7 @@
 //! The numeric factorization in pieces (`spectrum::numeric`) against faer's own numeric factorization on the same
 //! symbolic analysis: the same factor to rounding, LLᵀ and LDLᵀ (with the same inertia), on surface, P2 and tet
-//! operators; solves with it as accurate; and a stop flag raised in the middle ends it with `Stopped`.
+//! operators, on one thread and on several (subtrees side by side); solves with it as accurate; and a stop flag
+//! raised in the middle ends it with `Stopped`.
 
 use faer::{Mat, Par};
 use kac_core::geometry::{generate, Shape};
@@ -79,10 +80,14 @@ fn the_pieces_make_faers_factor_on_surfaces_p2_and_tets() {
     let sphere = pair(Shape::TriangleMesh(generate::icosphere(5)), 1);
     same_factor(&sphere, -0.5, false, Par::Seq);
     same_factor(&sphere, 30.0, true, Par::Seq);
+    // Several threads: the tree's subtrees factored side by side, the top after them.
     same_factor(&sphere, -0.5, true, Par::rayon(2));
+    same_factor(&sphere, -0.5, false, Par::rayon(3));
+    same_factor(&sphere, 30.0, true, Par::rayon(4));
     let p2 = pair(Shape::TriangleMesh(generate::icosphere(4)), 2);
     same_factor(&p2, -1.0, false, Par::Seq);
     same_factor(&p2, 50.0, true, Par::Seq);
+    same_factor(&p2, 50.0, true, Par::rayon(2));
     // Tets: wide supernodes near the root, factored in several panels.
     let cube = pair(Shape::TetMesh(generate::unit_cube_tets(14)), 1);
     same_factor(&cube, -1.0, false, Par::Seq);
@@ -109,6 +114,8 @@ fn a_raised_flag_stops_the_factorization() {
     let values = p.shifted(-1.0);
     let raised = AtomicBool::new(true);
     assert_eq!(Cholesky::factor_pieces(&sym, &values, Par::Seq, Some(&raised)).err(), Some(FactorError::Stopped));
+    // Subtrees on several threads: each worker sees the flag.
+    assert_eq!(Cholesky::factor_pieces(&sym, &values, Par::rayon(2), Some(&raised)).err(), Some(FactorError::Stopped));
     let stop = AtomicBool::new(false);
     let t = std::time::Instant::now();
     let r = std::thread::scope(|s| {

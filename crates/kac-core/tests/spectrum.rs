@@ -333,6 +333,17 @@ fn check_block_solve(
                     );
                 }
             }
+            // On several threads (the factor's tree split into subtrees solved side by side, where the kernels
+            // apply): the same solution up to the order of the sums into the rows above the subtrees, which an
+            // indefinite K (σ inside the spectrum) amplifies by its condition: compared norm-wise.
+            let largest = xr.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for threads in [2, 3] {
+                let mut xp: Vec<f64> = (0..n * b).map(|t| rhs[(t / b, t % b)]).collect();
+                let m = faer::MatMut::from_row_major_slice_mut(&mut xp, n, b);
+                chol.solve_in_place_with(m, faer::Par::rayon(threads), isa);
+                let diff = xp.iter().zip(&xr).fold(0.0f64, |m, (a, e)| m.max((a - e).abs()));
+                assert!(diff <= 1e-10 * largest, "{isa:?} b = {b}, {threads} threads: {diff:e} of {largest:e}");
+            }
         }
     }
 }

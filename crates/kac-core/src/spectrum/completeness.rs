@@ -30,21 +30,22 @@ pub(crate) fn check_shift(values: &[f64], wanted: usize) -> Option<(f64, usize)>
 pub(crate) const CHECK_BACKWARD_ERROR: f64 = 1e-10;
 
 /// Sylvester's inertia at τ: the eigenvalues of the problem below τ, from an LDLᵀ factor whose test solve is
-/// backward stable; τ is tried at the middle, then at a third and two thirds of the gap (lo, hi).
+/// backward stable; τ is tried at the middle, then at a third and two thirds of the gap (lo, hi). The factorization
+/// and the test solve run on `par`'s threads.
 pub(crate) fn inertia_in_gap(
     sym: &factor::Symbolic,
     pair: &SparsePair,
-    lo: f64,
-    hi: f64,
+    (lo, hi): (f64, f64),
     control: &Control<'_>,
+    par: faer::Par,
 ) -> Result<(f64, usize), EigenError> {
     let mut last = String::new();
     for f in [0.5, 1.0 / 3.0, 2.0 / 3.0] {
         let tau = lo + f * (hi - lo);
         let values = pair.shifted(tau);
-        match factor::Cholesky::factor_ldlt_stoppable(sym, &values, faer::Par::Seq, control.stop) {
+        match factor::Cholesky::factor_ldlt_stoppable(sym, &values, par, control.stop) {
             Ok((factor, below)) => {
-                let e = lanczos::solve_backward_error(pair, &values, &factor, faer::Par::Seq);
+                let e = lanczos::solve_backward_error(pair, &values, &factor, par);
                 if e <= CHECK_BACKWARD_ERROR {
                     return Ok((tau, below));
                 }
@@ -76,7 +77,8 @@ pub fn check_completeness(
             &owned
         }
     };
-    let (tau, below) = inertia_in_gap(sym, pair, values[found - 1], values[found], &Control::default())?;
+    let (tau, below) =
+        inertia_in_gap(sym, pair, (values[found - 1], values[found]), &Control::default(), faer::Par::Seq)?;
     Ok(Some(Completeness {
         method: "inertia",
         complete: below == found,
@@ -119,7 +121,8 @@ pub(crate) fn verify_and_repair(
             }
         };
         control.phase("verifying", k, k)?;
-        let (tau, below) = inertia_in_gap(sym, pair, lo, hi, &control)?;
+        let par = if options.threads == 1 { faer::Par::Seq } else { faer::Par::rayon(options.threads) };
+        let (tau, below) = inertia_in_gap(sym, pair, (lo, hi), &control, par)?;
         control.check()?;
         let c = Completeness {
             method: "inertia",

@@ -6,15 +6,17 @@ use crate::operators::sparse::{Pattern, SparsePair};
 use crate::simd::Isa;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering,
 };
 use faer::sparse::SparseColMatRef;
 use faer::{Conj, MatMut, Par, Side};
 use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use super::numeric::{self, FactorError};
+use super::tree::Split;
 
 /// Factors with more values than this are made in pieces when a stop flag may end them (about 0.3 s of numeric
 /// factorization on one core of this project's machines at 8·10⁶ values; `bench/cancel.py` measures the
@@ -104,6 +106,11 @@ pub struct Cholesky {
     values: Vec<f64>,
     /// LDLᵀ (unit diagonal in L, D on the diagonal) rather than LLᵀ.
     ldlt: bool,
+    /// The block solve's split of the tree for the thread count of its first parallel solve (`None` inside: the
+    /// tree does not split usefully).
+    plan: OnceLock<(usize, Option<Arc<SolvePlan>>)>,
+    /// The parallel block solve's permuted block, kept between solves.
+    scratch: Mutex<Vec<f64>>,
 }
 
 impl Cholesky {
@@ -122,7 +129,7 @@ impl Cholesky {
         par: Par,
         stop: Option<&AtomicBool>,
     ) -> Result<(Self, usize), FactorError> {
-        if stop.is_some() && symbolic.inner.len_val() > PIECES_FROM {
+        if pieces(symbolic, par, stop) {
             return Self::factor_ldlt_pieces(symbolic, values, par, stop);
         }
         Self::factor_ldlt_whole(symbolic, values, par).map_err(FactorError::Failed)
@@ -135,7 +142,7 @@ impl Cholesky {
         par: Par,
         stop: Option<&AtomicBool>,
     ) -> Result<Self, FactorError> {
-        if stop.is_some() && symbolic.inner.len_val() > PIECES_FROM {
+        if pieces(symbolic, par, stop) {
             return Self::factor_pieces(symbolic, values, par, stop);
         }
         Self::factor_whole(symbolic, values, par).map_err(FactorError::Failed)
@@ -233,7 +240,17 @@ impl Cholesky {
         if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.inner.raw() {
             assert_supernodes_fit(&SupernodalLltRef::<'_, usize, f64>::new(sn, &values), symbolic.inner.nrows());
         }
-        Cholesky { symbolic: symbolic.clone(), values, ldlt }
+        Cholesky { symbolic: symbolic.clone(), values, ldlt, plan: OnceLock::new(), scratch: Mutex::new(Vec::new()) }
+    }
+    /// The parallel block solve's plan for `threads` threads, made once for the first thread count asked (another
+    /// count makes its own each time).
+    fn plan(&self, sn: &SymbolicSupernodalCholesky<usize>, threads: usize) -> Option<Arc<SolvePlan>> {
+        let (t, plan) = self.plan.get_or_init(|| (threads, SolvePlan::new(sn, threads).map(Arc::new)));
+        if *t == threads {
+            plan.clone()
+        } else {
+            SolvePlan::new(sn, threads).map(Arc::new)
+        }
     }
     /// Whether this is an LDLᵀ factor (else Cholesky).
     pub fn is_ldlt(&self) -> bool {
@@ -259,11 +276,15 @@ impl Cholesky {
         assert_eq!(rhs.nrows(), n, "Cholesky::solve_in_place: the right-hand side must have one row per unknown");
         if let SymbolicCholeskyRaw::Supernodal(sn) = s.raw() {
             let f = SupernodalLltRef::<'_, usize, f64>::new(sn, &self.values);
+            let plan = match par {
+                Par::Rayon(t) if t.get() > 1 => self.plan(sn, t.get()),
+                _ => None,
+            };
+            let plan = plan.as_deref();
             let perm = s.perm();
             let fwd = |i: usize| perm.map_or(i, |p| p.arrays().0[i]);
             macro_rules! run {
                 ($b:literal) => {{
-                    let mut x = vec![[0.0f64; $b]; n];
                     // Row-major right-hand sides (the eigensolver's blocks) are permuted a whole row at a time.
                     let row_major = rhs.col_stride() == 1 && (n <= 1 || rhs.row_stride() == $b);
                     if row_major {
@@ -273,22 +294,50 @@ impl Cholesky {
                         // seen as n rows of b (`[f64; b]` has the alignment of f64). `rhs` is borrowed mutably for
                         // this call and not used while `rows` lives.
                         let rows = unsafe { std::slice::from_raw_parts_mut(rhs.as_ptr_mut().cast::<[f64; $b]>(), n) };
+                        if plan.is_some() {
+                            // On the plan's threads: both permutations as gathers, by chunks of rows, into the
+                            // factor's kept scratch (a fresh n × b block would be faulted in page by page each time).
+                            use rayon::prelude::*;
+                            let mut kept = self.scratch.try_lock().ok();
+                            let mut own = Vec::new();
+                            let buf: &mut Vec<f64> = match kept.as_deref_mut() {
+                                Some(v) => v,
+                                None => &mut own,
+                            };
+                            buf.resize(n * $b, 0.0);
+                            let x: &mut [[f64; $b]] = buf.as_chunks_mut::<$b>().0;
+                            let inv = |j: usize| perm.map_or(j, |p| p.arrays().1[j]);
+                            x.par_chunks_mut(PERMUTE_ROWS).enumerate().for_each(|(c, chunk)| {
+                                for (i, row) in chunk.iter_mut().enumerate() {
+                                    *row = rows[fwd(c * PERMUTE_ROWS + i)];
+                                }
+                            });
+                            supernodal_solve_with::<$b>(&f, x, self.ldlt, isa, plan);
+                            rows.par_chunks_mut(PERMUTE_ROWS).enumerate().for_each(|(c, chunk)| {
+                                for (j, row) in chunk.iter_mut().enumerate() {
+                                    *row = x[inv(c * PERMUTE_ROWS + j)];
+                                }
+                            });
+                            return;
+                        }
+                        let mut x = vec![[0.0f64; $b]; n];
                         for (i, row) in x.iter_mut().enumerate() {
                             *row = rows[fwd(i)];
                         }
-                        supernodal_solve_with::<$b>(&f, &mut x, self.ldlt, isa);
+                        supernodal_solve_with::<$b>(&f, &mut x, self.ldlt, isa, plan);
                         for (i, row) in x.iter().enumerate() {
                             rows[fwd(i)] = *row;
                         }
                         return;
                     }
+                    let mut x = vec![[0.0f64; $b]; n];
                     for (i, row) in x.iter_mut().enumerate() {
                         let src = fwd(i);
                         for (c, v) in row.iter_mut().enumerate() {
                             *v = rhs[(src, c)];
                         }
                     }
-                    supernodal_solve_with::<$b>(&f, &mut x, self.ldlt, isa);
+                    supernodal_solve_with::<$b>(&f, &mut x, self.ldlt, isa, plan);
                     for (i, row) in x.iter().enumerate() {
                         let dst = fwd(i);
                         for (c, v) in row.iter().enumerate() {
@@ -350,6 +399,18 @@ impl Cholesky {
 
 type SupernodalFactor<'a> = faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef<'a, usize, f64>;
 
+/// Whether a numeric factorization is made in pieces ([`numeric`]) rather than by faer in one call: where a stop
+/// flag must be seen within a fraction of a second (factors of more than [`PIECES_FROM`] values), and where several
+/// threads can factor disjoint subtrees side by side (more than [`PARALLEL_FROM`] values; faer's numeric
+/// factorization uses threads only inside each supernode's dense blocks).
+fn pieces(symbolic: &Symbolic, par: Par, stop: Option<&AtomicBool>) -> bool {
+    let len = symbolic.inner.len_val();
+    (stop.is_some() && len > PIECES_FROM) || (matches!(par, Par::Rayon(t) if t.get() > 1) && len > PARALLEL_FROM)
+}
+
+/// Factors with more values than this are made in pieces, subtrees side by side, when several threads are given.
+pub const PARALLEL_FROM: usize = 1_000_000;
+
 /// Asserts what the intrinsic kernels take on trust from faer's supernodal structure, for a block X of `n` rows:
 /// every supernode's columns `start..start + nc` and pattern rows are rows of X (< n), and its value block is
 /// `ld × nc` column-major with column stride `ld = nc + pattern length`, so that entry (i, j) is at `j·ld + i`.
@@ -370,15 +431,145 @@ fn assert_supernodes_fit(f: &SupernodalFactor<'_>, n: usize) {
     }
 }
 
+/// Rows per task of a parallel solve's permutations.
+const PERMUTE_ROWS: usize = 8192;
+
+/// How the block solve runs on several threads: the tree's [`Split`] for the factor's values, each subtree's
+/// column limit, and the buffer row of every column of the top.
+struct SolvePlan {
+    split: Split,
+    /// Per worker, per subtree: the first column past the subtree (its pattern rows at or above it are the top's).
+    limits: Vec<Vec<usize>>,
+    /// The buffer row of each top column (`usize::MAX` elsewhere), and the top's columns in order.
+    top_pos: Vec<usize>,
+    top_cols: Vec<usize>,
+}
+
+impl SolvePlan {
+    /// `None` where the tree does not split usefully for `threads` (see [`Split::new`]).
+    fn new(sn: &SymbolicSupernodalCholesky<usize>, threads: usize) -> Option<Self> {
+        // A solve streams each supernode's lower triangle and its rows below once per sweep.
+        let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
+        let weight: Vec<f64> = (0..sn.n_supernodes())
+            .map(|s| {
+                let (c, r) = (end[s] - begin[s], sn.supernode(s).pattern().len());
+                (c * (c + 1) / 2 + c * r) as f64
+            })
+            .collect();
+        let split = Split::new(sn, threads, &weight)?;
+        let limits = split.parts.iter().map(|p| p.iter().map(|&(_, hi)| end[hi - 1]).collect()).collect();
+        let mut top_pos = vec![usize::MAX; sn.nrows()];
+        let top_cols: Vec<usize> = split.top.iter().flat_map(|&s| begin[s]..end[s]).collect();
+        for (i, &c) in top_cols.iter().enumerate() {
+            top_pos[c] = i;
+        }
+        Some(SolvePlan { split, limits, top_pos, top_cols })
+    }
+}
+
+/// A pointer shared by the threads of one parallel solve, each writing its own rows (see [`parallel_solve`]).
+#[derive(Clone, Copy)]
+struct Shared(*mut f64);
+// SAFETY: `parallel_solve` hands the pointer to threads that write disjoint rows of X while it lives (each
+// subtree's own columns) and read rows no thread writes meanwhile (the top's, in the backward sweep).
+unsafe impl Send for Shared {}
+// SAFETY: as above.
+unsafe impl Sync for Shared {}
+
+impl Shared {
+    /// The pointer (a method, so that closures capture the `Shared`, not its field).
+    fn get(self) -> *mut f64 {
+        self.0
+    }
+}
+
+/// The block solve on the plan's threads. Forward: the workers sweep their subtrees side by side, each updating the
+/// top's rows in a buffer of its own, which are then added to X; then the top, in order, on this thread. Backward:
+/// the top first, then the subtrees side by side (each reads the top's final rows and writes its own). Subtrees are
+/// closed under descendants ([`Split`]), so no two workers touch the same row of X.
+///
+/// `sweep` must be sound to call on X (n rows of B) for any range of supernodes with rows at or above the limit
+/// redirected to a buffer of the plan's top rows: the kernels' contract given the factor and the CPU.
+fn parallel_solve<const B: usize>(
+    f: &SupernodalFactor<'_>,
+    x: &mut [[f64; B]],
+    plan: &SolvePlan,
+    sweep: impl Fn(&SupernodalFactor<'_>, bool, usize, usize, &kernels::Sweep<'_>) + Sync,
+) {
+    use rayon::prelude::*;
+    let n_top = plan.top_cols.len();
+    let xp = Shared(x.as_mut_ptr().cast::<f64>());
+    let mut bufs: Vec<Vec<f64>> = vec![vec![0.0; n_top * B]; plan.split.parts.len()];
+    let whole = |buf: *mut f64, limit: usize| kernels::Sweep { x: xp.get(), limit, buf, top_pos: &plan.top_pos, n_top };
+    bufs.par_iter_mut().zip(&plan.split.parts).zip(&plan.limits).for_each(|((buf, part), limits)| {
+        for (&(lo, hi), &limit) in part.iter().zip(limits) {
+            let sw = kernels::Sweep { x: xp.get(), limit, buf: buf.as_mut_ptr(), top_pos: &plan.top_pos, n_top };
+            sweep(f, true, lo, hi, &sw);
+        }
+    });
+    for buf in &bufs {
+        for (i, &c) in plan.top_cols.iter().enumerate() {
+            for (xv, bv) in x[c].iter_mut().zip(&buf[i * B..(i + 1) * B]) {
+                *xv += bv;
+            }
+        }
+    }
+    let sw = whole(std::ptr::null_mut(), usize::MAX);
+    for &s in &plan.split.top {
+        sweep(f, true, s, s + 1, &sw);
+    }
+    for &s in plan.split.top.iter().rev() {
+        sweep(f, false, s, s + 1, &sw);
+    }
+    plan.split.parts.par_iter().for_each(|part| {
+        let sw = kernels::Sweep { x: xp.get(), limit: usize::MAX, buf: std::ptr::null_mut(), top_pos: &[], n_top: 0 };
+        for &(lo, hi) in part {
+            sweep(f, false, lo, hi, &sw);
+        }
+    });
+}
+
 /// Runs the block solve with intrinsics for 4, 8 or 16 right-hand sides when `isa` is AVX2 + FMA or AVX-512 and
 /// the CPU has it (detected at run time by the caller, as faer's own kernels do), else the portable
 /// `supernodal_solve` (compiled for AVX2 + FMA where available).
 ///
 /// `f` must be the factor of a `Cholesky` (whose constructor ran `assert_supernodes_fit` on it against its n rows);
 /// the length of `x` is asserted equal to that n here.
-fn supernodal_solve_with<const B: usize>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]], ldlt: bool, isa: Isa) {
+fn supernodal_solve_with<const B: usize>(
+    f: &SupernodalFactor<'_>,
+    x: &mut [[f64; B]],
+    ldlt: bool,
+    isa: Isa,
+    plan: Option<&SolvePlan>,
+) {
     #[cfg(target_arch = "x86_64")]
     {
+        if let Some(plan) = plan.filter(|_| isa != Isa::Scalar && isa.supported()) {
+            type Sweep = unsafe fn(&SupernodalFactor<'_>, bool, usize, usize, &kernels::Sweep<'_>);
+            let sweep: Option<Sweep> = match (isa, B, ldlt) {
+                (Isa::Avx512, 8, false) => Some(kernels::sweep_avx512::<1, false>),
+                (Isa::Avx512, 8, true) => Some(kernels::sweep_avx512::<1, true>),
+                (Isa::Avx512, 16, false) => Some(kernels::sweep_avx512::<2, false>),
+                (Isa::Avx512, 16, true) => Some(kernels::sweep_avx512::<2, true>),
+                (_, 4, false) => Some(kernels::sweep_avx2::<1, false>),
+                (_, 4, true) => Some(kernels::sweep_avx2::<1, true>),
+                (_, 8, false) => Some(kernels::sweep_avx2::<2, false>),
+                (_, 8, true) => Some(kernels::sweep_avx2::<2, true>),
+                _ => None,
+            };
+            if let Some(sweep) = sweep {
+                assert_eq!(x.len(), f.symbolic().nrows(), "the block must have one row per unknown");
+                assert_eq!(plan.top_pos.len(), x.len(), "a plan for another factor");
+                parallel_solve(f, x, plan, |f, fwd, lo, hi, sw| {
+                    // SAFETY: the CPU has the sweep's instruction set (`isa.supported()` above); X is n rows of
+                    // B = R·LANES values (the `match` pairs each width with its sweep; n asserted just above), the
+                    // factor passed `assert_supernodes_fit` against n in `Cholesky::checked`, and `parallel_solve`
+                    // keeps the rest of the sweep's contract (see there).
+                    unsafe { sweep(f, fwd, lo, hi, sw) }
+                });
+                return;
+            }
+        }
         #[target_feature(enable = "avx2,fma")]
         fn portable_avx2<const B: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [[f64; B]]) {
             supernodal_solve::<B, true, UNIT>(f, x)
@@ -454,6 +645,64 @@ mod kernels {
         unsafe { supernodal_solve::<__m512d, R, UNIT>(f, x) }
     }
 
+    /// Where a forward sweep reads and writes (see [`forward`]): X, and the rows redirected into a buffer.
+    pub(super) struct Sweep<'a> {
+        /// Row r of X at `x + r·b`.
+        pub x: *mut f64,
+        /// Pattern rows at or above this go to `buf` (`usize::MAX`: none).
+        pub limit: usize,
+        /// `n_top` rows of b values.
+        pub buf: *mut f64,
+        /// The buffer row of each redirected row (n entries; others are not read).
+        pub top_pos: &'a [usize],
+        pub n_top: usize,
+    }
+
+    /// One sweep of the block solve ([`forward`] or [`backward`], on `sw.x`) over supernodes `lo..hi` with AVX2 +
+    /// FMA registers (B = 4·R right-hand sides).
+    ///
+    /// # Safety
+    /// As [`forward`] or [`backward`] with `S = __m256d`: the CPU has AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn sweep_avx2<const R: usize, const UNIT: bool>(
+        f: &SupernodalFactor<'_>,
+        fwd: bool,
+        lo: usize,
+        hi: usize,
+        sw: &Sweep<'_>,
+    ) {
+        // SAFETY: this function's contract is the sweep's.
+        unsafe {
+            if fwd {
+                forward::<__m256d, R, UNIT>(f, lo, hi, sw)
+            } else {
+                backward::<__m256d, R, UNIT>(f, lo, hi, sw.x)
+            }
+        }
+    }
+
+    /// [`sweep_avx2`] with AVX-512 registers (B = 8·R right-hand sides).
+    ///
+    /// # Safety
+    /// As [`forward`] or [`backward`] with `S = __m512d`: the CPU has AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn sweep_avx512<const R: usize, const UNIT: bool>(
+        f: &SupernodalFactor<'_>,
+        fwd: bool,
+        lo: usize,
+        hi: usize,
+        sw: &Sweep<'_>,
+    ) {
+        // SAFETY: this function's contract is the sweep's.
+        unsafe {
+            if fwd {
+                forward::<__m512d, R, UNIT>(f, lo, hi, sw)
+            } else {
+                backward::<__m512d, R, UNIT>(f, lo, hi, sw.x)
+            }
+        }
+    }
+
     /// The block solve on X row-major (row r at `x[r·b..(r + 1)·b]`, b = R·LANES), through raw pointers.
     ///
     /// # Safety
@@ -463,13 +712,40 @@ mod kernels {
     ///   block with column stride `ld` (so `lp + j·ld + i`, i < ld, j < nc, stays in the block).
     #[inline(always)]
     unsafe fn supernodal_solve<S: F64s, const R: usize, const UNIT: bool>(f: &SupernodalFactor<'_>, x: &mut [f64]) {
-        // SAFETY: the contract above. Every pointer below is `row!(r)` (then up to b values from it) for a row
-        // r the structure names, or `lp.add(j·ld + i)` with j < nc, i < ld inside a supernode's value block: both
-        // in bounds by `assert_supernodes_fit`, which `Cholesky::checked` ran on the factor. The register operations
-        // need the instruction set the caller checked with `Isa::supported`.
+        let ns = f.symbolic().n_supernodes();
+        let xp = x.as_mut_ptr();
+        let whole = Sweep { x: xp, limit: usize::MAX, buf: std::ptr::null_mut(), top_pos: &[], n_top: 0 };
+        // SAFETY: the contract above is `forward`'s and `backward`'s for the whole range of supernodes, with no rows
+        // redirected (limit past every row).
+        unsafe {
+            forward::<S, R, UNIT>(f, 0, ns, &whole);
+            backward::<S, R, UNIT>(f, 0, ns, xp);
+        }
+    }
+
+    /// The forward sweep (L y = x, D⁻¹ y stored for LDLᵀ) over supernodes `lo..hi`, in order. Rows below
+    /// `sw.limit` are rows of X at `sw.x`; a pattern row at or above it (an ancestor's, in the top of a
+    /// [`super::super::tree::Split`]) is updated in `sw.buf` at row `sw.top_pos[r]` instead.
+    ///
+    /// # Safety
+    /// As [`supernodal_solve`], for X at `sw.x` (n rows of b, n the factor's); every supernode of `lo..hi` lies
+    /// below `sw.limit` with its columns; and where some pattern row is at or above `sw.limit`, `sw.top_pos` has n
+    /// entries and `sw.buf` holds `sw.n_top` rows of b (positions are checked against `n_top`). No other thread
+    /// touches the rows written meanwhile.
+    #[inline(always)]
+    unsafe fn forward<S: F64s, const R: usize, const UNIT: bool>(
+        f: &SupernodalFactor<'_>,
+        lo: usize,
+        hi: usize,
+        sw: &Sweep<'_>,
+    ) {
+        // SAFETY: the contract above. Every pointer below is `row!(r)` or `top!(r)` (then up to b values from it)
+        // for a row r the structure names, or `lp.add(j·ld + i)` with j < nc, i < ld inside a supernode's value
+        // block: in bounds by `assert_supernodes_fit`, which `Cholesky::checked` ran on the factor, and by the
+        // `top_pos` check. The register operations need the instruction set the caller checked.
         unsafe {
             let b = S::LANES * R;
-            let xp = x.as_mut_ptr();
+            let xp = sw.x;
             macro_rules! row {
                 ($r:expr) => {{
                     let r: usize = $r;
@@ -511,14 +787,22 @@ mod kernels {
                     }
                 }};
             }
-            let ns = f.symbolic().n_supernodes();
-            for s in 0..ns {
+            macro_rules! top {
+                ($r:expr) => {{
+                    let pos = sw.top_pos[$r];
+                    assert!(pos < sw.n_top, "a pattern row above the range that is not in the top");
+                    sw.buf.add(pos * b)
+                }};
+            }
+            for s in lo..hi {
                 let sn = f.supernode(s);
                 let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
                 let nc = l.ncols();
                 let ld = nc + rows.len();
                 let lp = l.as_ptr();
                 let lead = nc % 4;
+                // Pattern rows below the limit are the range's own; the rest are the top's.
+                let own = if sw.limit == usize::MAX { rows.len() } else { rows.partition_point(|&r| r < sw.limit) };
                 for j in 0..lead {
                     let cj = lp.add(j * ld);
                     let mut g = load!(row!(c0 + j));
@@ -536,10 +820,16 @@ mod kernels {
                         axpy!(xi, cj.add(i), g);
                         store!(p, xi);
                     }
-                    for (t, &r) in rows.iter().enumerate() {
+                    for (t, &r) in rows[..own].iter().enumerate() {
                         let p = row!(r);
                         let mut xi = load!(p);
                         axpy!(xi, cj.add(nc + t), g);
+                        store!(p, xi);
+                    }
+                    for (t, &r) in rows[own..].iter().enumerate() {
+                        let p = top!(r);
+                        let mut xi = load!(p);
+                        axpy!(xi, cj.add(nc + own + t), g);
                         store!(p, xi);
                     }
                 }
@@ -582,12 +872,74 @@ mod kernels {
                     for i in j + 4..nc {
                         update4!(row!(c0 + i), i);
                     }
-                    for (t, &r) in rows.iter().enumerate() {
+                    for (t, &r) in rows[..own].iter().enumerate() {
                         update4!(row!(r), nc + t);
+                    }
+                    for (t, &r) in rows[own..].iter().enumerate() {
+                        update4!(top!(r), nc + own + t);
                     }
                 }
             }
-            for s in (0..ns).rev() {
+        }
+    }
+
+    /// The backward sweep (Lᵀ x = y) over supernodes `lo..hi`, in reverse: reads the rows of their patterns
+    /// (final already: the range's ancestors are swept before it) and writes the range's own rows.
+    ///
+    /// # Safety
+    /// As [`supernodal_solve`], for X at `x` (n rows of b, n the factor's). No other thread writes the rows read or
+    /// touches the rows written meanwhile.
+    #[inline(always)]
+    unsafe fn backward<S: F64s, const R: usize, const UNIT: bool>(
+        f: &SupernodalFactor<'_>,
+        lo: usize,
+        hi: usize,
+        xp: *mut f64,
+    ) {
+        // SAFETY: as in `forward`, without redirected rows.
+        unsafe {
+            let b = S::LANES * R;
+            macro_rules! row {
+                ($r:expr) => {{
+                    let r: usize = $r;
+                    xp.add(r * b)
+                }};
+            }
+            macro_rules! load {
+                ($p:expr) => {{
+                    let p: *mut f64 = $p;
+                    let mut v = [S::zero(); R];
+                    for q in 0..R {
+                        v[q] = S::load(p.add(S::LANES * q));
+                    }
+                    v
+                }};
+            }
+            macro_rules! store {
+                ($p:expr, $v:expr) => {{
+                    let (p, v): (*mut f64, [S; R]) = ($p, $v);
+                    for q in 0..R {
+                        v[q].store(p.add(S::LANES * q));
+                    }
+                }};
+            }
+            macro_rules! scale {
+                ($v:expr, $d:expr) => {{
+                    let d = S::splat(&(1.0 / $d));
+                    for q in 0..R {
+                        $v[q] = $v[q].mul(d);
+                    }
+                }};
+            }
+            macro_rules! axpy {
+                ($x:expr, $a:expr, $g:expr) => {{
+                    let a = S::splat($a);
+                    for q in 0..R {
+                        $x[q] = a.neg_mul_add($g[q], $x[q]);
+                    }
+                }};
+            }
+            for s in (lo..hi).rev() {
                 let sn = f.supernode(s);
                 let (c0, rows, l) = (sn.start(), sn.pattern(), sn.val());
                 let nc = l.ncols();

@@ -556,7 +556,7 @@ pub fn eigs_block_lanczos(
     // E: Q's coupling, T V_exp = V_exp H + Q E, nonzero from column `e_lo` on.
     // The basis is the largest allocation (1.3 GB at 164k × 1006): filled column group by column group, so that
     // a stop during its first touch of memory (about a second there) takes effect.
-    let mut v = super::zeros_checked(n, msize, &control)?;
+    let mut v = super::zeros_checked(n, msize, &control, ctx.threads)?;
     let mut mq = RowBlock::zeros(n, b);
     let mut h = Mat::<f64>::zeros(msize, msize);
     let mut w = RowBlock::zeros(n, b);
@@ -730,12 +730,21 @@ pub fn eigs_block_lanczos(
             drop(chol);
             // So are the basis columns past the last one copied out (about half the basis).
             super::release_columns(&mut v, src.iter().map(|&c| c + 1).max().unwrap_or(0));
-            let mut vectors = super::zeros_checked(n, want, &control)?;
-            for (j, &from) in idx.iter().enumerate() {
-                if j % 64 == 0 {
-                    control.check()?;
+            let mut vectors = super::zeros_checked(n, want, &control, ctx.threads)?;
+            let copy = |j0: usize, mut chunk: MatMut<'_, f64>| -> Result<(), EigenError> {
+                control.check()?;
+                for j in 0..chunk.ncols() {
+                    chunk.rb_mut().col_mut(j).copy_from(v.col(src[idx[j0 + j]]));
                 }
-                vectors.as_mut().col_mut(j).copy_from(v.col(src[from]));
+                Ok(())
+            };
+            if ctx.threads > 1 {
+                use rayon::prelude::*;
+                vectors.as_mut().par_col_chunks_mut(64).enumerate().try_for_each(|(c, chunk)| copy(64 * c, chunk))?;
+            } else {
+                for c0 in (0..want).step_by(64) {
+                    copy(c0, vectors.as_mut().subcols_mut(c0, 64.min(want - c0)))?;
+                }
             }
             clock.restart += lap(&mut t);
             control.report("converged", k, k);

@@ -43,6 +43,7 @@ pub mod numeric;
 mod options;
 mod result;
 pub mod slicing;
+pub mod tree;
 pub mod weyl_law;
 
 pub use options::*;
@@ -201,16 +202,52 @@ pub(crate) fn release_columns(m: &mut Mat<f64>, from: usize) {
 }
 
 /// An n × m matrix of zeros, filled 64 columns at a time with a stop check between: a basis or a set of
-/// eigenvectors of a large problem is gigabytes, whose first touch takes about a second.
-pub(crate) fn zeros_checked(n: usize, m: usize, control: &Control<'_>) -> Result<Mat<f64>, EigenError> {
+/// eigenvectors of a large problem is gigabytes, whose first touch takes about a second. With `threads` > 1 the
+/// column groups are filled on the current rayon pool, so that the page faults of the first touch are shared out.
+pub(crate) fn zeros_checked(n: usize, m: usize, control: &Control<'_>, threads: usize) -> Result<Mat<f64>, EigenError> {
+    use rayon::prelude::*;
+    const GROUP: usize = 64;
+    if threads <= 1 || m <= GROUP {
+        let mut out = Mat::<f64>::with_capacity(n, m);
+        for c in (0..m).step_by(GROUP) {
+            control.check()?;
+            out.resize_with(n, (c + GROUP).min(m), |_, _| 0.0);
+        }
+        if m == 0 {
+            out.resize_with(n, 0, |_, _| 0.0);
+        }
+        return Ok(out);
+    }
     let mut out = Mat::<f64>::with_capacity(n, m);
-    for c in (0..m).step_by(64) {
+    let stride = usize::try_from(out.col_stride()).expect("a column stride");
+    // faer documents `with_capacity` as reserving at least n rows (the column stride) and m columns.
+    assert!(stride >= n, "row capacity for n rows");
+    #[derive(Clone, Copy)]
+    struct Base(*mut f64);
+    // SAFETY: the tasks below write disjoint columns of the allocation through this pointer, and nothing else
+    // touches it until they are done.
+    unsafe impl Send for Base {}
+    // SAFETY: as above.
+    unsafe impl Sync for Base {}
+    impl Base {
+        /// The pointer (a method, so that closures capture the `Base`, not its field).
+        fn get(self) -> *mut f64 {
+            self.0
+        }
+    }
+    let base = Base(out.as_ptr_mut());
+    (0..m.div_ceil(GROUP)).into_par_iter().with_max_len(1).try_for_each(|g| {
         control.check()?;
-        out.resize_with(n, (c + 64).min(m), |_, _| 0.0);
-    }
-    if m == 0 {
-        out.resize_with(n, 0, |_, _| 0.0);
-    }
+        for c in g * GROUP..((g + 1) * GROUP).min(m) {
+            // SAFETY: column c (< m, within the column capacity `with_capacity(n, m)` reserves) starts at c·stride and
+            // holds n ≤ stride values, inside that allocation; each column is written by one task only.
+            unsafe { std::ptr::write_bytes(base.get().add(c * stride), 0, n) };
+        }
+        Ok::<(), EigenError>(())
+    })?;
+    // SAFETY: n and m are within the capacities `with_capacity(n, m)` reserved, and every entry of the n × m matrix
+    // was written (zeros) by the tasks above, all of which succeeded.
+    unsafe { out.set_dims(n, m) };
     Ok(out)
 }
 
@@ -462,6 +499,23 @@ mod tests {
         for (j, &from) in idx.iter().enumerate() {
             assert_eq!(m.col(j), original.col(from), "column {j}");
         }
+    }
+
+    /// On several threads, the zeros come out with the asked shape, every entry zero and writable (odd sizes: a last
+    /// column group of 2, rows not a multiple of anything); a raised stop flag ends the fill with `Canceled`.
+    #[test]
+    fn zeros_on_several_threads() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let (n, m) = (1_003, 130);
+        let mut z = pool.install(|| super::zeros_checked(n, m, &super::Control::default(), 2)).unwrap();
+        assert_eq!((z.nrows(), z.ncols()), (n, m));
+        assert!((0..m).all(|j| (0..n).all(|i| z[(i, j)] == 0.0)));
+        z[(n - 1, m - 1)] = 1.0;
+        assert_eq!(z.as_ref().sum(), 1.0);
+        let stop = std::sync::atomic::AtomicBool::new(true);
+        let control = super::Control { progress: None, stop: Some(&stop) };
+        let r = pool.install(|| super::zeros_checked(n, m, &control, 2));
+        assert!(matches!(r, Err(super::EigenError::Canceled)));
     }
 
     /// Released columns read as zeros (or as they were, on a page shared with a kept column) and can be written

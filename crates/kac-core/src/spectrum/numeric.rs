@@ -8,6 +8,7 @@
 //!
 //! LDLᵀ is without pivoting, as faer's: D on the diagonal of each supernode's diagonal block, L unit lower.
 
+use super::tree::Split;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
@@ -131,32 +132,143 @@ pub fn factor_supernodal(
             }
         }
     }
+    let job = Job { sn, a_ptr: &a_ptr, a_rows: &a_rows, a_vals: &a_vals, descendants: &descendants, ldlt, stop };
     let mut l = vec![0.0f64; sn.len_val()];
-    let mut local = vec![usize::MAX; n];
-    // Scratch of the dense kernels (sized for the largest diagonal block) and of one update.
-    let largest = (0..ns).map(|s| end[s] - begin[s]).max().unwrap_or(0).min(PANEL);
-    let scratch = if ldlt {
-        faer::linalg::cholesky::ldlt::factor::cholesky_in_place_scratch::<f64>(largest, par, Default::default())
-    } else {
-        faer::linalg::cholesky::llt::factor::cholesky_in_place_scratch::<f64>(largest, par, Default::default())
+    let threads = match par {
+        Par::Rayon(t) => t.get(),
+        Par::Seq => 1,
     };
-    let mut mem = MemBuffer::new(scratch);
-    let mut update: Vec<f64> = Vec::new();
-    let mut scaled: Vec<f64> = Vec::new();
-    let mut rowmap: Vec<usize> = Vec::new();
-    for s in 0..ns {
-        if stopped(stop) {
+    // Several threads: disjoint subtrees side by side (each reads and writes only its own supernodes' values, see
+    // `tree`), then the supernodes above them here, their dense blocks on every thread.
+    let split = (threads > 1).then(|| Split::new(sn, threads, &work_of(sn, &descendants)));
+    let top: Vec<usize> = match split.flatten() {
+        Some(split) => {
+            use rayon::prelude::*;
+            let mut ranges: Vec<(usize, usize, usize)> = split
+                .parts
+                .iter()
+                .enumerate()
+                .flat_map(|(w, part)| part.iter().map(move |&(lo, hi)| (lo, hi, w)))
+                .collect();
+            ranges.sort_unstable();
+            // Each subtree's values, cut out of the factor in order.
+            let mut work: Vec<Vec<(usize, usize, &mut [f64])>> = (0..threads).map(|_| Vec::new()).collect();
+            let mut rest: &mut [f64] = &mut l;
+            let mut at = 0;
+            for &(lo, hi, w) in &ranges {
+                let (_, tail) = std::mem::take(&mut rest).split_at_mut(val_ptr[lo] - at);
+                let (mine, tail) = tail.split_at_mut(val_ptr[hi] - val_ptr[lo]);
+                work[w].push((lo, hi, mine));
+                rest = tail;
+                at = val_ptr[hi];
+            }
+            work.into_par_iter().try_for_each(|ranges| {
+                let mut scratch = Scratch::new(&job, n, ranges.iter().flat_map(|&(lo, hi, _)| lo..hi), Par::Seq);
+                for (lo, hi, values) in ranges {
+                    for s in lo..hi {
+                        job.factor(s, values, val_ptr[lo], &mut scratch, Par::Seq)?;
+                    }
+                }
+                Ok::<(), FactorError>(())
+            })?;
+            split.top
+        }
+        None => (0..ns).collect(),
+    };
+    let mut scratch = Scratch::new(&job, n, top.iter().copied(), par);
+    for s in top {
+        job.factor(s, &mut l[..val_ptr[s + 1]], 0, &mut scratch, par)?;
+    }
+    Ok(l)
+}
+
+/// The multiply-adds of factoring each supernode s (left-looking: the updates it gathers from its descendants, then
+/// its own block), the weights of the tree's [`Split`].
+fn work_of(sn: &SymbolicSupernodalCholesky<usize>, descendants: &[Vec<usize>]) -> Vec<f64> {
+    let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
+    (0..sn.n_supernodes())
+        .map(|s| {
+            let (c, r) = ((end[s] - begin[s]) as f64, sn.supernode(s).pattern().len() as f64);
+            let gathered: f64 = descendants[s]
+                .iter()
+                .map(|&d| {
+                    let p = sn.supernode(d).pattern();
+                    let first = p.partition_point(|&x| x < begin[s]);
+                    let mid = p[first..].partition_point(|&x| x < end[s]);
+                    ((p.len() - first) * mid * (end[d] - begin[d])) as f64
+                })
+                .sum();
+            gathered + c * c * c / 3.0 + c * c * r
+        })
+        .collect()
+}
+
+/// What every supernode's factorization reads: the structure, A's lower triangle in factor order, who updates whom.
+struct Job<'a> {
+    sn: &'a SymbolicSupernodalCholesky<usize>,
+    a_ptr: &'a [usize],
+    a_rows: &'a [usize],
+    a_vals: &'a [f64],
+    descendants: &'a [Vec<usize>],
+    ldlt: bool,
+    stop: Option<&'a AtomicBool>,
+}
+
+/// One thread's working memory for [`Job::factor`].
+struct Scratch {
+    /// Each pattern row's position in the supernode being factored (`usize::MAX` elsewhere).
+    local: Vec<usize>,
+    /// The dense kernels' scratch (sized for the largest diagonal panel).
+    mem: MemBuffer,
+    update: Vec<f64>,
+    scaled: Vec<f64>,
+    rowmap: Vec<usize>,
+}
+
+impl Scratch {
+    fn new(job: &Job<'_>, n: usize, supernodes: impl Iterator<Item = usize>, par: Par) -> Self {
+        let (begin, end) = (job.sn.supernode_begin(), job.sn.supernode_end());
+        let largest = supernodes.map(|s| end[s] - begin[s]).max().unwrap_or(0).min(PANEL);
+        let scratch = if job.ldlt {
+            faer::linalg::cholesky::ldlt::factor::cholesky_in_place_scratch::<f64>(largest, par, Default::default())
+        } else {
+            faer::linalg::cholesky::llt::factor::cholesky_in_place_scratch::<f64>(largest, par, Default::default())
+        };
+        Scratch {
+            local: vec![usize::MAX; n],
+            mem: MemBuffer::new(scratch),
+            update: Vec::new(),
+            scaled: Vec::new(),
+            rowmap: Vec::new(),
+        }
+    }
+}
+
+impl Job<'_> {
+    /// Factors supernode `s` into `l`, which holds the factor's values from offset `base` on, up to the end of
+    /// `s`'s own: every descendant of `s` lies at or after `base` (its own subtree's values, or the whole factor).
+    fn factor(&self, s: usize, l: &mut [f64], base: usize, w: &mut Scratch, par: Par) -> Result<(), FactorError> {
+        let sn = self.sn;
+        let (begin, end, val_ptr) = (sn.supernode_begin(), sn.supernode_end(), sn.col_ptr_for_val());
+        let (a_ptr, a_rows, a_vals, ldlt) = (self.a_ptr, self.a_rows, self.a_vals, self.ldlt);
+        if stopped(self.stop) {
             return Err(FactorError::Stopped);
         }
         let (s_start, s_end) = (begin[s], end[s]);
         let s_pattern = sn.supernode(s).pattern();
         let nc = s_end - s_start;
         let nr = nc + s_pattern.len();
+        let local = &mut w.local;
         for (i, &row) in s_pattern.iter().enumerate() {
             local[row] = nc + i;
         }
-        let (head, tail) = l.split_at_mut(val_ptr[s]);
-        let mut ls = MatMut::from_column_major_slice_mut(&mut tail[..val_ptr[s + 1] - val_ptr[s]], nr, nc);
+        let (head, tail) = l.split_at_mut(val_ptr[s] - base);
+        let block = &mut tail[..val_ptr[s + 1] - val_ptr[s]];
+        // Zero already, but written before it is read: a first read of fresh memory maps the shared zero page, and
+        // the write after it then replaces that mapping, which interrupts every other core running this process
+        // to flush its TLB (measured: two threads factoring side by side each ran at half speed).
+        block.fill(0.0);
+        let mut ls = MatMut::from_column_major_slice_mut(block, nr, nc);
         // A's columns of this supernode.
         for j in s_start..s_end {
             for (&i, &v) in a_rows[a_ptr[j]..a_ptr[j + 1]].iter().zip(&a_vals[a_ptr[j]..a_ptr[j + 1]]) {
@@ -166,14 +278,18 @@ pub fn factor_supernodal(
         }
         // Updates from every descendant d: Ls[rows, cols] −= L_d[rows] · D_d · L_d[cols]ᵀ over d's rows that fall
         // in this supernode's columns (cols) and at or below them (rows).
-        for (count, &d) in descendants[s].iter().enumerate() {
-            if count % UPDATES_PER_CHECK == UPDATES_PER_CHECK - 1 && stopped(stop) {
+        for (count, &d) in self.descendants[s].iter().enumerate() {
+            if count % UPDATES_PER_CHECK == UPDATES_PER_CHECK - 1 && stopped(self.stop) {
                 return Err(FactorError::Stopped);
             }
             let (d_start, d_end) = (begin[d], end[d]);
             let d_pattern = sn.supernode(d).pattern();
             let dc = d_end - d_start;
-            let ld = MatRef::from_column_major_slice(&head[val_ptr[d]..val_ptr[d + 1]], dc + d_pattern.len(), dc);
+            let ld = MatRef::from_column_major_slice(
+                &head[val_ptr[d] - base..val_ptr[d + 1] - base],
+                dc + d_pattern.len(),
+                dc,
+            );
             let first = d_pattern.partition_point(|&r| r < s_start);
             let mid = d_pattern[first..].partition_point(|&r| r < s_end);
             let rows = &d_pattern[first..];
@@ -181,25 +297,25 @@ pub fn factor_supernodal(
             let cols = below.subrows(0, mid);
             // cols · D when LDLᵀ (D on the diagonal of d's diagonal block).
             // Scratch kept between updates (every entry is written before it is read).
-            if scaled.len() < mid * dc {
-                scaled.resize(mid * dc, 0.0);
+            if w.scaled.len() < mid * dc {
+                w.scaled.resize(mid * dc, 0.0);
             }
             let rhs: MatRef<'_, f64> = if ldlt {
-                let mut m = MatMut::from_column_major_slice_mut(&mut scaled[..mid * dc], mid, dc);
+                let mut m = MatMut::from_column_major_slice_mut(&mut w.scaled[..mid * dc], mid, dc);
                 for k in 0..dc {
                     let dk = ld[(k, k)];
                     for i in 0..mid {
                         m[(i, k)] = cols[(i, k)] * dk;
                     }
                 }
-                MatRef::from_column_major_slice(&scaled[..mid * dc], mid, dc)
+                MatRef::from_column_major_slice(&w.scaled[..mid * dc], mid, dc)
             } else {
                 cols
             };
-            if update.len() < rows.len() * mid {
-                update.resize(rows.len() * mid, 0.0);
+            if w.update.len() < rows.len() * mid {
+                w.update.resize(rows.len() * mid, 0.0);
             }
-            let mut u = MatMut::from_column_major_slice_mut(&mut update[..rows.len() * mid], rows.len(), mid);
+            let mut u = MatMut::from_column_major_slice_mut(&mut w.update[..rows.len() * mid], rows.len(), mid);
             faer::linalg::matmul::matmul(
                 u.as_mut(),
                 Accum::Replace,
@@ -209,24 +325,24 @@ pub fn factor_supernodal(
                 par_for(rows.len() * mid * dc, par),
             );
             // Scattered into the supernode's rows: a row map for this descendant, then column by column.
-            rowmap.clear();
-            rowmap.extend(rows.iter().map(|&r| if r < s_end { r - s_start } else { local[r] }));
+            w.rowmap.clear();
+            w.rowmap.extend(rows.iter().map(|&r| if r < s_end { r - s_start } else { local[r] }));
             let u = u.rb();
             for c in 0..mid {
                 let target = ls.rb_mut().col_mut(rows[c] - s_start).try_as_col_major_mut().expect("contiguous");
                 let target = target.as_slice_mut();
                 let source = u.col(c).try_as_col_major().expect("contiguous").as_slice();
-                for (&row, &x) in rowmap[c..].iter().zip(&source[c..]) {
+                for (&row, &x) in w.rowmap[c..].iter().zip(&source[c..]) {
                     target[row] -= x;
                 }
             }
         }
-        factor_block(ls.as_mut(), nc, s_start, ldlt, par, MemStack::new(&mut mem), stop)?;
+        factor_block(ls.as_mut(), nc, s_start, ldlt, par, MemStack::new(&mut w.mem), self.stop)?;
         for &row in s_pattern {
             local[row] = usize::MAX;
         }
+        Ok(())
     }
-    Ok(l)
 }
 
 /// Factors a supernode's block (nr × nc: the diagonal block on top, the pattern's rows below) in column panels:

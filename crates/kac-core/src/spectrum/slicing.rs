@@ -152,7 +152,8 @@ pub(crate) fn solve(
         let below = if w0.lo.is_finite() { w0.lo } else { 0.0 };
         let above = if w1.hi.is_finite() { w1.hi } else { w1.sigma };
         let reach = 0.01 * (e - below).min(above - e);
-        completeness::inertia_in_gap(sym, pair, e - reach, e + reach, &control)
+        // One thread per edge: the edges are counted side by side.
+        completeness::inertia_in_gap(sym, pair, (e - reach, e + reach), &control, faer::Par::Seq)
     };
     let edges: Vec<Result<(f64, usize), EigenError>> = if parallel {
         (1..slices.len()).into_par_iter().with_max_len(1).map(count_edge).collect()
