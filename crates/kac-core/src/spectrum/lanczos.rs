@@ -730,22 +730,11 @@ pub fn eigs_block_lanczos(
             drop(chol);
             // So are the basis columns past the last one copied out (about half the basis).
             super::release_columns(&mut v, src.iter().map(|&c| c + 1).max().unwrap_or(0));
-            let mut vectors = super::zeros_checked(n, want, &control, ctx.threads)?;
-            let copy = |j0: usize, mut chunk: MatMut<'_, f64>| -> Result<(), EigenError> {
-                control.check()?;
-                for j in 0..chunk.ncols() {
-                    chunk.rb_mut().col_mut(j).copy_from(v.col(src[idx[j0 + j]]));
+            let vectors = super::columns_checked(n, want, &control, ctx.threads, |j, col| {
+                for (x, y) in col.iter_mut().zip(v.col(src[idx[j]]).iter()) {
+                    *x = *y;
                 }
-                Ok(())
-            };
-            if ctx.threads > 1 {
-                use rayon::prelude::*;
-                vectors.as_mut().par_col_chunks_mut(64).enumerate().try_for_each(|(c, chunk)| copy(64 * c, chunk))?;
-            } else {
-                for c0 in (0..want).step_by(64) {
-                    copy(c0, vectors.as_mut().subcols_mut(c0, 64.min(want - c0)))?;
-                }
-            }
+            })?;
             clock.restart += lap(&mut t);
             control.report("converged", k, k);
             let iteration_s = t2.elapsed().as_secs_f64();

@@ -118,7 +118,7 @@ pub fn eigs(
             None => lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?,
         };
         let mut s = match single {
-            Some(s) => prepend_zero_modes(pair, &zeros, s, &control)?,
+            Some(s) => prepend_zero_modes(pair, &zeros, s, &control, o.threads)?,
             None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, control)?,
         };
         control.check()?;
@@ -202,29 +202,31 @@ pub(crate) fn release_columns(m: &mut Mat<f64>, from: usize) {
 }
 
 /// An n × m matrix of zeros, filled 64 columns at a time with a stop check between: a basis or a set of
-/// eigenvectors of a large problem is gigabytes, whose first touch takes about a second. With `threads` > 1 the
-/// column groups are filled on the current rayon pool, so that the page faults of the first touch are shared out.
+/// eigenvectors of a large problem is gigabytes, whose first touch takes about a second.
 pub(crate) fn zeros_checked(n: usize, m: usize, control: &Control<'_>, threads: usize) -> Result<Mat<f64>, EigenError> {
+    columns_checked(n, m, control, threads, |_, _| {})
+}
+
+/// An n × m matrix whose column c is written by `fill(c, column)` (the column holds zeros when `fill` sees it), 64
+/// columns at a time with a stop check between. With `threads` > 1 the column groups are made on the current rayon
+/// pool: the page faults of the first touch of a large matrix (gigabytes, about a second) are shared out, and each
+/// column is filled while it is still in cache.
+pub(crate) fn columns_checked(
+    n: usize,
+    m: usize,
+    control: &Control<'_>,
+    threads: usize,
+    fill: impl Fn(usize, &mut [f64]) + Sync,
+) -> Result<Mat<f64>, EigenError> {
     use rayon::prelude::*;
     const GROUP: usize = 64;
-    if threads <= 1 || m <= GROUP {
-        let mut out = Mat::<f64>::with_capacity(n, m);
-        for c in (0..m).step_by(GROUP) {
-            control.check()?;
-            out.resize_with(n, (c + GROUP).min(m), |_, _| 0.0);
-        }
-        if m == 0 {
-            out.resize_with(n, 0, |_, _| 0.0);
-        }
-        return Ok(out);
-    }
     let mut out = Mat::<f64>::with_capacity(n, m);
     let stride = usize::try_from(out.col_stride()).expect("a column stride");
     // faer documents `with_capacity` as reserving at least n rows (the column stride) and m columns.
     assert!(stride >= n, "row capacity for n rows");
     #[derive(Clone, Copy)]
     struct Base(*mut f64);
-    // SAFETY: the tasks below write disjoint columns of the allocation through this pointer, and nothing else
+    // SAFETY: the groups below write disjoint columns of the allocation through this pointer, and nothing else
     // touches it until they are done.
     unsafe impl Send for Base {}
     // SAFETY: as above.
@@ -236,17 +238,29 @@ pub(crate) fn zeros_checked(n: usize, m: usize, control: &Control<'_>, threads: 
         }
     }
     let base = Base(out.as_ptr_mut());
-    (0..m.div_ceil(GROUP)).into_par_iter().with_max_len(1).try_for_each(|g| {
+    let group = |g: usize| -> Result<(), EigenError> {
         control.check()?;
         for c in g * GROUP..((g + 1) * GROUP).min(m) {
             // SAFETY: column c (< m, within the column capacity `with_capacity(n, m)` reserves) starts at c·stride and
-            // holds n ≤ stride values, inside that allocation; each column is written by one task only.
-            unsafe { std::ptr::write_bytes(base.get().add(c * stride), 0, n) };
+            // holds n ≤ stride values, inside that allocation; it is zeroed before the slice over it is made, and
+            // each column is written by one group only.
+            let column = unsafe {
+                let p = base.get().add(c * stride);
+                std::ptr::write_bytes(p, 0, n);
+                std::slice::from_raw_parts_mut(p, n)
+            };
+            fill(c, column);
         }
-        Ok::<(), EigenError>(())
-    })?;
+        Ok(())
+    };
+    let groups = m.div_ceil(GROUP);
+    if threads > 1 && groups > 1 {
+        (0..groups).into_par_iter().with_max_len(1).try_for_each(group)?;
+    } else {
+        (0..groups).try_for_each(group)?;
+    }
     // SAFETY: n and m are within the capacities `with_capacity(n, m)` reserved, and every entry of the n × m matrix
-    // was written (zeros) by the tasks above, all of which succeeded.
+    // was written by the groups above, all of which succeeded.
     unsafe { out.set_dims(n, m) };
     Ok(out)
 }
@@ -257,6 +271,7 @@ pub(crate) fn prepend_zero_modes(
     zeros: &ZeroModes,
     s: Spectrum,
     control: &Control<'_>,
+    threads: usize,
 ) -> Result<Spectrum, EigenError> {
     let z = zeros.len();
     if z == 0 {
@@ -265,16 +280,15 @@ pub(crate) fn prepend_zero_modes(
     let n = pair.n();
     let head = zero_mode_spectrum(pair, zeros, z);
     let k = s.values.len();
-    // Written once, 64 columns at a time (zeroing a gigabyte first and copying into it touched it twice: 1.9 s at
-    // 164k vertices, k = 1000).
-    let mut vectors = Mat::<f64>::with_capacity(n, z + k);
-    vectors.resize_with(n, z, |i, j| head.vectors[(i, j)]);
-    for c in (0..k).step_by(64) {
-        control.check()?;
-        let w = 64.min(k - c);
-        let from = s.vectors.as_ref();
-        vectors.resize_with(n, z + c + w, |i, j| from[(i, j - z)]);
-    }
+    // Written once, column by column (zeroing a gigabyte first and copying into it touched it twice: 1.9 s at 164k
+    // vertices, k = 1000), on the solve's threads.
+    let from = s.vectors.as_ref();
+    let vectors = columns_checked(n, z + k, control, threads, |c, col| {
+        let src = if c < z { head.vectors.col(c) } else { from.col(c - z) };
+        for (x, y) in col.iter_mut().zip(src.iter()) {
+            *x = *y;
+        }
+    })?;
     let mut values = head.values;
     values.extend_from_slice(&s.values);
     Ok(Spectrum { values, vectors, residuals: vec![], stats: s.stats })
@@ -285,7 +299,9 @@ pub(crate) fn truncate(s: &mut Spectrum, k: usize) {
     if s.values.len() > k {
         s.values.truncate(k);
         s.residuals.truncate(k);
-        s.vectors = s.vectors.as_ref().subcols(0, k).to_owned();
+        // In place: the columns past k stay allocated (guard pairs, a few), nothing is copied.
+        let n = s.vectors.nrows();
+        s.vectors.truncate(n, k);
     }
 }
 
