@@ -103,6 +103,14 @@ fn a_matrix_that_is_not_positive_definite_is_refused_by_cholesky() {
     let sym = Symbolic::analyze(&sphere.pattern).unwrap();
     let r = Cholesky::factor_pieces(&sym, &sphere.shifted(30.0), Par::Seq, None);
     assert!(matches!(&r, Err(FactorError::Failed(m)) if m.contains("not positive definite")), "{:?}", r.err());
+    // On several threads (subtrees side by side; a sphere of 10k vertices, whose tree splits): the failure, not
+    // the stops it causes in the other threads.
+    let sphere = pair(Shape::TriangleMesh(generate::icosphere(5)), 1);
+    let sym = Symbolic::analyze(&sphere.pattern).unwrap();
+    for threads in [2, 3] {
+        let r = Cholesky::factor_pieces(&sym, &sphere.shifted(30.0), Par::rayon(threads), None);
+        assert!(matches!(&r, Err(FactorError::Failed(m)) if m.contains("not positive definite")), "{:?}", r.err());
+    }
 }
 
 #[test]
@@ -114,7 +122,7 @@ fn a_raised_flag_stops_the_factorization() {
     let values = p.shifted(-1.0);
     let raised = AtomicBool::new(true);
     assert_eq!(Cholesky::factor_pieces(&sym, &values, Par::Seq, Some(&raised)).err(), Some(FactorError::Stopped));
-    // Subtrees on several threads: each worker sees the flag.
+    // On several threads the raised flag ends it too (before the subtrees start).
     assert_eq!(Cholesky::factor_pieces(&sym, &values, Par::rayon(2), Some(&raised)).err(), Some(FactorError::Stopped));
     let stop = AtomicBool::new(false);
     let t = std::time::Instant::now();

@@ -285,6 +285,7 @@ fn check_block_solve(
 ) {
     use kac_core::simd::Isa;
     let n = pair.n();
+    assert!(chol.solves_in_parallel(2), "the factor's tree splits for two threads: the parallel solve is tested");
     for isa in Isa::available() {
         for b in [1usize, 2, 3, 4, 8, 16] {
             let rhs = faer::Mat::<f64>::from_fn(n, b, |i, j| ((i * 31 + j * 17) % 23) as f64 - 11.0);

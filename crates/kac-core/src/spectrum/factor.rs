@@ -119,8 +119,9 @@ impl Cholesky {
         Self::factor_whole(symbolic, values, par)
     }
     /// As [`Cholesky::factor_ldlt`], stopped by `stop` within a fraction of a second: a factor of more than
-    /// [`PIECES_FROM`] values is made in pieces ([`numeric`]) when there is a flag to see; a smaller one (a few
-    /// tenths of a second at most) by faer's numeric factorization in one call, about a fifth faster.
+    /// [`PIECES_FROM`] values is made in pieces ([`numeric`]) when there is a flag to see, and so is a factor of more
+    /// than [`PARALLEL_FROM`] values on several threads when its tree splits (subtrees side by side); others by faer's
+    /// numeric factorization in one call, about a fifth faster on one thread.
     ///
     /// [`numeric`]: super::numeric
     pub fn factor_ldlt_stoppable(
@@ -250,6 +251,14 @@ impl Cholesky {
             plan.clone()
         } else {
             SolvePlan::new(sn, threads).map(Arc::new)
+        }
+    }
+    /// Whether a block solve on `threads` threads splits the tree (subtrees side by side), where its kernels apply.
+    pub fn solves_in_parallel(&self, threads: usize) -> bool {
+        use faer::sparse::linalg::cholesky::SymbolicCholeskyRaw;
+        match self.symbolic.inner.raw() {
+            SymbolicCholeskyRaw::Supernodal(sn) if threads > 1 => self.plan(sn, threads).is_some(),
+            _ => false,
         }
     }
     /// Whether this is an LDLᵀ factor (else Cholesky).
@@ -401,11 +410,20 @@ type SupernodalFactor<'a> = faer::sparse::linalg::cholesky::supernodal::Supernod
 
 /// Whether a numeric factorization is made in pieces ([`numeric`]) rather than by faer in one call: where a stop
 /// flag must be seen within a fraction of a second (factors of more than [`PIECES_FROM`] values), and where several
-/// threads can factor disjoint subtrees side by side (more than [`PARALLEL_FROM`] values; faer's numeric
-/// factorization uses threads only inside each supernode's dense blocks).
+/// threads can factor disjoint subtrees side by side (more than [`PARALLEL_FROM`] values, and a tree that splits;
+/// faer's numeric factorization uses threads only inside each supernode's dense blocks).
 fn pieces(symbolic: &Symbolic, par: Par, stop: Option<&AtomicBool>) -> bool {
+    use faer::sparse::linalg::cholesky::SymbolicCholeskyRaw;
     let len = symbolic.inner.len_val();
-    (stop.is_some() && len > PIECES_FROM) || (matches!(par, Par::Rayon(t) if t.get() > 1) && len > PARALLEL_FROM)
+    if stop.is_some() && len > PIECES_FROM {
+        return true;
+    }
+    match (par, symbolic.inner.raw()) {
+        (Par::Rayon(t), SymbolicCholeskyRaw::Supernodal(sn)) if t.get() > 1 && len > PARALLEL_FROM => {
+            SolvePlan::new(sn, t.get()).is_some()
+        }
+        _ => false,
+    }
 }
 
 /// Factors with more values than this are made in pieces, subtrees side by side, when several threads are given.
@@ -457,6 +475,17 @@ impl SolvePlan {
             })
             .collect();
         let split = Split::new(sn, threads, &weight)?;
+        // What keeps the threads on their own rows (the kernels' redirection splits each pattern at the subtree's
+        // limit): every supernode's pattern is strictly ascending and lies past its own columns, so a subtree's
+        // rows below the limit are its own and those at or above it are its ancestors' (the top's). Checked once per
+        // plan rather than taken on trust from faer.
+        for s in 0..sn.n_supernodes() {
+            let p = sn.supernode(s).pattern();
+            assert!(
+                p.first().is_none_or(|&r| r >= end[s]) && p.windows(2).all(|w| w[0] < w[1]),
+                "supernode {s}: pattern not ascending past its columns"
+            );
+        }
         let limits = split.parts.iter().map(|p| p.iter().map(|&(_, hi)| end[hi - 1]).collect()).collect();
         let mut top_pos = vec![usize::MAX; sn.nrows()];
         let top_cols: Vec<usize> = split.top.iter().flat_map(|&s| begin[s]..end[s]).collect();
@@ -468,14 +497,19 @@ impl SolvePlan {
 }
 
 /// A pointer shared by the threads of one parallel solve, each writing its own rows (see [`parallel_solve`]).
+#[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
 struct Shared(*mut f64);
 // SAFETY: `parallel_solve` hands the pointer to threads that write disjoint rows of X while it lives (each
-// subtree's own columns) and read rows no thread writes meanwhile (the top's, in the backward sweep).
+// subtree's own columns; `SolvePlan::new` checked the patterns that make them disjoint) and read rows no thread
+// writes meanwhile (the top's, in the backward sweep).
+#[cfg(target_arch = "x86_64")]
 unsafe impl Send for Shared {}
 // SAFETY: as above.
+#[cfg(target_arch = "x86_64")]
 unsafe impl Sync for Shared {}
 
+#[cfg(target_arch = "x86_64")]
 impl Shared {
     /// The pointer (a method, so that closures capture the `Shared`, not its field).
     fn get(self) -> *mut f64 {
@@ -490,6 +524,7 @@ impl Shared {
 ///
 /// `sweep` must be sound to call on X (n rows of B) for any range of supernodes with rows at or above the limit
 /// redirected to a buffer of the plan's top rows: the kernels' contract given the factor and the CPU.
+#[cfg(target_arch = "x86_64")]
 fn parallel_solve<const B: usize>(
     f: &SupernodalFactor<'_>,
     x: &mut [[f64; B]],
@@ -500,7 +535,6 @@ fn parallel_solve<const B: usize>(
     let n_top = plan.top_cols.len();
     let xp = Shared(x.as_mut_ptr().cast::<f64>());
     let mut bufs: Vec<Vec<f64>> = vec![vec![0.0; n_top * B]; plan.split.parts.len()];
-    let whole = |buf: *mut f64, limit: usize| kernels::Sweep { x: xp.get(), limit, buf, top_pos: &plan.top_pos, n_top };
     bufs.par_iter_mut().zip(&plan.split.parts).zip(&plan.limits).for_each(|((buf, part), limits)| {
         for (&(lo, hi), &limit) in part.iter().zip(limits) {
             let sw = kernels::Sweep { x: xp.get(), limit, buf: buf.as_mut_ptr(), top_pos: &plan.top_pos, n_top };
@@ -514,6 +548,9 @@ fn parallel_solve<const B: usize>(
             }
         }
     }
+    // X was written through its reference just now: the pointer is taken again for what follows.
+    let xp = Shared(x.as_mut_ptr().cast::<f64>());
+    let whole = |buf: *mut f64, limit: usize| kernels::Sweep { x: xp.get(), limit, buf, top_pos: &plan.top_pos, n_top };
     let sw = whole(std::ptr::null_mut(), usize::MAX);
     for &s in &plan.split.top {
         sweep(f, true, s, s + 1, &sw);
@@ -606,6 +643,8 @@ fn supernodal_solve_with<const B: usize>(
             return;
         }
     }
+    // The split solve needs the intrinsic kernels: elsewhere the plan goes unused.
+    let _ = plan;
     if ldlt {
         supernodal_solve::<B, false, true>(f, x)
     } else {

@@ -220,10 +220,11 @@ pub(crate) fn columns_checked(
 ) -> Result<Mat<f64>, EigenError> {
     use rayon::prelude::*;
     const GROUP: usize = 64;
-    let mut out = Mat::<f64>::with_capacity(n, m);
+    // One row and one column more than needed: faer's `set_dims` asks for dimensions strictly below the capacities.
+    let mut out = Mat::<f64>::with_capacity(n + 1, m + 1);
     let stride = usize::try_from(out.col_stride()).expect("a column stride");
-    // faer documents `with_capacity` as reserving at least n rows (the column stride) and m columns.
-    assert!(stride >= n, "row capacity for n rows");
+    // faer documents `with_capacity` as reserving at least n + 1 rows (the column stride) and m + 1 columns.
+    assert!(stride > n, "row capacity for n rows");
     #[derive(Clone, Copy)]
     struct Base(*mut f64);
     // SAFETY: the groups below write disjoint columns of the allocation through this pointer, and nothing else
@@ -241,7 +242,7 @@ pub(crate) fn columns_checked(
     let group = |g: usize| -> Result<(), EigenError> {
         control.check()?;
         for c in g * GROUP..((g + 1) * GROUP).min(m) {
-            // SAFETY: column c (< m, within the column capacity `with_capacity(n, m)` reserves) starts at c·stride and
+            // SAFETY: column c (< m, within the column capacity `with_capacity` reserved) starts at c·stride and
             // holds n ≤ stride values, inside that allocation; it is zeroed before the slice over it is made, and
             // each column is written by one group only.
             let column = unsafe {
@@ -254,13 +255,15 @@ pub(crate) fn columns_checked(
         Ok(())
     };
     let groups = m.div_ceil(GROUP);
+    // 0: every thread of the current pool.
+    let threads = if threads == 0 { rayon::current_num_threads() } else { threads };
     if threads > 1 && groups > 1 {
         (0..groups).into_par_iter().with_max_len(1).try_for_each(group)?;
     } else {
         (0..groups).try_for_each(group)?;
     }
-    // SAFETY: n and m are within the capacities `with_capacity(n, m)` reserved, and every entry of the n × m matrix
-    // was written by the groups above, all of which succeeded.
+    // SAFETY: n and m are below the capacities `with_capacity(n + 1, m + 1)` reserved, and every entry of the n × m
+    // matrix was written by the groups above, all of which succeeded.
     unsafe { out.set_dims(n, m) };
     Ok(out)
 }

@@ -6,6 +6,10 @@
 //! it reads faer's), with faer's dense kernels for the blocks. The flag is checked before every supernode, every
 //! 32 updates from descendants, and between the column panels of a large supernode's dense factorization.
 //!
+//! On several threads, disjoint subtrees of the supernodal tree are factored side by side (see [`super::tree`]), each
+//! reading and writing only its own supernodes' values, and the supernodes above them after, their dense blocks on
+//! every thread; a thread whose subtree fails makes the others give up.
+//!
 //! LDLᵀ is without pivoting, as faer's: D on the diagonal of each supernode's diagonal block, L unit lower.
 
 use super::tree::Split;
@@ -132,7 +136,18 @@ pub fn factor_supernodal(
             }
         }
     }
-    let job = Job { sn, a_ptr: &a_ptr, a_rows: &a_rows, a_vals: &a_vals, descendants: &descendants, ldlt, stop };
+    // Raised by a thread whose subtree failed, so that the others give up too.
+    let abort = AtomicBool::new(false);
+    let job = Job {
+        sn,
+        a_ptr: &a_ptr,
+        a_rows: &a_rows,
+        a_vals: &a_vals,
+        descendants: &descendants,
+        ldlt,
+        stop,
+        abort: &abort,
+    };
     let mut l = vec![0.0f64; sn.len_val()];
     let threads = match par {
         Par::Rayon(t) => t.get(),
@@ -162,15 +177,26 @@ pub fn factor_supernodal(
                 rest = tail;
                 at = val_ptr[hi];
             }
-            work.into_par_iter().try_for_each(|ranges| {
-                let mut scratch = Scratch::new(&job, n, ranges.iter().flat_map(|&(lo, hi, _)| lo..hi), Par::Seq);
-                for (lo, hi, values) in ranges {
-                    for s in lo..hi {
-                        job.factor(s, values, val_ptr[lo], &mut scratch, Par::Seq)?;
+            let outcomes: Vec<Result<(), FactorError>> = work
+                .into_par_iter()
+                .map(|ranges| {
+                    let mut scratch = Scratch::new(&job, n, ranges.iter().flat_map(|&(lo, hi, _)| lo..hi), Par::Seq);
+                    for (lo, hi, values) in ranges {
+                        for s in lo..hi {
+                            if let Err(e) = job.factor(s, values, val_ptr[lo], &mut scratch, Par::Seq) {
+                                abort.store(true, Ordering::Relaxed);
+                                return Err(e);
+                            }
+                        }
                     }
-                }
-                Ok::<(), FactorError>(())
-            })?;
+                    Ok(())
+                })
+                .collect();
+            // A failure is reported over the stops it caused in the other threads.
+            if let Some(Err(failed)) = outcomes.iter().find(|r| matches!(r, Err(FactorError::Failed(_)))) {
+                return Err(failed.clone());
+            }
+            outcomes.into_iter().collect::<Result<Vec<()>, FactorError>>()?;
             split.top
         }
         None => (0..ns).collect(),
@@ -212,6 +238,8 @@ struct Job<'a> {
     descendants: &'a [Vec<usize>],
     ldlt: bool,
     stop: Option<&'a AtomicBool>,
+    /// Set when another thread's subtree failed.
+    abort: &'a AtomicBool,
 }
 
 /// One thread's working memory for [`Job::factor`].
@@ -245,13 +273,17 @@ impl Scratch {
 }
 
 impl Job<'_> {
+    /// The stop flag, or another thread's failure.
+    fn halted(&self) -> bool {
+        stopped(self.stop) || self.abort.load(Ordering::Relaxed)
+    }
     /// Factors supernode `s` into `l`, which holds the factor's values from offset `base` on, up to the end of
     /// `s`'s own: every descendant of `s` lies at or after `base` (its own subtree's values, or the whole factor).
     fn factor(&self, s: usize, l: &mut [f64], base: usize, w: &mut Scratch, par: Par) -> Result<(), FactorError> {
         let sn = self.sn;
         let (begin, end, val_ptr) = (sn.supernode_begin(), sn.supernode_end(), sn.col_ptr_for_val());
         let (a_ptr, a_rows, a_vals, ldlt) = (self.a_ptr, self.a_rows, self.a_vals, self.ldlt);
-        if stopped(self.stop) {
+        if self.halted() {
             return Err(FactorError::Stopped);
         }
         let (s_start, s_end) = (begin[s], end[s]);
@@ -279,7 +311,7 @@ impl Job<'_> {
         // Updates from every descendant d: Ls[rows, cols] −= L_d[rows] · D_d · L_d[cols]ᵀ over d's rows that fall
         // in this supernode's columns (cols) and at or below them (rows).
         for (count, &d) in self.descendants[s].iter().enumerate() {
-            if count % UPDATES_PER_CHECK == UPDATES_PER_CHECK - 1 && stopped(self.stop) {
+            if count % UPDATES_PER_CHECK == UPDATES_PER_CHECK - 1 && self.halted() {
                 return Err(FactorError::Stopped);
             }
             let (d_start, d_end) = (begin[d], end[d]);

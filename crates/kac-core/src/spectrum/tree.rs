@@ -4,7 +4,7 @@
 //! parent. Two supernodes neither of which is an ancestor of the other never touch each other's columns: the
 //! forward solve and the left-looking factorization of one subtree read and write only that subtree's columns and
 //! its ancestors' rows. So disjoint subtrees run side by side, and what lies above them (the *top*: every ancestor
-//! of a subtree's root) runs after them, on one thread, its large dense blocks with the threads' help.
+//! of a subtree's root) runs after them on one thread (the factorization gives its dense blocks to every thread).
 //!
 //! faer numbers supernodes in a postorder of the tree, so a subtree is a contiguous range of supernodes (and of
 //! columns and factor values) ending at its root. [`Split::new`] checks that, and declines a tree that is not so
