@@ -208,9 +208,9 @@ pub(crate) fn zeros_checked(n: usize, m: usize, control: &Control<'_>, threads: 
 }
 
 /// An n × m matrix whose column c is written by `fill(c, column)` (the column holds zeros when `fill` sees it), 64
-/// columns at a time with a stop check between. With `threads` > 1 the column groups are made on the current rayon
-/// pool: the page faults of the first touch of a large matrix (gigabytes, about a second) are shared out, and each
-/// column is filled while it is still in cache.
+/// columns at a time with a stop check between. With `threads` > 1 (0: the current pool's) the column groups are made
+/// on the current rayon pool: the page faults of the first touch of a large matrix (gigabytes, about a second) are
+/// shared out, and each column is filled while it is still in cache.
 pub(crate) fn columns_checked(
     n: usize,
     m: usize,
@@ -218,54 +218,90 @@ pub(crate) fn columns_checked(
     threads: usize,
     fill: impl Fn(usize, &mut [f64]) + Sync,
 ) -> Result<Mat<f64>, EigenError> {
-    use rayon::prelude::*;
-    const GROUP: usize = 64;
-    // One row and one column more than needed: faer's `set_dims` asks for dimensions strictly below the capacities.
-    let mut out = Mat::<f64>::with_capacity(n + 1, m + 1);
-    let stride = usize::try_from(out.col_stride()).expect("a column stride");
-    // faer documents `with_capacity` as reserving at least n + 1 rows (the column stride) and m + 1 columns.
-    assert!(stride > n, "row capacity for n rows");
-    #[derive(Clone, Copy)]
-    struct Base(*mut f64);
-    // SAFETY: the groups below write disjoint columns of the allocation through this pointer, and nothing else
-    // touches it until they are done.
-    unsafe impl Send for Base {}
-    // SAFETY: as above.
-    unsafe impl Sync for Base {}
-    impl Base {
-        /// The pointer (a method, so that closures capture the `Base`, not its field).
-        fn get(self) -> *mut f64 {
-            self.0
-        }
+    let mut out = Columns::new(n, m);
+    out.append(m, control, threads, fill)?;
+    Ok(out.done())
+}
+
+/// An n-row matrix of at most `capacity` columns, made by appending columns ([`Columns::append`]).
+pub(crate) struct Columns {
+    mat: Mat<f64>,
+    n: usize,
+    capacity: usize,
+    stride: usize,
+}
+
+impl Columns {
+    pub(crate) fn new(n: usize, capacity: usize) -> Self {
+        // One row and one column more than needed: faer's `set_dims` asks for dimensions strictly below the
+        // capacities.
+        let mat = Mat::<f64>::with_capacity(n + 1, capacity + 1);
+        let stride = usize::try_from(mat.col_stride()).expect("a column stride");
+        // faer documents `with_capacity` as reserving at least n + 1 rows (the column stride) and capacity + 1
+        // columns.
+        assert!(stride > n, "row capacity for n rows");
+        Columns { mat, n, capacity, stride }
     }
-    let base = Base(out.as_ptr_mut());
-    let group = |g: usize| -> Result<(), EigenError> {
-        control.check()?;
-        for c in g * GROUP..((g + 1) * GROUP).min(m) {
-            // SAFETY: column c (< m, within the column capacity `with_capacity` reserved) starts at c·stride and
-            // holds n ≤ stride values, inside that allocation; it is zeroed before the slice over it is made, and
-            // each column is written by one group only.
-            let column = unsafe {
-                let p = base.get().add(c * stride);
-                std::ptr::write_bytes(p, 0, n);
-                std::slice::from_raw_parts_mut(p, n)
-            };
-            fill(c, column);
+
+    /// Appends `count` columns, the j-th of them written by `fill(j, column)` (zeros when `fill` sees it), 64 at a
+    /// time with a stop check between, on the current rayon pool when `threads` > 1 (0: the pool's threads).
+    pub(crate) fn append(
+        &mut self,
+        count: usize,
+        control: &Control<'_>,
+        threads: usize,
+        fill: impl Fn(usize, &mut [f64]) + Sync,
+    ) -> Result<(), EigenError> {
+        use rayon::prelude::*;
+        const GROUP: usize = 64;
+        let (n, first) = (self.n, self.mat.ncols());
+        assert!(count <= self.capacity - first, "{count} columns past the capacity");
+        #[derive(Clone, Copy)]
+        struct Base(*mut f64);
+        // SAFETY: the groups below write disjoint columns of the allocation through this pointer, and nothing else
+        // touches it until they are done.
+        unsafe impl Send for Base {}
+        // SAFETY: as above.
+        unsafe impl Sync for Base {}
+        impl Base {
+            /// The pointer (a method, so that closures capture the `Base`, not its field).
+            fn get(self) -> *mut f64 {
+                self.0
+            }
         }
+        let (base, stride) = (Base(self.mat.as_ptr_mut()), self.stride);
+        let group = |g: usize| -> Result<(), EigenError> {
+            control.check()?;
+            for j in g * GROUP..((g + 1) * GROUP).min(count) {
+                // SAFETY: column first + j (< the capacity, asserted above, within the column capacity `new`
+                // reserved) starts at (first + j)·stride and holds n < stride values, inside that allocation, past
+                // the matrix's current columns; it is zeroed before the slice over it is made, and each column is
+                // written by one group only.
+                let column = unsafe {
+                    let p = base.get().add((first + j) * stride);
+                    std::ptr::write_bytes(p, 0, n);
+                    std::slice::from_raw_parts_mut(p, n)
+                };
+                fill(j, column);
+            }
+            Ok(())
+        };
+        let groups = count.div_ceil(GROUP);
+        let threads = if threads == 0 { rayon::current_num_threads() } else { threads };
+        if threads > 1 && groups > 1 {
+            (0..groups).into_par_iter().with_max_len(1).try_for_each(group)?;
+        } else {
+            (0..groups).try_for_each(group)?;
+        }
+        // SAFETY: n and first + count are below the capacities `new` reserved (n + 1 rows, capacity + 1 columns), the
+        // first `first` columns were written before, and the groups above wrote every entry of the new ones.
+        unsafe { self.mat.set_dims(n, first + count) };
         Ok(())
-    };
-    let groups = m.div_ceil(GROUP);
-    // 0: every thread of the current pool.
-    let threads = if threads == 0 { rayon::current_num_threads() } else { threads };
-    if threads > 1 && groups > 1 {
-        (0..groups).into_par_iter().with_max_len(1).try_for_each(group)?;
-    } else {
-        (0..groups).try_for_each(group)?;
     }
-    // SAFETY: n and m are below the capacities `with_capacity(n + 1, m + 1)` reserved, and every entry of the n × m
-    // matrix was written by the groups above, all of which succeeded.
-    unsafe { out.set_dims(n, m) };
-    Ok(out)
+
+    pub(crate) fn done(self) -> Mat<f64> {
+        self.mat
+    }
 }
 
 /// The known zero modes (eigenvalue 0) followed by the pairs of a deflated solve.
