@@ -133,11 +133,24 @@ fn a_raised_flag_stops_the_factorization() {
         });
         Cholesky::factor_ldlt_pieces(&sym, &values, Par::Seq, Some(&stop)).map(|_| ())
     });
+    // The same on two threads (subtrees side by side where the tree splits), the flag raised during the work.
+    let stop2 = AtomicBool::new(false);
+    let r2 = std::thread::scope(|s| {
+        s.spawn(|| {
+            std::thread::sleep(std::time::Duration::from_millis(30));
+            stop2.store(true, Ordering::SeqCst);
+        });
+        Cholesky::factor_ldlt_pieces(&sym, &values, Par::rayon(2), Some(&stop2)).map(|_| ())
+    });
     let whole = std::time::Instant::now();
     let done = Cholesky::factor_whole(&sym, &values, Par::Seq);
     assert!(done.is_ok());
-    // Only meaningful when the whole factorization takes longer than the flag's delay.
-    if whole.elapsed() > std::time::Duration::from_millis(300) {
+    // Only meaningful when the whole factorization takes longer than the flag's delay (on two threads, twice that).
+    let took = whole.elapsed();
+    if took > std::time::Duration::from_millis(300) {
         assert_eq!(r.err(), Some(FactorError::Stopped), "after {:?}", t.elapsed());
+    }
+    if took > std::time::Duration::from_millis(600) {
+        assert_eq!(r2.err(), Some(FactorError::Stopped), "two threads");
     }
 }
