@@ -662,6 +662,44 @@ mod kernels {
     use crate::simd::F64s;
     use std::arch::x86_64::{__m256d, __m512d};
 
+    // Register helpers of the two sweeps, for a row of B = R·LANES values at a pointer. `S` and `R` are the
+    // expanding function's register type and count (macro_rules resolve them where the macro is used).
+    macro_rules! load {
+        ($p:expr) => {{
+            let p: *mut f64 = $p;
+            let mut v = [S::zero(); R];
+            for q in 0..R {
+                v[q] = S::load(p.add(S::LANES * q));
+            }
+            v
+        }};
+    }
+    macro_rules! store {
+        ($p:expr, $v:expr) => {{
+            let (p, v): (*mut f64, [S; R]) = ($p, $v);
+            for q in 0..R {
+                v[q].store(p.add(S::LANES * q));
+            }
+        }};
+    }
+    macro_rules! scale {
+        ($v:expr, $d:expr) => {{
+            let d = S::splat(&(1.0 / $d));
+            for q in 0..R {
+                $v[q] = $v[q].mul(d);
+            }
+        }};
+    }
+    // x ← x − a·g for one broadcast factor entry a.
+    macro_rules! axpy {
+        ($x:expr, $a:expr, $g:expr) => {{
+            let a = S::splat($a);
+            for q in 0..R {
+                $x[q] = a.neg_mul_add($g[q], $x[q]);
+            }
+        }};
+    }
+
     /// [`supernodal_solve`] with AVX2 + FMA registers (B = 4·R right-hand sides).
     ///
     /// # Safety
@@ -791,41 +829,6 @@ mod kernels {
                     xp.add(r * b)
                 }};
             }
-            macro_rules! load {
-                ($p:expr) => {{
-                    let p: *mut f64 = $p;
-                    let mut v = [S::zero(); R];
-                    for q in 0..R {
-                        v[q] = S::load(p.add(S::LANES * q));
-                    }
-                    v
-                }};
-            }
-            macro_rules! store {
-                ($p:expr, $v:expr) => {{
-                    let (p, v): (*mut f64, [S; R]) = ($p, $v);
-                    for q in 0..R {
-                        v[q].store(p.add(S::LANES * q));
-                    }
-                }};
-            }
-            macro_rules! scale {
-                ($v:expr, $d:expr) => {{
-                    let d = S::splat(&(1.0 / $d));
-                    for q in 0..R {
-                        $v[q] = $v[q].mul(d);
-                    }
-                }};
-            }
-            // x ← x − a·g for one broadcast factor entry a.
-            macro_rules! axpy {
-                ($x:expr, $a:expr, $g:expr) => {{
-                    let a = S::splat($a);
-                    for q in 0..R {
-                        $x[q] = a.neg_mul_add($g[q], $x[q]);
-                    }
-                }};
-            }
             macro_rules! top {
                 ($r:expr) => {{
                     let pos = sw.top_pos[$r];
@@ -942,40 +945,6 @@ mod kernels {
                 ($r:expr) => {{
                     let r: usize = $r;
                     xp.add(r * b)
-                }};
-            }
-            macro_rules! load {
-                ($p:expr) => {{
-                    let p: *mut f64 = $p;
-                    let mut v = [S::zero(); R];
-                    for q in 0..R {
-                        v[q] = S::load(p.add(S::LANES * q));
-                    }
-                    v
-                }};
-            }
-            macro_rules! store {
-                ($p:expr, $v:expr) => {{
-                    let (p, v): (*mut f64, [S; R]) = ($p, $v);
-                    for q in 0..R {
-                        v[q].store(p.add(S::LANES * q));
-                    }
-                }};
-            }
-            macro_rules! scale {
-                ($v:expr, $d:expr) => {{
-                    let d = S::splat(&(1.0 / $d));
-                    for q in 0..R {
-                        $v[q] = $v[q].mul(d);
-                    }
-                }};
-            }
-            macro_rules! axpy {
-                ($x:expr, $a:expr, $g:expr) => {{
-                    let a = S::splat($a);
-                    for q in 0..R {
-                        $x[q] = a.neg_mul_add($g[q], $x[q]);
-                    }
                 }};
             }
             for s in (lo..hi).rev() {
