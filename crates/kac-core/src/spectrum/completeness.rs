@@ -121,8 +121,7 @@ pub(crate) fn verify_and_repair(
             }
         };
         control.phase("verifying", k, k)?;
-        let par = if options.threads == 1 { faer::Par::Seq } else { faer::Par::rayon(options.threads) };
-        let (tau, below) = inertia_in_gap(sym, pair, (lo, hi), &control, par)?;
+        let (tau, below) = inertia_in_gap(sym, pair, (lo, hi), &control, options.par())?;
         control.check()?;
         let c = Completeness {
             method: "inertia",

@@ -420,7 +420,7 @@ fn pieces(symbolic: &Symbolic, par: Par, stop: Option<&AtomicBool>) -> bool {
     }
     match (par, symbolic.inner.raw()) {
         (Par::Rayon(t), SymbolicCholeskyRaw::Supernodal(sn)) if t.get() > 1 && len > PARALLEL_FROM => {
-            SolvePlan::new(sn, t.get()).is_some()
+            Split::new(sn, t.get(), &solve_weights(sn)).is_some()
         }
         _ => false,
     }
@@ -463,18 +463,22 @@ struct SolvePlan {
     top_cols: Vec<usize>,
 }
 
+/// Each supernode's weight in a block solve: each sweep streams its lower triangle and its rows below once.
+fn solve_weights(sn: &SymbolicSupernodalCholesky<usize>) -> Vec<f64> {
+    let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
+    (0..sn.n_supernodes())
+        .map(|s| {
+            let (c, r) = (end[s] - begin[s], sn.supernode(s).pattern().len());
+            (c * (c + 1) / 2 + c * r) as f64
+        })
+        .collect()
+}
+
 impl SolvePlan {
     /// `None` where the tree does not split usefully for `threads` (see [`Split::new`]).
     fn new(sn: &SymbolicSupernodalCholesky<usize>, threads: usize) -> Option<Self> {
-        // A solve streams each supernode's lower triangle and its rows below once per sweep.
         let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
-        let weight: Vec<f64> = (0..sn.n_supernodes())
-            .map(|s| {
-                let (c, r) = (end[s] - begin[s], sn.supernode(s).pattern().len());
-                (c * (c + 1) / 2 + c * r) as f64
-            })
-            .collect();
-        let split = Split::new(sn, threads, &weight)?;
+        let split = Split::new(sn, threads, &solve_weights(sn))?;
         // What keeps the threads on their own rows (the kernels' redirection splits each pattern at the subtree's
         // limit): every supernode's pattern is strictly ascending and lies past its own columns, so a subtree's
         // rows below the limit are its own and those at or above it are its ancestors' (the top's). Checked once per

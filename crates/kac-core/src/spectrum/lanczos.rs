@@ -507,7 +507,7 @@ pub fn eigs_block_lanczos(
     let t_start = Instant::now();
     let n = pair.n();
     let k = o.k;
-    let par = if o.threads == 1 { Par::Seq } else { Par::rayon(o.threads) };
+    let par = o.par();
     let Some((b, want, msize)) = plan(n, run.deflation.len(), o) else { return Ok(None) };
     // Factor L − σM (symbolic analysis reused when given).
     let t0 = Instant::now();

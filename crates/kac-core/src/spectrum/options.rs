@@ -66,6 +66,14 @@ pub const MAX_SLICES: usize = 64;
 pub const MAX_ABS_SIGMA: f64 = 1e15;
 
 impl EigenOptions {
+    /// faer's parallelism for `threads`: one thread is sequential, 0 is the current rayon pool's threads.
+    pub fn par(&self) -> faer::Par {
+        if self.threads == 1 {
+            faer::Par::Seq
+        } else {
+            faer::Par::rayon(self.threads)
+        }
+    }
     /// Checks the settings no solve could honour, before anything is computed: a tolerance outside
     /// [`MIN_TOL`, `MAX_TOL`], a shift that is not finite, zero or beyond ±[`MAX_ABS_SIGMA`], a block outside
     /// 1..=[`MAX_BLOCK`], a subspace that cannot hold the pairs asked for, or no steps. Each error names the setting.
