@@ -58,14 +58,12 @@ fn row_ranges(n: usize, threads: usize) -> Vec<(usize, usize)> {
 /// [`gram`] on `threads` threads: each takes a range of rows, and the partial products are summed (V is streamed
 /// once in all, each core reading its share).
 pub fn gram_par(v: MatRef<'_, f64>, y: &[f64], b: usize, threads: usize) -> Mat<f64> {
-    use rayon::prelude::*;
     let (n, m) = (v.nrows(), v.ncols());
     if threads <= 1 || n < PARALLEL_ROWS {
         return gram(v, y, b);
     }
     assert_eq!(y.len(), block_len(n, b), "Y must be n × b row-major");
-    let parts: Vec<Mat<f64>> =
-        row_ranges(n, threads).into_par_iter().map(|(a, e)| gram(v.subrows(a, e - a), &y[a * b..e * b], b)).collect();
+    let parts = by_rows(n, threads, |a, e| gram(v.subrows(a, e - a), &y[a * b..e * b], b));
     let mut out = Mat::<f64>::zeros(m, b);
     for p in &parts {
         out += p;
@@ -92,6 +90,74 @@ pub fn update_par(w: &mut [f64], b: usize, v: MatRef<'_, f64>, c: MatRef<'_, f64
     pieces.into_par_iter().for_each(|(a, piece)| {
         let rows = piece.len() / b;
         update(piece, b, v.subrows(a, rows), c, alpha);
+    });
+}
+
+/// Xᵀ Y (b × b) for two row-major n × b blocks, on `threads` threads by ranges of rows (faer's product on each,
+/// summed): the small Gram products of a block step (the normalization's Gram matrix, the recurrence's diagonal
+/// block), which faer's product kept on one thread at these shapes.
+pub fn block_gram_par(x: &[f64], y: &[f64], b: usize, threads: usize) -> Mat<f64> {
+    let n = x.len() / b.max(1);
+    assert_eq!((x.len(), y.len()), (block_len(n, b), block_len(n, b)), "X and Y must be n × b row-major");
+    let parts = by_rows(n, threads, |a, e| {
+        let mut g = Mat::<f64>::zeros(b, b);
+        let xs = MatRef::from_row_major_slice(&x[a * b..e * b], e - a, b);
+        let ys = MatRef::from_row_major_slice(&y[a * b..e * b], e - a, b);
+        matmul(g.as_mut(), Accum::Replace, xs.transpose(), ys, 1.0, Par::Seq);
+        g
+    });
+    let mut out = Mat::<f64>::zeros(b, b);
+    for g in &parts {
+        out += g;
+    }
+    out
+}
+
+/// `part(a, e)` for about equal ranges of `n` rows, one per thread (one range below [`PARALLEL_ROWS`] rows or on
+/// one thread), in the ranges' order.
+fn by_rows<T: Send>(n: usize, threads: usize, part: impl Fn(usize, usize) -> T + Sync) -> Vec<T> {
+    use rayon::prelude::*;
+    if threads <= 1 || n < PARALLEL_ROWS {
+        return vec![part(0, n)];
+    }
+    row_ranges(n, threads).into_par_iter().map(|(a, e)| part(a, e)).collect()
+}
+
+/// The column-wise inner products ⟨x_c, y_c⟩ of two row-major n × b blocks (the diagonal of [`block_gram_par`]), on
+/// `threads` threads by ranges of rows.
+pub fn col_dots_par(x: &[f64], y: &[f64], b: usize, threads: usize) -> Vec<f64> {
+    let n = x.len() / b.max(1);
+    assert_eq!((x.len(), y.len()), (block_len(n, b), block_len(n, b)), "X and Y must be n × b row-major");
+    let parts = by_rows(n, threads, |a, e| {
+        let mut acc = vec![0.0; b];
+        for (xr, yr) in x[a * b..e * b].chunks_exact(b).zip(y[a * b..e * b].chunks_exact(b)) {
+            for ((s, xv), yv) in acc.iter_mut().zip(xr).zip(yr) {
+                *s += xv * yv;
+            }
+        }
+        acc
+    });
+    (0..b).map(|c| parts.iter().map(|p| p[c]).sum()).collect()
+}
+
+/// OUT = X T for a row-major n × b block X and a small b × p matrix T, into any n × p view (a run of the basis's
+/// columns, or a row-major block), on `threads` threads by ranges of rows (faer's product on each).
+pub fn block_times_par(x: &[f64], b: usize, t: MatRef<'_, f64>, out: faer::MatMut<'_, f64>, threads: usize) {
+    use rayon::prelude::*;
+    let (n, p) = (out.nrows(), out.ncols());
+    assert_eq!(x.len(), block_len(n, b), "X must be n × b row-major");
+    assert_eq!((t.nrows(), t.ncols()), (b, p), "T must be b × p");
+    let ranges = if threads <= 1 || n < PARALLEL_ROWS { vec![(0, n)] } else { row_ranges(n, threads) };
+    let mut pieces = Vec::with_capacity(ranges.len());
+    let mut rest = out;
+    for &(a, e) in &ranges {
+        let (head, tail) = rest.split_at_row_mut(e - a);
+        pieces.push((a, e, head));
+        rest = tail;
+    }
+    pieces.into_par_iter().for_each(|(a, e, piece)| {
+        let xs = MatRef::from_row_major_slice(&x[a * b..e * b], e - a, b);
+        matmul(piece, Accum::Replace, xs, t, 1.0, Par::Seq);
     });
 }
 
@@ -380,6 +446,49 @@ mod tests {
                             let want = y[i * b + t] - 0.5 * (0..m).map(|j| v[(i, j)] * c[(j, t)]).sum::<f64>();
                             let ok = (w[i * b + t] - want).abs() <= 1e-11 * (1.0 + want.abs());
                             assert!(ok, "update {isa:?} b={b} n={n} m={m}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The block step's small products (Gram matrix, column dots, X T) against plain loops, on one thread and on
+    /// several (row counts on both sides of the split's threshold), X T written into a run of columns of a wider
+    /// column-major matrix and into a row-major block.
+    #[test]
+    fn block_products_match_the_definition_on_any_threads() {
+        for &n in &[7usize, PARALLEL_ROWS + 123, 3 * PARALLEL_ROWS] {
+            for &b in &[3usize, 8] {
+                let x: Vec<f64> = (0..n * b).map(|p| ((p * 13) % 17) as f64 / 5.0 - 1.5).collect();
+                let y: Vec<f64> = (0..n * b).map(|p| ((p * 7) % 23) as f64 / 9.0 - 1.0).collect();
+                let t = Mat::<f64>::from_fn(b, b - 1, |c, j| (c * 3 + j) as f64 / 4.0 - 1.0);
+                for threads in [1usize, 2, 3] {
+                    let g = block_gram_par(&x, &y, b, threads);
+                    let d = col_dots_par(&x, &y, b, threads);
+                    for i in 0..b {
+                        for j in 0..b {
+                            let want: f64 = (0..n).map(|r| x[r * b + i] * y[r * b + j]).sum();
+                            assert!((g[(i, j)] - want).abs() <= 1e-10 * (1.0 + want.abs()), "gram n={n} b={b}");
+                            if i == j {
+                                assert!((d[i] - want).abs() <= 1e-10 * (1.0 + want.abs()), "dots n={n} b={b}");
+                            }
+                        }
+                    }
+                    let mut wide = Mat::<f64>::zeros(n, b + 2);
+                    block_times_par(&x, b, t.as_ref(), wide.as_mut().subcols_mut(1, b - 1), threads);
+                    let mut rows = vec![0.0; n * b];
+                    let row_major = faer::MatMut::from_row_major_slice_mut(&mut rows, n, b);
+                    block_times_par(&x, b, t.as_ref(), row_major.subcols_mut(0, b - 1), threads);
+                    for r in 0..n {
+                        assert_eq!(
+                            (wide[(r, 0)], wide[(r, b)], wide[(r, b + 1)], rows[r * b + b - 1]),
+                            (0.0, 0.0, 0.0, 0.0)
+                        );
+                        for j in 0..b - 1 {
+                            let want: f64 = (0..b).map(|c| x[r * b + c] * t[(c, j)]).sum();
+                            assert!((wide[(r, 1 + j)] - want).abs() <= 1e-12 * (1.0 + want.abs()), "X T n={n} b={b}");
+                            assert!((rows[r * b + j] - want).abs() <= 1e-12 * (1.0 + want.abs()), "X T n={n} b={b}");
                         }
                     }
                 }

@@ -85,17 +85,6 @@ fn lap(t: &mut Instant) -> f64 {
     d
 }
 
-/// Column-wise inner products ⟨x_c, y_c⟩ of two row-major n × b blocks.
-fn col_dots(x: &[f64], y: &[f64], b: usize) -> Vec<f64> {
-    let mut acc = vec![0.0; b];
-    for (xr, yr) in x.chunks_exact(b).zip(y.chunks_exact(b)) {
-        for ((a, xv), yv) in acc.iter_mut().zip(xr).zip(yr) {
-            *a += xv * yv;
-        }
-    }
-    acc
-}
-
 /// V[:, a0..a0 + p] = V[:, a0..a0 + ma] S for S (ma × p, p ≤ ma): Ritz vectors formed in place, by chunks of rows
 /// (each chunk's product is taken before the chunk is overwritten), so no n × p copy is allocated.
 fn ritz_in_place(
@@ -136,7 +125,6 @@ struct Ctx<'a> {
     scratch: Vec<f64>,
     /// Threads for the basis products (1: this thread only).
     threads: usize,
-    par: Par,
 }
 
 impl Ctx<'_> {
@@ -164,7 +152,7 @@ impl Ctx<'_> {
             return;
         }
         for pass in 0..3 {
-            let before = col_dots(w, mw, b);
+            let before = basis_products::col_dots_par(w, mw, b, self.threads);
             let c = basis_products::gram_par(v, mw, b, self.threads);
             basis_products::update_par(w, b, v, c.as_ref(), -1.0, self.threads);
             for col in 0..b {
@@ -193,15 +181,14 @@ impl Ctx<'_> {
         &mut self,
         mut v: MatMut<'_, f64>,
         lead: usize,
-        w: MatRef<'_, f64>,
-        mw: MatRef<'_, f64>,
+        w: &RowBlock,
+        mw: &RowBlock,
         mut mq: MatMut<'_, f64>,
         rng: &mut Rng,
         scale: &[f64],
     ) -> Mat<f64> {
-        let (n, b) = (w.nrows(), w.ncols());
-        let mut g = Mat::<f64>::zeros(b, b);
-        matmul(g.as_mut(), Accum::Replace, w.transpose(), mw, 1.0, self.par);
+        let (n, b) = (w.n, w.b);
+        let g = basis_products::block_gram_par(&w.data, &mw.data, b, self.threads);
         let g = Mat::from_fn(b, b, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
         let evd = g.self_adjoint_eigen(Side::Lower).expect("symmetric eigen of a small Gram matrix");
         let (s, u) = (evd.S(), evd.U());
@@ -218,18 +205,30 @@ impl Ctx<'_> {
                 bmat[(j, c)] = r * u[(c, idx)];
             }
         }
-        matmul(v.rb_mut().subcols_mut(lead, kept), Accum::Replace, w, transform.as_ref(), 1.0, self.par);
-        matmul(mq.rb_mut().subcols_mut(0, kept), Accum::Replace, mw, transform.as_ref(), 1.0, self.par);
+        basis_products::block_times_par(
+            &w.data,
+            b,
+            transform.as_ref(),
+            v.rb_mut().subcols_mut(lead, kept),
+            self.threads,
+        );
+        basis_products::block_times_par(
+            &mw.data,
+            b,
+            transform.as_ref(),
+            mq.rb_mut().subcols_mut(0, kept),
+            self.threads,
+        );
         // Refill vanished directions with random vectors.
         for j in kept..b {
             let mut x: Vec<f64> = (0..n).map(|_| rng.next()).collect();
             let mut mx = vec![0.0; n];
             for _attempt in 0..3 {
                 self.apply_m(MatRef::from_row_major_slice(&x, n, 1), MatMut::from_row_major_slice_mut(&mut mx, n, 1));
-                self.deflation.project(&mut x, &mut mx, 1);
+                self.deflation.project(&mut x, &mut mx, 1, self.threads);
                 let mut sink = Mat::<f64>::zeros(lead + j, 1);
                 self.project_out(v.rb().subcols(0, lead + j), &mut x, &mut mx, sink.as_mut());
-                let nrm = col_dots(&x, &mx, 1)[0].sqrt();
+                let nrm = basis_products::col_dots_par(&x, &mx, 1, self.threads)[0].sqrt();
                 if nrm > 1e-8 {
                     for i in 0..n {
                         v[(i, lead + j)] = x[i] / nrm;
@@ -548,7 +547,6 @@ pub fn eigs_block_lanczos(
         mean_mass,
         scratch: Vec::new(),
         threads: if o.threads == 0 { rayon::current_num_threads() } else { o.threads },
-        par,
     };
     let mut rng = Rng(o.seed);
 
@@ -565,8 +563,8 @@ pub fn eigs_block_lanczos(
         let mut q0 = RowBlock::zeros(n, b);
         q0.data.iter_mut().for_each(|x| *x = rng.next());
         ctx.apply_m(q0.as_ref(), mw.as_mut());
-        run.deflation.project(&mut q0.data, &mut mw.data, b);
-        ctx.normalize(v.as_mut(), 0, q0.as_ref(), mw.as_ref(), mq.as_mut(), &mut rng, &[1.0]);
+        run.deflation.project(&mut q0.data, &mut mw.data, b, ctx.threads);
+        ctx.normalize(v.as_mut(), 0, &q0, &mw, mq.as_mut(), &mut rng, &[1.0]);
     }
     let mut m = 0usize; // expanded columns
     let mut locked = 0usize;
@@ -590,7 +588,10 @@ pub fn eigs_block_lanczos(
             solves += b;
             steps += 1;
             // Scale for the rank test: Euclidean norms² times the mean mass (no extra M-product).
-            let gram: Vec<f64> = col_dots(&w.data, &w.data, b).iter().map(|g| g * ctx.mean_mass).collect();
+            let gram: Vec<f64> = basis_products::col_dots_par(&w.data, &w.data, b, ctx.threads)
+                .iter()
+                .map(|g| g * ctx.mean_mass)
+                .collect();
             let mut coef = Mat::<f64>::zeros(m + b, b);
             {
                 let (basis, _) = v.as_ref().split_at_col(m + b);
@@ -600,14 +601,13 @@ pub fn eigs_block_lanczos(
                     basis_products::update_par(&mut w.data, b, basis.subcols(e_lo, m - e_lo), et, -1.0, ctx.threads);
                     coef.as_mut().subrows_mut(e_lo, m - e_lo).copy_from(et);
                 }
-                let mut a = Mat::<f64>::zeros(b, b);
-                matmul(a.as_mut(), Accum::Replace, mq.as_ref().transpose(), w.as_ref(), 1.0, par);
+                let a = basis_products::block_gram_par(&mq.data, &w.data, b, ctx.threads);
                 basis_products::update_par(&mut w.data, b, basis.subcols(m, b), a.as_ref(), -1.0, ctx.threads);
                 coef.as_mut().subrows_mut(m, b).copy_from(a.as_ref());
                 // Full reorthogonalization against the whole basis (locked vectors included), after the deflated
                 // directions (T keeps their complement, so this removes rounding only).
                 ctx.apply_m(w.as_ref(), mw.as_mut());
-                run.deflation.project(&mut w.data, &mut mw.data, b);
+                run.deflation.project(&mut w.data, &mut mw.data, b, ctx.threads);
                 ctx.project_out(basis, &mut w.data, &mut mw.data, coef.as_mut());
             }
             for r in locked..m + b {
@@ -622,7 +622,7 @@ pub fn eigs_block_lanczos(
                     h[(m + c, r)] = 0.0;
                 }
             }
-            let bm = ctx.normalize(v.as_mut(), m + b, w.as_ref(), mw.as_ref(), mq.as_mut(), &mut rng, &gram);
+            let bm = ctx.normalize(v.as_mut(), m + b, &w, &mw, mq.as_mut(), &mut rng, &gram);
             m += b;
             e = Mat::<f64>::zeros(b, m);
             e.as_mut().subcols_mut(m - b, b).copy_from(bm.as_ref());

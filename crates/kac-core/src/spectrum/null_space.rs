@@ -200,27 +200,58 @@ impl Deflation<'_> {
         self.len() == 0
     }
     /// W ← W − Z Zᵀ M W for a row-major n × b block W with M W in `mw` (updated alike: M W − (M Z) Zᵀ M W).
-    pub fn project(&self, w: &mut [f64], mw: &mut [f64], b: usize) {
+    pub fn project(&self, w: &mut [f64], mw: &mut [f64], b: usize, threads: usize) {
+        use rayon::prelude::*;
         assert_eq!(w.len(), mw.len(), "W and M W have the same shape");
         if b == 0 {
             return;
         }
         let n = w.len() / b;
-        let mut coef = vec![0.0; b];
+        // Rows per piece on several threads: each piece sums the coefficients over its share of the vector's entries,
+        // then updates its own range of rows (a piece reads every entry and keeps those in its range).
+        const PIECE: usize = 1 << 15;
+        let pieces = if threads > 1 { threads.min(n / PIECE).max(1) } else { 1 };
         for z in self.sparse {
-            coef.iter_mut().for_each(|c| *c = 0.0);
-            for (&i, &v) in z.rows.iter().zip(&z.values) {
-                let row = &mw[i as usize * b..i as usize * b + b];
-                for (c, x) in coef.iter_mut().zip(row) {
-                    *c += v * x;
+            let len = z.rows.len();
+            let sum = |(a, e): (usize, usize)| {
+                let mut coef = vec![0.0; b];
+                for (&i, &v) in z.rows[a..e].iter().zip(&z.values[a..e]) {
+                    let row = &mw[i as usize * b..i as usize * b + b];
+                    for (c, x) in coef.iter_mut().zip(row) {
+                        *c += v * x;
+                    }
                 }
-            }
-            for ((&i, &v), &mv) in z.rows.iter().zip(&z.values).zip(&z.m_values) {
-                let i = i as usize * b;
-                for c in 0..b {
-                    w[i + c] -= coef[c] * v;
-                    mw[i + c] -= coef[c] * mv;
+                coef
+            };
+            let ranges: Vec<(usize, usize)> = (0..pieces).map(|p| (p * len / pieces, (p + 1) * len / pieces)).collect();
+            let parts: Vec<Vec<f64>> = if pieces > 1 {
+                ranges.into_par_iter().map(sum).collect()
+            } else {
+                ranges.into_iter().map(sum).collect()
+            };
+            let coef: Vec<f64> = (0..b).map(|c| parts.iter().map(|p| p[c]).sum()).collect();
+            let update = |(r0, w, mw): (usize, &mut [f64], &mut [f64])| {
+                let r1 = r0 + w.len() / b;
+                for ((&i, &v), &mv) in z.rows.iter().zip(&z.values).zip(&z.m_values) {
+                    let i = i as usize;
+                    if i < r0 || i >= r1 {
+                        continue;
+                    }
+                    let at = (i - r0) * b;
+                    for c in 0..b {
+                        w[at + c] -= coef[c] * v;
+                        mw[at + c] -= coef[c] * mv;
+                    }
                 }
+            };
+            if pieces > 1 {
+                let rows = n.div_ceil(pieces);
+                w.par_chunks_mut(rows * b)
+                    .zip(mw.par_chunks_mut(rows * b))
+                    .enumerate()
+                    .for_each(|(p, (w, mw))| update((p * rows, w, mw)));
+            } else {
+                update((0, w, mw));
             }
         }
         if let Some((y, my)) = self.dense {
@@ -228,6 +259,49 @@ impl Deflation<'_> {
             let c = super::basis_products::gram(y, mw, b);
             super::basis_products::update(w, b, y, c.as_ref(), -1.0);
             super::basis_products::update(mw, b, my, c.as_ref(), -1.0);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The projection removes each sparse vector's component, w − z (zᵀ M w) and M w − M z (zᵀ M w), the same on one
+    /// thread as on several: two vectors on disjoint supports, one with its rows out of order, on enough rows for the
+    /// pieces to split.
+    #[test]
+    fn projection_is_the_same_on_any_threads() {
+        let (n, b) = (3 * (1 << 15) + 17, 3);
+        let even: Vec<u32> = (0..n as u32).filter(|i| i % 2 == 0).collect();
+        let odd: Vec<u32> = (0..n as u32).filter(|i| i % 2 == 1).rev().collect();
+        let vector = |rows: Vec<u32>, s: f64| SparseVector {
+            values: rows.iter().map(|&i| s * (1.0 + (i % 5) as f64)).collect(),
+            m_values: rows.iter().map(|&i| s * (2.0 - (i % 3) as f64)).collect(),
+            rows,
+        };
+        let zs = vec![vector(even, 0.01), vector(odd, -0.02)];
+        let w0: Vec<f64> = (0..n * b).map(|p| ((p * 13) % 17) as f64 / 5.0 - 1.5).collect();
+        let mw0: Vec<f64> = (0..n * b).map(|p| ((p * 7) % 23) as f64 / 9.0 - 1.0).collect();
+        // The definition, one vector after the other (each coefficient from M W after the earlier vectors).
+        let (mut want_w, mut want_mw) = (w0.clone(), mw0.clone());
+        for z in &zs {
+            let (zd, mzd) = (z.to_dense(n), SparseVector { values: z.m_values.clone(), ..z.clone() }.to_dense(n));
+            for c in 0..b {
+                let coef: f64 = (0..n).map(|i| zd[i] * want_mw[i * b + c]).sum();
+                for i in 0..n {
+                    want_w[i * b + c] -= coef * zd[i];
+                    want_mw[i * b + c] -= coef * mzd[i];
+                }
+            }
+        }
+        for threads in [1usize, 2, 3] {
+            let (mut w, mut mw) = (w0.clone(), mw0.clone());
+            Deflation { sparse: &zs, dense: None }.project(&mut w, &mut mw, b, threads);
+            for p in 0..n * b {
+                assert!((w[p] - want_w[p]).abs() <= 1e-9 * (1.0 + want_w[p].abs()), "W at {p}, {threads} threads");
+                assert!((mw[p] - want_mw[p]).abs() <= 1e-9 * (1.0 + want_mw[p].abs()), "M W at {p}, {threads} threads");
+            }
         }
     }
 }
