@@ -454,12 +454,13 @@ mod tests {
     }
 
     /// The block step's small products (Gram matrix, column dots, X T) against plain loops, on one thread and on
-    /// several (row counts on both sides of the split's threshold), X T written into a run of columns of a wider
-    /// column-major matrix and into a row-major block.
+    /// several (no rows, and row counts on both sides of the split's threshold; widths 1, 3 and 8, T with one column
+    /// fewer, so none at width 1), X T written into a run of columns of a wider column-major matrix and into a
+    /// row-major block, the columns beside them left as they were.
     #[test]
     fn block_products_match_the_definition_on_any_threads() {
-        for &n in &[7usize, PARALLEL_ROWS + 123, 3 * PARALLEL_ROWS] {
-            for &b in &[3usize, 8] {
+        for &n in &[0usize, 7, PARALLEL_ROWS + 123, 3 * PARALLEL_ROWS] {
+            for &b in &[1usize, 3, 8] {
                 let x: Vec<f64> = (0..n * b).map(|p| ((p * 13) % 17) as f64 / 5.0 - 1.5).collect();
                 let y: Vec<f64> = (0..n * b).map(|p| ((p * 7) % 23) as f64 / 9.0 - 1.0).collect();
                 let t = Mat::<f64>::from_fn(b, b - 1, |c, j| (c * 3 + j) as f64 / 4.0 - 1.0);

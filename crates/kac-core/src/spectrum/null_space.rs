@@ -14,6 +14,10 @@
 use crate::operators::sparse::{Kernel, SparsePair};
 use faer::{Mat, MatRef};
 
+/// Entries of a sparse deflation vector per thread below which [`Deflation::project`] stays on one thread (a piece
+/// then streams at least 32,768 rows of W and M W, about 2 MB at b = 8, against a rayon task's few microseconds).
+const PROJECT_PIECE: usize = 1 << 15;
+
 /// A vector with few non-zeros: `values` at rows `rows`, and M times it on the same rows (a zero mode's support
 /// is closed under M's pattern).
 #[derive(Debug, Clone)]
@@ -206,13 +210,13 @@ impl Deflation<'_> {
         if b == 0 {
             return;
         }
+        assert_eq!(w.len() % b, 0, "W is n × b");
         let n = w.len() / b;
-        // Rows per piece on several threads: each piece sums the coefficients over its share of the vector's entries,
-        // then updates its own range of rows (a piece reads every entry and keeps those in its range).
-        const PIECE: usize = 1 << 15;
-        let pieces = if threads > 1 { threads.min(n / PIECE).max(1) } else { 1 };
         for z in self.sparse {
             let len = z.rows.len();
+            // On several threads each piece sums the coefficients over its share of the vector's entries, then updates
+            // its own range of rows (reading every entry and keeping those in its range).
+            let pieces = if threads > 1 { threads.min(len / PROJECT_PIECE).max(1) } else { 1 };
             let sum = |(a, e): (usize, usize)| {
                 let mut coef = vec![0.0; b];
                 for (&i, &v) in z.rows[a..e].iter().zip(&z.values[a..e]) {
@@ -256,9 +260,9 @@ impl Deflation<'_> {
         }
         if let Some((y, my)) = self.dense {
             assert_eq!(y.nrows(), n, "deflation vectors have one row per unknown");
-            let c = super::basis_products::gram(y, mw, b);
-            super::basis_products::update(w, b, y, c.as_ref(), -1.0);
-            super::basis_products::update(mw, b, my, c.as_ref(), -1.0);
+            let c = super::basis_products::gram_par(y, mw, b, threads);
+            super::basis_products::update_par(w, b, y, c.as_ref(), -1.0, threads);
+            super::basis_products::update_par(mw, b, my, c.as_ref(), -1.0, threads);
         }
     }
 }
@@ -267,9 +271,10 @@ impl Deflation<'_> {
 mod tests {
     use super::*;
 
-    /// The projection removes each sparse vector's component, w − z (zᵀ M w) and M w − M z (zᵀ M w), the same on one
-    /// thread as on several: two vectors on disjoint supports, one with its rows out of order, on enough rows for the
-    /// pieces to split.
+    /// The projection removes each sparse vector's component, w − z (zᵀ M w) and M w − M z (zᵀ M w), then the dense
+    /// vectors' (w − Y Yᵀ M w, M w − (M Y) Yᵀ M w), the same on one thread as on several: two vectors on disjoint
+    /// supports (one with its rows out of order) on enough rows for the pieces to split, one on a few rows (one
+    /// piece), and two dense vectors.
     #[test]
     fn projection_is_the_same_on_any_threads() {
         let (n, b) = (3 * (1 << 15) + 17, 3);
@@ -280,7 +285,9 @@ mod tests {
             m_values: rows.iter().map(|&i| s * (2.0 - (i % 3) as f64)).collect(),
             rows,
         };
-        let zs = vec![vector(even, 0.01), vector(odd, -0.02)];
+        let zs = vec![vector(even, 0.01), vector(odd, -0.02), vector((100..140).collect(), 0.3)];
+        let y = Mat::<f64>::from_fn(n, 2, |i, j| ((i * (j + 3)) % 11) as f64 / 1e3);
+        let my = Mat::<f64>::from_fn(n, 2, |i, j| ((i * (j + 5)) % 13) as f64 / 1e3);
         let w0: Vec<f64> = (0..n * b).map(|p| ((p * 13) % 17) as f64 / 5.0 - 1.5).collect();
         let mw0: Vec<f64> = (0..n * b).map(|p| ((p * 7) % 23) as f64 / 9.0 - 1.0).collect();
         // The definition, one vector after the other (each coefficient from M W after the earlier vectors).
@@ -295,9 +302,16 @@ mod tests {
                 }
             }
         }
+        for c in 0..b {
+            let coef: Vec<f64> = (0..2).map(|j| (0..n).map(|i| y[(i, j)] * want_mw[i * b + c]).sum()).collect();
+            for i in 0..n {
+                want_w[i * b + c] -= y[(i, 0)] * coef[0] + y[(i, 1)] * coef[1];
+                want_mw[i * b + c] -= my[(i, 0)] * coef[0] + my[(i, 1)] * coef[1];
+            }
+        }
         for threads in [1usize, 2, 3] {
             let (mut w, mut mw) = (w0.clone(), mw0.clone());
-            Deflation { sparse: &zs, dense: None }.project(&mut w, &mut mw, b, threads);
+            Deflation { sparse: &zs, dense: Some((y.as_ref(), my.as_ref())) }.project(&mut w, &mut mw, b, threads);
             for p in 0..n * b {
                 assert!((w[p] - want_w[p]).abs() <= 1e-9 * (1.0 + want_w[p].abs()), "W at {p}, {threads} threads");
                 assert!((mw[p] - want_mw[p]).abs() <= 1e-9 * (1.0 + want_mw[p].abs()), "M W at {p}, {threads} threads");

@@ -10,8 +10,8 @@
 //!   pairs lie in it as the inertia counts: that proves the window complete. The lowest window is the standard
 //!   interior-shift run (σ at 0.7 of its top, every eigenvalue below σ returned); the top one returns the pairs up to
 //!   the k-th eigenvalue counted from the bottom (its own inertia at σ says how many lie below σ) and guard pairs
-//!   above it, for the completeness check of the whole; its subspace has [`TOP_EXTRA`] more columns, for a cluster
-//!   across the k-th eigenvalue.
+//!   above it, for the completeness check of the whole; its subspace has up to [`TOP_EXTRA`] more columns, for a
+//!   cluster across the k-th eigenvalue.
 //! - **The edges.** Eigenvectors of different slices are M-orthogonal as far as their residuals allow; at every edge,
 //!   where a cluster may be split between two slices, the pairs within a tenth of the narrower window go through one
 //!   Rayleigh–Ritz step together (M-orthonormalized, a direction held twice dropped by rank).
@@ -64,7 +64,7 @@ pub struct SliceReport {
     pub seconds: f64,
 }
 
-/// Columns added to the top slice's default subspace. Measured on the 164k-vertex sphere, k = 1000, 8 slices, two
+/// Columns added at most to the top slice's default subspace (as many as its pairs below that). Measured on the 164k-vertex sphere, k = 1000, 8 slices, two
 /// threads: the top slice (104 pairs, the 63-fold cluster at λ ≈ 992 across the 1000th eigenvalue) took 99 block
 /// steps and 13 restarts in the default 216 columns, 63 steps and 2 restarts with 100 more, 61–62 with 200 or 300;
 /// the whole solve 32.6–34.9 s against 29.9–31.5 s, its peak memory unchanged (2.9 GB: the top slice runs first,
@@ -230,10 +230,11 @@ pub(crate) fn solve(
         let slice_control = Control { progress: Some(&report), stop: control.stop };
         let run = lanczos::Run { deflation, deflated_values, interior_shift: true, window: Some(window) };
         // The top slice ends at the k-th eigenvalue, not at an edge placed in a gap, and must see whole the cluster
-        // that may straddle it: its subspace gets [`TOP_EXTRA`] more columns than the default for its pairs.
+        // that may straddle it: its subspace gets as many more columns as its pairs, at most [`TOP_EXTRA`].
         let sub = window.total.and_then(|_| {
-            let (_, _, msize) = lanczos::plan(pair.n(), deflation.len(), &EigenOptions { k: pairs, ..o.clone() })?;
-            Some((msize + TOP_EXTRA).min(pair.n()))
+            let own = EigenOptions { k: pairs, subspace: None, ..o.clone() };
+            let (_, _, msize) = lanczos::plan(pair.n(), deflation.len(), &own)?;
+            Some((msize + TOP_EXTRA.min(pairs)).min(pair.n()))
         });
         let os = EigenOptions { k: pairs, threads: inner, subspace: sub, ..o.clone() };
         (lanczos::eigs_block_lanczos(pair, &os, Some(sym), slice_control, &run), t.elapsed().as_secs_f64())
