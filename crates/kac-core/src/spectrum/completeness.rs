@@ -158,6 +158,7 @@ pub(crate) fn verify_and_repair(
             deflated_values: &deflated_values,
             interior_shift: false,
             window: None,
+            head: None,
         };
         let o = EigenOptions {
             k: missing,

@@ -109,16 +109,24 @@ pub fn eigs(
         }
         let deflation = Deflation { sparse: &zeros.vectors, dense: None };
         let zero_values = vec![0.0; z];
-        let run =
-            lanczos::Run { deflation: &deflation, deflated_values: &zero_values, interior_shift: true, window: None };
+        // The zero modes come first in the result, written there as the eigenvectors are allocated.
+        let head = (z > 0).then(|| zero_mode_spectrum(pair, &zeros, z));
+        let run = lanczos::Run {
+            deflation: &deflation,
+            deflated_values: &zero_values,
+            interior_shift: true,
+            window: None,
+            head: head.as_ref(),
+        };
         let o = EigenOptions { k: k - z, ..options.clone() };
-        let sliced = slicing::solve(pair, &o, sym, control, &deflation, &zero_values)?;
+        let sliced = slicing::solve(pair, &o, sym, control, &deflation, &zero_values, head.as_ref())?;
         let single = match sliced {
             Some(s) => Some(s),
             None => lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?,
         };
+        drop(head);
         let mut s = match single {
-            Some(s) => prepend_zero_modes(pair, &zeros, s, &control, o.threads)?,
+            Some(s) => s,
             None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, control)?,
         };
         control.check()?;
@@ -302,35 +310,6 @@ impl Columns {
     pub(crate) fn done(self) -> Mat<f64> {
         self.mat
     }
-}
-
-/// The known zero modes (eigenvalue 0) followed by the pairs of a deflated solve.
-pub(crate) fn prepend_zero_modes(
-    pair: &SparsePair,
-    zeros: &ZeroModes,
-    s: Spectrum,
-    control: &Control<'_>,
-    threads: usize,
-) -> Result<Spectrum, EigenError> {
-    let z = zeros.len();
-    if z == 0 {
-        return Ok(s);
-    }
-    let n = pair.n();
-    let head = zero_mode_spectrum(pair, zeros, z);
-    let k = s.values.len();
-    // Written once, column by column (zeroing a gigabyte first and copying into it touched it twice: 1.9 s at 164k
-    // vertices, k = 1000), on the solve's threads.
-    let from = s.vectors.as_ref();
-    let vectors = columns_checked(n, z + k, control, threads, |c, col| {
-        let src = if c < z { head.vectors.col(c) } else { from.col(c - z) };
-        for (x, y) in col.iter_mut().zip(src.iter()) {
-            *x = *y;
-        }
-    })?;
-    let mut values = head.values;
-    values.extend_from_slice(&s.values);
-    Ok(Spectrum { values, vectors, residuals: vec![], stats: s.stats })
 }
 
 /// Keeps the first k pairs.

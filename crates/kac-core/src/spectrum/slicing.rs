@@ -144,6 +144,7 @@ pub(crate) fn solve(
     control: Control<'_>,
     deflation: &null_space::Deflation<'_>,
     deflated_values: &[f64],
+    head: Option<&Spectrum>,
 ) -> Result<Option<Spectrum>, EigenError> {
     let t0 = Instant::now();
     let Some(slices) = plan(pair, deflation.len(), o.k, o) else { return Ok(None) };
@@ -228,7 +229,7 @@ pub(crate) fn solve(
             }
         };
         let slice_control = Control { progress: Some(&report), stop: control.stop };
-        let run = lanczos::Run { deflation, deflated_values, interior_shift: true, window: Some(window) };
+        let run = lanczos::Run { deflation, deflated_values, interior_shift: true, window: Some(window), head: None };
         // The top slice ends at the k-th eigenvalue, not at an edge placed in a gap, and must see whole the cluster
         // that may straddle it: its subspace gets as many more columns as its pairs, at most [`TOP_EXTRA`].
         let sub = window.total.and_then(|_| {
@@ -310,8 +311,8 @@ pub(crate) fn solve(
             seconds: s,
         })
         .collect();
-    let mut s = stitch(pair, parts, &slices, &control, threads)?;
-    if s.values.len() < k {
+    let mut s = stitch(pair, parts, head, &slices, &control, threads)?;
+    if s.values.len() < k + head.map_or(0, |h| h.values.len()) {
         return Ok(None);
     }
     s.stats.slices = reports;
@@ -319,23 +320,33 @@ pub(crate) fn solve(
     Ok(Some(s))
 }
 
-/// The slices' pairs in one ascending spectrum, with each edge's neighbourhood Rayleigh–Ritz'd (see the module
-/// docs). Statistics add up the slices' work; σ and the inertia are the lowest slice's.
+/// The slices' pairs in one ascending spectrum after `head`'s (the known zero modes), with each edge's neighbourhood
+/// Rayleigh–Ritz'd (see the module docs). Statistics add up the slices' work; σ and the inertia are the lowest
+/// slice's.
 fn stitch(
     pair: &SparsePair,
     parts: Vec<Spectrum>,
+    head: Option<&Spectrum>,
     slices: &[(Window, usize)],
     control: &Control<'_>,
     threads: usize,
 ) -> Result<Spectrum, EigenError> {
     let n = pair.n();
-    let total: usize = parts.iter().map(|p| p.values.len()).sum();
+    let total: usize = parts.iter().map(|p| p.values.len()).sum::<usize>() + head.map_or(0, |h| h.values.len());
     // Filled slice by slice, each slice's vectors dropped once copied: the peak holds one copy of the
     // eigenvectors and one slice's.
     // The copies run on the slices' threads.
     let mut vectors = super::Columns::new(n, total);
     let mut values = Vec::with_capacity(total);
     let mut stats = Stats { method: "block-lanczos", factorization: "ldlt", ..Default::default() };
+    if let Some(h) = head {
+        vectors.append(h.values.len(), control, threads, |j, col| {
+            for (x, y) in col.iter_mut().zip(h.vectors.col(j).iter()) {
+                *x = *y;
+            }
+        })?;
+        values.extend_from_slice(&h.values);
+    }
     for (i, p) in parts.into_iter().enumerate() {
         control.check()?;
         let from = p.vectors.as_ref();
