@@ -93,26 +93,6 @@ pub fn update_par(w: &mut [f64], b: usize, v: MatRef<'_, f64>, c: MatRef<'_, f64
     });
 }
 
-/// Xᵀ Y (b × b) for two row-major n × b blocks, on `threads` threads by ranges of rows (faer's product on each,
-/// summed): the small Gram products of a block step (the normalization's Gram matrix, the recurrence's diagonal
-/// block), which faer's product kept on one thread at these shapes.
-pub fn block_gram_par(x: &[f64], y: &[f64], b: usize, threads: usize) -> Mat<f64> {
-    let n = x.len() / b.max(1);
-    assert_eq!((x.len(), y.len()), (block_len(n, b), block_len(n, b)), "X and Y must be n × b row-major");
-    let parts = by_rows(n, threads, |a, e| {
-        let mut g = Mat::<f64>::zeros(b, b);
-        let xs = MatRef::from_row_major_slice(&x[a * b..e * b], e - a, b);
-        let ys = MatRef::from_row_major_slice(&y[a * b..e * b], e - a, b);
-        matmul(g.as_mut(), Accum::Replace, xs.transpose(), ys, 1.0, Par::Seq);
-        g
-    });
-    let mut out = Mat::<f64>::zeros(b, b);
-    for g in &parts {
-        out += g;
-    }
-    out
-}
-
 /// `part(a, e)` for about equal ranges of `n` rows, one per thread (one range below [`PARALLEL_ROWS`] rows or on
 /// one thread), in the ranges' order.
 fn by_rows<T: Send>(n: usize, threads: usize, part: impl Fn(usize, usize) -> T + Sync) -> Vec<T> {
@@ -123,8 +103,8 @@ fn by_rows<T: Send>(n: usize, threads: usize, part: impl Fn(usize, usize) -> T +
     row_ranges(n, threads).into_par_iter().map(|(a, e)| part(a, e)).collect()
 }
 
-/// The column-wise inner products ⟨x_c, y_c⟩ of two row-major n × b blocks (the diagonal of [`block_gram_par`]), on
-/// `threads` threads by ranges of rows.
+/// The column-wise inner products ⟨x_c, y_c⟩ of two row-major n × b blocks (the diagonal of Xᵀ Y), on `threads`
+/// threads by ranges of rows.
 pub fn col_dots_par(x: &[f64], y: &[f64], b: usize, threads: usize) -> Vec<f64> {
     let n = x.len() / b.max(1);
     assert_eq!((x.len(), y.len()), (block_len(n, b), block_len(n, b)), "X and Y must be n × b row-major");
@@ -453,7 +433,7 @@ mod tests {
         }
     }
 
-    /// The block step's small products (Gram matrix, column dots, X T) against plain loops, on one thread and on
+    /// The block step's small products (Xᵀ Y of two row-major blocks, column dots, X T) against plain loops, on one thread and on
     /// several (no rows, and row counts on both sides of the split's threshold; widths 1, 3 and 8, T with one column
     /// fewer, so none at width 1), X T written into a run of columns of a wider column-major matrix and into a
     /// row-major block, the columns beside them left as they were.
@@ -465,7 +445,8 @@ mod tests {
                 let y: Vec<f64> = (0..n * b).map(|p| ((p * 7) % 23) as f64 / 9.0 - 1.0).collect();
                 let t = Mat::<f64>::from_fn(b, b - 1, |c, j| (c * 3 + j) as f64 / 4.0 - 1.0);
                 for threads in [1usize, 2, 3] {
-                    let g = block_gram_par(&x, &y, b, threads);
+                    // Xᵀ Y for a row-major X: `gram_par` on a row-major view (faer's product on each range of rows).
+                    let g = gram_par(MatRef::from_row_major_slice(&x, n, b), &y, b, threads);
                     let d = col_dots_par(&x, &y, b, threads);
                     for i in 0..b {
                         for j in 0..b {

@@ -188,7 +188,7 @@ impl Ctx<'_> {
         scale: &[f64],
     ) -> Mat<f64> {
         let (n, b) = (w.n, w.b);
-        let g = basis_products::block_gram_par(&w.data, &mw.data, b, self.threads);
+        let g = basis_products::gram_par(w.as_ref(), &mw.data, b, self.threads);
         let g = Mat::from_fn(b, b, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
         let evd = g.self_adjoint_eigen(Side::Lower).expect("symmetric eigen of a small Gram matrix");
         let (s, u) = (evd.S(), evd.U());
@@ -605,7 +605,7 @@ pub fn eigs_block_lanczos(
                     basis_products::update_par(&mut w.data, b, basis.subcols(e_lo, m - e_lo), et, -1.0, ctx.threads);
                     coef.as_mut().subrows_mut(e_lo, m - e_lo).copy_from(et);
                 }
-                let a = basis_products::block_gram_par(&mq.data, &w.data, b, ctx.threads);
+                let a = basis_products::gram_par(mq.as_ref(), &w.data, b, ctx.threads);
                 basis_products::update_par(&mut w.data, b, basis.subcols(m, b), a.as_ref(), -1.0, ctx.threads);
                 coef.as_mut().subrows_mut(m, b).copy_from(a.as_ref());
                 // Full reorthogonalization against the whole basis (locked vectors included), after the deflated
