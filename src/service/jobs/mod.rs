@@ -277,6 +277,10 @@ impl Jobs {
     pub fn running(&self) -> usize {
         self.running.lock().unwrap_or_else(|e| e.into_inner()).len()
     }
+    /// The claims of the jobs running here (their owners), which this replica's supervisor renews.
+    pub fn held_claims(&self) -> Vec<String> {
+        self.running.lock().unwrap_or_else(|e| e.into_inner()).values().map(|j| j.owner.clone()).collect()
+    }
     /// Every job, oldest first (live views for the ones running here).
     pub fn list(&self) -> Result<Vec<JobView>, JobError> {
         let mut all = self.queue.list()?;
@@ -550,8 +554,8 @@ fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
 }
 
 /// The dispatcher of this replica: claims jobs from the queue while a worker is free and starts them on the pool;
-/// every `lease / 3` it also requeues jobs whose lease expired (a replica that died). Runs until the process
-/// drains.
+/// every `lease / 3` it also requeues jobs whose lease expired (a replica that died; never one running here).
+/// Runs until the process drains.
 pub fn dispatch(state: AppState) {
     let jobs = &state.jobs;
     let mut last_sweep: Option<Duration> = None;
@@ -562,7 +566,7 @@ pub fn dispatch(state: AppState) {
         let now = jobs.clock.elapsed();
         if last_sweep.is_none_or(|at| now.saturating_sub(at) >= jobs.lease / 3) {
             last_sweep = Some(now);
-            match jobs.queue.requeue_expired() {
+            match jobs.queue.requeue_expired(&jobs.held_claims()) {
                 Ok(ids) if !ids.is_empty() => tracing::warn!(jobs = ?ids, "requeued jobs whose lease expired"),
                 Ok(_) => {}
                 Err(e) => tracing::error!(error = %e, "cannot requeue expired jobs"),

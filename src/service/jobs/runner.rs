@@ -84,19 +84,13 @@ impl Jobs {
                 job.timed_out.store(true, Ordering::SeqCst);
                 job.stop.store(true, Ordering::SeqCst);
             }
-            let due = match beats.get(&view.id) {
-                // The claim itself set the lease: the first beat is due a third of a lease later.
-                None => {
-                    beats.insert(view.id.clone(), (now, view.progress.clone()));
-                    false
-                }
-                Some((at, progress)) => {
-                    let since = now.saturating_sub(*at);
-                    since >= self.lease / 3
-                        || (since >= Duration::from_secs(1) && progress.phase != view.progress.phase)
-                        || (since >= Duration::from_secs(1) && progress.converged != view.progress.converged)
-                }
-            };
+            // The claim itself set the lease as the job started: the first beat is due a third of a lease after
+            // that, not after the supervisor first sees the job.
+            let (at, progress) = beats.entry(view.id.clone()).or_insert_with(|| (job.started, view.progress.clone()));
+            let since = now.saturating_sub(*at);
+            let due = since >= self.lease / 3
+                || (since >= Duration::from_secs(1) && progress.phase != view.progress.phase)
+                || (since >= Duration::from_secs(1) && progress.converged != view.progress.converged);
             if !due && !announced.contains(&view.id) {
                 continue;
             }

@@ -143,9 +143,9 @@ impl JobQueue for MemoryQueue {
         self.announce(&id);
         Ok(Some(view))
     }
-    fn requeue_expired(&self) -> std::io::Result<Vec<String>> {
+    fn requeue_expired(&self, held: &[String]) -> std::io::Result<Vec<String>> {
         let now = self.clock.wall_ms();
-        Ok(self.requeue_if(|r| r.lease_until < now))
+        Ok(self.requeue_if(|r| r.lease_until < now && !r.owner.as_ref().is_some_and(|o| held.contains(o))))
     }
     fn recover(&self) -> std::io::Result<usize> {
         // A queue in memory belongs to this process: no other worker can hold a claim.

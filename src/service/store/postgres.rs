@@ -877,15 +877,16 @@ impl JobQueue for Postgres {
             Ok(Some(view))
         })
     }
-    fn requeue_expired(&self) -> std::io::Result<Vec<String>> {
-        self.run(|pool| async move {
+    fn requeue_expired(&self, held: &[String]) -> std::io::Result<Vec<String>> {
+        let held = held.to_vec();
+        self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
             let tx = c.transaction().await.map_err(pg)?;
             let rows = tx
                 .query(
                     "SELECT id, view, cancel FROM jobs WHERE status = 'processing' AND lease_until < now()
-                     FOR UPDATE SKIP LOCKED",
-                    &[],
+                     AND owner <> ALL($1::text[]) FOR UPDATE SKIP LOCKED",
+                    &[&held],
                 )
                 .await
                 .map_err(pg)?;
@@ -909,7 +910,7 @@ impl JobQueue for Postgres {
     }
     fn recover(&self) -> std::io::Result<usize> {
         // Other replicas may be running jobs: only claims whose lease expired are taken back.
-        self.requeue_expired()?;
+        self.requeue_expired(&[])?;
         Ok(self.depth()?.0)
     }
     fn get(&self, id: &JobId) -> std::io::Result<Option<JobView>> {

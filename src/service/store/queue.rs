@@ -46,8 +46,10 @@ pub trait JobQueue: Send + Sync {
     /// Cancels a job: an enqueued one at once (status `canceled`, `problem` its error), a processing one by a
     /// request that its worker sees at its next heartbeat (its view returned as it is). None: no such job.
     fn cancel(&self, id: &JobId, problem: &Problem) -> Result<Option<JobView>>;
-    /// Puts processing jobs whose lease expired back in the queue; their ids.
-    fn requeue_expired(&self) -> Result<Vec<String>>;
+    /// Puts processing jobs whose lease expired back in the queue; their ids. Claims named in `held` (this
+    /// replica's own running jobs, which its supervisor renews) are never taken back: a replica that falls behind
+    /// with a beat on a loaded machine does not lose, and then run again, the job it is running.
+    fn requeue_expired(&self, held: &[String]) -> Result<Vec<String>>;
     /// At start: puts back in the queue the jobs no live worker can hold (the embedded store belongs to one
     /// process, so every processing job; a shared one waits for their leases to expire). The number of jobs
     /// enqueued afterwards.

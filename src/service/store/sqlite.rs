@@ -526,12 +526,12 @@ impl JobQueue for Database {
         let _ = self.changes.send(id.to_string());
         Ok(Some(view))
     }
-    fn requeue_expired(&self) -> std::io::Result<Vec<String>> {
-        self.requeue_where("lease_until < ?1", self.clock.wall_ms())
+    fn requeue_expired(&self, held: &[String]) -> std::io::Result<Vec<String>> {
+        self.requeue_where("lease_until < ?1", self.clock.wall_ms(), held)
     }
     fn recover(&self) -> std::io::Result<usize> {
         // The data directory belongs to this process: no other worker can hold a claim.
-        self.requeue_where("?1 = ?1", 0)?;
+        self.requeue_where("?1 = ?1", 0, &[])?;
         Ok(self.depth()?.0)
     }
     fn get(&self, id: &JobId) -> std::io::Result<Option<JobView>> {
@@ -562,18 +562,24 @@ impl JobQueue for Database {
 
 impl Database {
     /// Puts the processing jobs matching `condition` (with `?1` bound to `arg`) back in the queue.
-    fn requeue_where(&self, condition: &str, arg: i64) -> std::io::Result<Vec<String>> {
+    /// Requeues the processing jobs that meet `condition` (on `arg`), except those whose owner is in `held`.
+    fn requeue_where(&self, condition: &str, arg: i64, held: &[String]) -> std::io::Result<Vec<String>> {
         let mut c = self.conn();
         let tx = c.transaction().map_err(db_err)?;
-        let rows: Vec<(String, String, i64)> = {
+        let rows: Vec<(String, String, i64, Option<String>)> = {
             let mut st = tx
-                .prepare(&format!("SELECT id, view, cancel FROM jobs WHERE status = 'processing' AND {condition}"))
+                .prepare(&format!(
+                    "SELECT id, view, cancel, owner FROM jobs WHERE status = 'processing' AND {condition}"
+                ))
                 .map_err(db_err)?;
-            let rows = st.query_map([arg], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?))).map_err(db_err)?;
+            let rows = st.query_map([arg], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?))).map_err(db_err)?;
             rows.collect::<Result<_, _>>().map_err(db_err)?
         };
         let mut ids = vec![];
-        for (id, text, cancel) in rows {
+        for (id, text, cancel, owner) in rows {
+            if owner.is_some_and(|o| held.contains(&o)) {
+                continue;
+            }
             let mut view = view_of(&text)?;
             let status = super::queue::release(&mut view, cancel != 0);
             let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
