@@ -1286,3 +1286,34 @@ fn a_collection_is_uploaded_in_bulk_tagged_and_searched_within_a_tag() {
     assert_eq!((r.body["created"].as_u64(), r.body["unstarted"].as_u64()), (Some(3), Some(2)), "{}", r.body);
     assert_eq!(r.body["files"][2]["problem"]["code"], "queue-full", "{}", r.body);
 }
+
+/// A job cut into spectrum slices borrows the server's idle workers, one slice at a time: on two workers with one
+/// thread per solve, one job's slices run on both workers, its eigenvalues are those of the same job in one run,
+/// and the lent worker is given back (the next job runs).
+#[test]
+fn idle_workers_solve_slices_of_a_running_job() {
+    let s = Server::start(&["--workers", "2", "--solver-threads", "1"]);
+    let id = upload(&s, &icosphere_off(5), "?format=off").body["id"].as_str().unwrap().to_string();
+    let run = |slices: usize| {
+        let j = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 150, "solver": { "slices": slices } }));
+        assert_eq!(j.status, 202, "{}", j.body);
+        let done = wait_done(&s, j.body["id"].as_str().unwrap());
+        assert_eq!(done["status"], "succeeded", "{done}");
+        reply(agent().get(&s.url(done["result"].as_str().unwrap())).call()).body
+    };
+    let sliced = run(4);
+    let reports = sliced["solver"]["slices"].as_array().unwrap();
+    assert_eq!(reports.len(), 4, "{}", sliced["solver"]);
+    let workers: std::collections::BTreeSet<u64> = reports.iter().map(|r| r["worker"].as_u64().unwrap()).collect();
+    assert_eq!(workers.len(), 2, "one job's slices on both workers: {reports:?}");
+    let one = run(1);
+    assert!(one["solver"].get("slices").is_none(), "{}", one["solver"]);
+    let (a, b): (Vec<f64>, Vec<f64>) = (
+        serde_json::from_value(sliced["eigenvalues"].clone()).unwrap(),
+        serde_json::from_value(one["eigenvalues"].clone()).unwrap(),
+    );
+    assert_eq!(a.len(), 150);
+    for (j, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!((x - y).abs() <= 1e-8 * y.abs().max(1.0), "λ{j}: sliced {x}, one run {y}");
+    }
+}

@@ -768,7 +768,7 @@ mod tests {
         let w = by_rows(&b, &go, |b| signatures::wks(b, &WksOptions::default()), |w| &mut w.values).unwrap();
         close(&w.values, &signatures::wks(&b, &WksOptions::default()).unwrap().values);
         let stop = std::sync::atomic::AtomicBool::new(true);
-        let stopped = Control { progress: None, stop: Some(&stop) };
+        let stopped = Control { stop: Some(&stop), ..Control::default() };
         let r = by_rows(&b, &stopped, |b| signatures::hks(b, &HksOptions::default()), |h| &mut h.values);
         assert_eq!(r.err().map(|e| e.code()), Some("canceled"));
     }

@@ -1113,7 +1113,7 @@ mod tests {
         let (oa, sa) = spectrum_of(&a, 30);
         let s = SpectralShape { basis: Basis::of(&sa, &oa.pair), pair: &oa.pair, surface: Some(&a) };
         let stop = std::sync::atomic::AtomicBool::new(true);
-        let stopped = Control { progress: None, stop: Some(&stop) };
+        let stopped = Control { stop: Some(&stop), ..Control::default() };
         let r = correspond(&s, &s, &CorrespondenceOptions { fit_k: 10, refine_k: 30, ..Default::default() }, &stopped);
         assert!(matches!(r, Err(CorrespondenceError::Stopped(_))));
     }

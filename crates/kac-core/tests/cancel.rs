@@ -21,7 +21,8 @@ fn stop_at(shape: &Shape, opts: &EigenOptions, phase: &str, nth: usize) -> (Resu
             stop.store(true, Ordering::SeqCst);
         }
     };
-    let r = eigs(&o.pair, opts, None, Control { progress: Some(&progress), stop: Some(&stop) }).map(|_| ());
+    let r =
+        eigs(&o.pair, opts, None, Control { progress: Some(&progress), stop: Some(&stop), lender: None }).map(|_| ());
     (r, phases.into_inner().unwrap())
 }
 
@@ -81,7 +82,7 @@ fn a_single_dense_decomposition_is_left_behind_on_stop() {
             std::thread::sleep(std::time::Duration::from_millis(100));
             stop.store(true, Ordering::SeqCst);
         });
-        eigs(&o.pair, &opts, None, Control { progress: None, stop: Some(&stop) }).map(|_| ())
+        eigs(&o.pair, &opts, None, Control { stop: Some(&stop), ..Control::default() }).map(|_| ())
     });
     assert!(matches!(r, Err(EigenError::Canceled)), "{r:?}");
 }
@@ -91,7 +92,7 @@ fn a_single_dense_decomposition_is_left_behind_on_stop() {
 #[test]
 fn abandonable_work_returns_stops_and_carries_its_panic() {
     let stop = AtomicBool::new(false);
-    let control = Control { progress: None, stop: Some(&stop) };
+    let control = Control { stop: Some(&stop), ..Control::default() };
     assert_eq!(control.abandonable("test", || 42).unwrap(), 42);
     let t = std::time::Instant::now();
     let r = std::thread::scope(|s| {

@@ -137,7 +137,7 @@ fn a_stop_inside_a_slice_cancels() {
         }
     };
     let o = EigenOptions { k: 150, slices: Some(4), threads: 1, method: Method::Sparse, ..Default::default() };
-    let r = eigs(&pair, &o, None, Control { progress: Some(&progress), stop: Some(&stop) });
+    let r = eigs(&pair, &o, None, Control { progress: Some(&progress), stop: Some(&stop), lender: None });
     assert!(matches!(r, Err(EigenError::Canceled)), "{:?}", r.map(|s| s.values.len()));
     assert!(stop.load(Ordering::Relaxed));
 }
@@ -176,4 +176,70 @@ fn threaded_basis_products_match_one_thread() {
     update(&mut w1, b, v.as_ref(), one.as_ref(), -0.5);
     pool.install(|| update_par(&mut w2, b, v.as_ref(), one.as_ref(), -0.5, 2));
     assert_eq!(w1, w2, "each row is updated by the same kernel on either thread");
+}
+
+/// A host lending threads: grants up to `grant`, counts what was borrowed, asked back and given back, and wants a
+/// thread back after each slice when `back` is set.
+struct Host {
+    grant: usize,
+    back: bool,
+    borrowed: std::sync::atomic::AtomicUsize,
+    asked: std::sync::atomic::AtomicUsize,
+    returned: std::sync::atomic::AtomicUsize,
+}
+
+impl kac_core::spectrum::Lender for Host {
+    fn borrow(&self, wanted: usize) -> usize {
+        let n = wanted.min(self.grant);
+        self.borrowed.fetch_add(n, Ordering::SeqCst);
+        n
+    }
+    fn wanted_back(&self) -> bool {
+        self.asked.fetch_add(1, Ordering::SeqCst);
+        self.back
+    }
+    fn give_back(&self) {
+        self.returned.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
+/// A solve of one thread in a pool of two, cut into four slices, with a host lending its idle thread: both threads
+/// solve slices, the eigenvalues are the one run's, and every lent thread is given back. A host that wants its
+/// thread back after each slice gets it after one slice (the solve's own thread does the rest).
+#[test]
+fn lent_threads_solve_slices_and_are_given_back() {
+    use std::sync::atomic::AtomicUsize;
+    let pair = pair_of(&Shape::TriangleMesh(generate::icosphere(5)), Boundary::Neumann);
+    let k = 150;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let whole = pool.install(|| solve(&pair, k, 1, 1));
+    for back in [false, true] {
+        let host = Host {
+            grant: 3,
+            back,
+            borrowed: AtomicUsize::new(0),
+            asked: AtomicUsize::new(0),
+            returned: AtomicUsize::new(0),
+        };
+        let o = EigenOptions { k, slices: Some(4), threads: 1, method: Method::Sparse, ..Default::default() };
+        let control = Control { lender: Some(&host), ..Control::default() };
+        let sliced = pool.install(|| eigs(&pair, &o, None, control).unwrap());
+        assert_eq!(sliced.stats.slices.len(), 4, "{:?}", sliced.stats.slices);
+        assert_same_values(&sliced, &whole);
+        // Three slices beyond the solve's own thread: three asked for, all granted, all given back.
+        assert_eq!(host.borrowed.load(Ordering::SeqCst), 3);
+        assert_eq!(host.returned.load(Ordering::SeqCst), 3);
+        let mut workers: Vec<usize> = sliced.stats.slices.iter().map(|s| s.worker.unwrap()).collect();
+        workers.sort_unstable();
+        workers.dedup();
+        assert_eq!(workers, vec![0, 1], "{:?}", sliced.stats.slices);
+        if back {
+            // Each lent thread solved at most one slice before it was asked back.
+            assert!(host.asked.load(Ordering::SeqCst) <= 3);
+        }
+    }
+    // Without a host, one thread solves every slice.
+    let alone = pool.install(|| solve(&pair, k, 4, 1));
+    let workers: std::collections::HashSet<_> = alone.stats.slices.iter().map(|s| s.worker).collect();
+    assert_eq!(workers.len(), 1, "{:?}", alone.stats.slices);
 }

@@ -223,6 +223,9 @@ pub struct Jobs {
     /// This replica's id (claims are `{replica}:{n}`).
     pub replica: String,
     claims: AtomicU64,
+    /// Idle workers lent to running jobs' spectrum slices ([`kac_core::spectrum::Lender`]): the dispatcher counts
+    /// them busy.
+    lent: std::sync::atomic::AtomicUsize,
     /// Wakes the dispatcher: a job was enqueued, or a worker became free.
     wake: (Mutex<bool>, Condvar),
 }
@@ -260,6 +263,7 @@ impl Jobs {
             submitted: AtomicU64::new(0),
             replica,
             claims: AtomicU64::new(0),
+            lent: std::sync::atomic::AtomicUsize::new(0),
             wake: (Mutex::new(false), Condvar::new()),
         }
     }
@@ -276,6 +280,14 @@ impl Jobs {
     /// Jobs processing on this replica now.
     pub fn running(&self) -> usize {
         self.running.lock().unwrap_or_else(|e| e.into_inner()).len()
+    }
+    /// Workers lent to running jobs' slices now.
+    pub fn lent(&self) -> usize {
+        self.lent.load(Ordering::SeqCst)
+    }
+    /// Workers neither running a job nor lent.
+    pub fn idle(&self) -> usize {
+        self.workers.saturating_sub(self.running() + self.lent())
     }
     /// The claims of the jobs running here (their owners), which this replica's supervisor renews.
     pub fn held_claims(&self) -> Vec<String> {
@@ -553,6 +565,31 @@ fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
     }
 }
 
+/// Idle workers lent to a job cut into spectrum slices, one slice at a time: a worker given back (no slice left,
+/// or a job waiting in the queue after a slice) wakes the dispatcher. Lending never runs more threads than the
+/// pool has: a lent worker is one of its threads, counted busy until given back.
+impl kac_core::spectrum::Lender for Jobs {
+    fn borrow(&self, wanted: usize) -> usize {
+        // Under the running set's lock, so that two jobs asking together are not both granted the same worker.
+        let running = self.running.lock().unwrap_or_else(|e| e.into_inner());
+        let mut granted = 0;
+        let _ = self.lent.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |lent| {
+            granted = self.workers.saturating_sub(running.len() + lent).min(wanted);
+            Some(lent + granted)
+        });
+        granted
+    }
+    fn wanted_back(&self) -> bool {
+        // A job waiting in the queue (for any replica) takes precedence over more slices of one already running; a
+        // queue that cannot be read asks the worker back too.
+        self.queue.depth().map_or(true, |(enqueued, _)| enqueued > 0)
+    }
+    fn give_back(&self) {
+        let _ = self.lent.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |l| Some(l.saturating_sub(1)));
+        self.notify();
+    }
+}
+
 /// The dispatcher of this replica: claims jobs from the queue while a worker is free and starts them on the pool;
 /// every `lease / 3` it also requeues jobs whose lease expired (a replica that died; never one running here).
 /// Runs until the process drains.
@@ -572,7 +609,7 @@ pub fn dispatch(state: AppState) {
                 Err(e) => tracing::error!(error = %e, "cannot requeue expired jobs"),
             }
         }
-        if jobs.running() >= jobs.workers {
+        if jobs.idle() == 0 {
             jobs.sleep(Duration::from_millis(500));
             continue;
         }

@@ -185,7 +185,7 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
     let on_solve = |s: &kac_core::spectrum::Stats| state.metrics.record_solve(s);
     let hooks = Hooks {
         on_solve: Some(&on_solve),
-        control: Control { progress: Some(&progress), stop: Some(&job.stop) },
+        control: Control { progress: Some(&progress), stop: Some(&job.stop), lender: Some(&*state.jobs) },
         cache: Some(&*state.cache),
         threads: state.config.solver_threads,
         limits: analysis::SolverLimits { max_pairs: state.config.max_k, max_values: state.config.max_output_values },

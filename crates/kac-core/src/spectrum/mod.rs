@@ -547,7 +547,7 @@ mod tests {
         z[(n - 1, m - 1)] = 1.0;
         assert_eq!(z.as_ref().sum(), 1.0);
         let stop = std::sync::atomic::AtomicBool::new(true);
-        let control = super::Control { progress: None, stop: Some(&stop) };
+        let control = super::Control { stop: Some(&stop), ..super::Control::default() };
         let r = pool.install(|| super::zeros_checked(n, m, &control, 2));
         assert!(matches!(r, Err(super::EigenError::Canceled)));
     }

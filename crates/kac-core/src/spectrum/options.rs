@@ -175,6 +175,24 @@ pub struct Progress {
 pub struct Control<'a> {
     pub progress: Option<&'a (dyn Fn(Progress) + Sync)>,
     pub stop: Option<&'a AtomicBool>,
+    /// Idle threads a host lends to a sliced solve beyond its own `threads` ([`Lender`]); none without one.
+    pub lender: Option<&'a dyn Lender>,
+}
+
+/// A host that lends idle threads of the pool a solve runs on (the service's idle workers) to a solve cut into
+/// spectrum slices ([`super::slicing`]). The solve asks once, when its slices are planned, for as many threads as
+/// it has slices beyond its own; each thread granted takes the next slice waiting, and after each slice it asks
+/// whether the host wants it back (work of its own is waiting), and gives it back when so or when no slice is left.
+///
+/// A granted thread is a task spawned on the solve's pool: an idle thread of that pool runs it, and when none is
+/// idle after all, the solve's own threads do, so a grant the host cannot keep delays nothing.
+pub trait Lender: Sync {
+    /// Up to `wanted` threads for the solve's slices; the number granted.
+    fn borrow(&self, wanted: usize) -> usize;
+    /// Whether the host wants a granted thread back now (asked after each slice it solved).
+    fn wanted_back(&self) -> bool;
+    /// One granted thread is given back.
+    fn give_back(&self);
 }
 
 impl Control<'_> {

@@ -24,6 +24,10 @@
 //!   eight slices take 39.6 s and 2.8 GB on two threads against 58.6 s and 4.2 GB in one run; at k = 200 one run is
 //!   faster on one thread and on two. The automatic plan slices from [`SLICING_MIN_PAIRS`] pairs on.
 //!
+//! - **Lent threads.** A host (the service) may lend idle threads of the solve's pool through [`Control::lender`]:
+//!   one per slice beyond the solve's own `threads`, each taking the next slice waiting until no slice is left or the
+//!   host wants it back ([`Lender`]). Each slice's report names the pool thread that solved it.
+//!
 //! A plan the problem does not fit (a window holding more pairs than its subspace allows, a factor that is not
 //! backward stable, too few unknowns) is given up, and the k pairs are solved in one run instead.
 
@@ -62,6 +66,18 @@ pub struct SliceReport {
     pub restarts: usize,
     /// Factorization and iteration of this slice.
     pub seconds: f64,
+    /// The thread of the solve's pool that solved this slice (its index there: in the service, the worker); null
+    /// outside a pool. Slices of one job on several workers are the idle workers the service lent it.
+    pub worker: Option<usize>,
+}
+
+/// A thread lent by a [`Lender`], given back when dropped.
+struct Returned<'a>(&'a dyn Lender);
+
+impl Drop for Returned<'_> {
+    fn drop(&mut self) {
+        self.0.give_back();
+    }
 }
 
 /// Columns added at most to the top slice's default subspace (as many as its pairs below that). Measured on the
@@ -149,7 +165,6 @@ pub(crate) fn solve(
     let t0 = Instant::now();
     let Some(slices) = plan(pair, deflation.len(), o.k, o) else { return Ok(None) };
     let threads = if o.threads == 0 { rayon::current_num_threads() } else { o.threads };
-    let parallel = threads > 1;
     control.phase("factorization", 0, o.k)?;
     // Sylvester's inertia at every edge between two slices: each window's count exactly, so its subspace is
     // sized for what it holds (Weyl's even split meets clustered spectra unevenly: a sphere's window can hold a
@@ -164,7 +179,7 @@ pub(crate) fn solve(
         // One thread per edge: the edges are counted side by side.
         completeness::inertia_in_gap(sym, pair, (e - reach, e + reach), &control, faer::Par::Seq)
     };
-    let edges: Vec<Result<(f64, usize), EigenError>> = if parallel {
+    let edges: Vec<Result<(f64, usize), EigenError>> = if threads > 1 {
         (1..slices.len()).into_par_iter().with_max_len(1).map(count_edge).collect()
     } else {
         (1..slices.len()).map(count_edge).collect()
@@ -218,7 +233,8 @@ pub(crate) fn solve(
     let inner = (threads / slices.len()).max(1);
     let converged: Vec<AtomicUsize> = slices.iter().map(|_| AtomicUsize::new(0)).collect();
     let k = o.k;
-    let run_slice = |i: usize| -> (Result<Option<Spectrum>, EigenError>, f64) {
+    type Outcome = (Result<Option<Spectrum>, EigenError>, f64, Option<usize>);
+    let run_slice = |i: usize| -> Outcome {
         let t = Instant::now();
         let (window, pairs) = slices[i];
         let report = |p: Progress| {
@@ -228,7 +244,7 @@ pub(crate) fn solve(
                 control.report("iterating", sum.min(k), k);
             }
         };
-        let slice_control = Control { progress: Some(&report), stop: control.stop };
+        let slice_control = Control { progress: Some(&report), stop: control.stop, lender: None };
         let run = lanczos::Run { deflation, deflated_values, interior_shift: true, window: Some(window), head: None };
         // The top slice ends at the k-th eigenvalue, not at an edge placed in a gap, and must see whole the cluster
         // that may straddle it: its subspace gets as many more columns as its pairs, at most [`TOP_EXTRA`].
@@ -238,21 +254,29 @@ pub(crate) fn solve(
             Some((msize + TOP_EXTRA.min(pairs)).min(pair.n()))
         });
         let os = EigenOptions { k: pairs, threads: inner, subspace: sub, ..o.clone() };
-        (lanczos::eigs_block_lanczos(pair, &os, Some(sym), slice_control, &run), t.elapsed().as_secs_f64())
+        let r = lanczos::eigs_block_lanczos(pair, &os, Some(sym), slice_control, &run);
+        (r, t.elapsed().as_secs_f64(), rayon::current_thread_index())
     };
-    let results: Vec<(Result<Option<Spectrum>, EigenError>, f64)> = if parallel {
+    // The solve's own threads, and the idle threads its host lends for the slices beyond them (the service's idle
+    // workers; see [`Lender`]).
+    let own = threads.min(slices.len());
+    let lender = control.lender.filter(|_| slices.len() > own);
+    let lent = lender.map_or(0, |l| l.borrow(slices.len() - own));
+    let results: Vec<Outcome> = if own + lent > 1 {
         // One queue, the top slice first: it holds the k-th eigenvalue, often inside a cluster it must see whole, and
         // takes the most block steps (164k sphere, k = 1000, 8 slices: 99 steps and 9.7 s against 44 to 65 and
         // 4.9 to 8.3 s). Each worker takes the next slice when it is free, so the longest does not start last
-        // (rayon's halves gave one thread slices 0 to 3 and the other 4 to 7: 26.4 against 30.1 s).
+        // (rayon's halves gave one thread slices 0 to 3 and the other 4 to 7: 26.4 against 30.1 s). A lent
+        // thread also leaves when its host wants it back, and is given back however it leaves (a panic included).
         let order: Vec<usize> = (0..slices.len()).rev().collect();
         let next = AtomicUsize::new(0);
         let failed = std::sync::atomic::AtomicBool::new(false);
-        type Outcome = (Result<Option<Spectrum>, EigenError>, f64);
         let done: Vec<std::sync::Mutex<Option<Outcome>>> = slices.iter().map(|_| std::sync::Mutex::new(None)).collect();
+        let (order, next, failed, slots, run_slice) = (&order, &next, &failed, &done, &run_slice);
         rayon::scope(|scope| {
-            for _ in 0..threads.min(slices.len()) {
-                scope.spawn(|_| {
+            for t in 0..own + lent {
+                let loan = lender.filter(|_| t >= own).map(Returned);
+                scope.spawn(move |_| {
                     // After a failure the rest is not started (the plan falls back to one run, or the stop ends it).
                     while !failed.load(Ordering::Relaxed) {
                         let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
@@ -260,8 +284,12 @@ pub(crate) fn solve(
                         if !matches!(r.0, Ok(Some(_))) {
                             failed.store(true, Ordering::Relaxed);
                         }
-                        *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                        *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                        if loan.as_ref().is_some_and(|l| l.0.wanted_back()) {
+                            break;
+                        }
                     }
+                    drop(loan);
                 });
             }
         });
@@ -282,14 +310,14 @@ pub(crate) fn solve(
     };
     let mut parts = Vec::with_capacity(slices.len());
     let mut seconds = Vec::with_capacity(slices.len());
-    for (r, s) in results {
+    for (r, s, worker) in results {
         match r {
             Ok(Some(spectrum)) => parts.push(spectrum),
             Err(EigenError::Canceled) => return Err(EigenError::Canceled),
             // The plan did not fit this problem (or too few unknowns): one run instead.
             Ok(None) | Err(_) => return Ok(None),
         }
-        seconds.push(s);
+        seconds.push((s, worker));
     }
     if parts.len() < slices.len() {
         return Ok(None);
@@ -299,7 +327,7 @@ pub(crate) fn solve(
         .iter()
         .zip(&slices)
         .zip(&seconds)
-        .map(|((p, (w, _)), &s)| SliceReport {
+        .map(|((p, (w, _)), &(s, worker))| SliceReport {
             lo: w.lo.is_finite().then_some(w.lo),
             hi: w.hi.is_finite().then_some(w.hi),
             sigma: w.sigma,
@@ -309,6 +337,7 @@ pub(crate) fn solve(
             solves: p.stats.solves,
             restarts: p.stats.restarts,
             seconds: s,
+            worker,
         })
         .collect();
     let mut s = stitch(pair, parts, head, &slices, &control, threads)?;
