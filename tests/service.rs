@@ -1289,11 +1289,11 @@ fn a_collection_is_uploaded_in_bulk_tagged_and_searched_within_a_tag() {
 
 /// A job cut into spectrum slices borrows the server's idle workers, one slice at a time: on two workers with one
 /// thread per solve, one job's slices run on both workers, its eigenvalues are those of the same job in one run,
-/// and the lent worker is given back (the next job runs).
+/// and the lent worker is given back (`kac_workers_lent` is 0 after the job).
 #[test]
 fn idle_workers_solve_slices_of_a_running_job() {
     let s = Server::start(&["--workers", "2", "--solver-threads", "1"]);
-    let id = upload(&s, &icosphere_off(5), "?format=off").body["id"].as_str().unwrap().to_string();
+    let id = upload(&s, &icosphere_off(6), "?format=off").body["id"].as_str().unwrap().to_string();
     let run = |slices: usize| {
         let j = submit(&s, json!({ "shape_id": id, "analysis": "spectrum", "k": 150, "solver": { "slices": slices } }));
         assert_eq!(j.status, 202, "{}", j.body);
@@ -1306,6 +1306,9 @@ fn idle_workers_solve_slices_of_a_running_job() {
     assert_eq!(reports.len(), 4, "{}", sliced["solver"]);
     let workers: std::collections::BTreeSet<u64> = reports.iter().map(|r| r["worker"].as_u64().unwrap()).collect();
     assert_eq!(workers.len(), 2, "one job's slices on both workers: {reports:?}");
+    // Given back: no worker is lent once the job is over.
+    let metrics = String::from_utf8(reply(agent().get(&s.url("/metrics")).call()).raw).unwrap();
+    assert!(metrics.lines().any(|l| l == "kac_workers_lent 0"), "{metrics}");
     let one = run(1);
     assert!(one["solver"].get("slices").is_none(), "{}", one["solver"]);
     let (a, b): (Vec<f64>, Vec<f64>) = (

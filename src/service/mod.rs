@@ -72,14 +72,16 @@ impl Inner {
         );
         let lease = std::time::Duration::from_secs_f64(config.lease_s.max(0.3));
         let timeout = std::time::Duration::from_secs(config.job_timeout_s);
-        let jobs = Arc::new(jobs::Jobs::new(
+        let mut jobs = jobs::Jobs::new(
             workers,
             config.queue_capacity.max(1),
             backend.queue.clone(),
             lease,
             timeout,
             Arc::new(jobs::SystemClock::default()),
-        ));
+        );
+        jobs.solver_threads = config.solver_threads;
+        let jobs = Arc::new(jobs);
         let recovered = jobs::recover(&jobs)?;
         let state = Arc::new(Inner {
             shapes: backend.shapes,

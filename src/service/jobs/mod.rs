@@ -226,6 +226,11 @@ pub struct Jobs {
     /// Idle workers lent to running jobs' spectrum slices ([`kac_core::spectrum::Lender`]): the dispatcher counts
     /// them busy.
     lent: std::sync::atomic::AtomicUsize,
+    /// Workers the dispatcher has set aside for the job it is claiming (changed under `running`'s lock, so a loan
+    /// never takes the worker a claim is about to start on).
+    starting: std::sync::atomic::AtomicUsize,
+    /// Threads of the pool one running job may use (`--solver-threads`): a loan counts them busy.
+    pub solver_threads: usize,
     /// Wakes the dispatcher: a job was enqueued, or a worker became free.
     wake: (Mutex<bool>, Condvar),
 }
@@ -264,6 +269,8 @@ impl Jobs {
             replica,
             claims: AtomicU64::new(0),
             lent: std::sync::atomic::AtomicUsize::new(0),
+            starting: std::sync::atomic::AtomicUsize::new(0),
+            solver_threads: 1,
             wake: (Mutex::new(false), Condvar::new()),
         }
     }
@@ -285,9 +292,23 @@ impl Jobs {
     pub fn lent(&self) -> usize {
         self.lent.load(Ordering::SeqCst)
     }
-    /// Workers neither running a job nor lent.
-    pub fn idle(&self) -> usize {
-        self.workers.saturating_sub(self.running() + self.lent())
+    /// Workers neither running a job, nor set aside for one being claimed, nor lent.
+    fn idle_in(&self, running: &HashMap<String, Arc<Job>>) -> usize {
+        let starting = self.starting.load(Ordering::SeqCst);
+        self.workers.saturating_sub(running.len() + starting + self.lent())
+    }
+    /// Sets a worker aside for a claim, if one is idle; [`Self::claimed`] ends it.
+    fn reserve(&self) -> bool {
+        let running = self.running.lock().unwrap_or_else(|e| e.into_inner());
+        let idle = self.idle_in(&running) > 0;
+        if idle {
+            self.starting.fetch_add(1, Ordering::SeqCst);
+        }
+        idle
+    }
+    /// The claim a worker was set aside for is over (its job started, or there was none).
+    fn claimed(&self) {
+        let _ = self.starting.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |s| Some(s.saturating_sub(1)));
     }
     /// The claims of the jobs running here (their owners), which this replica's supervisor renews.
     pub fn held_claims(&self) -> Vec<String> {
@@ -571,10 +592,12 @@ fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
 impl kac_core::spectrum::Lender for Jobs {
     fn borrow(&self, wanted: usize) -> usize {
         // Under the running set's lock, so that two jobs asking together are not both granted the same worker.
+        // A running job may use `solver_threads` threads of the pool: those are not idle.
         let running = self.running.lock().unwrap_or_else(|e| e.into_inner());
+        let busy = running.len() * self.solver_threads.max(1) + self.starting.load(Ordering::SeqCst);
         let mut granted = 0;
         let _ = self.lent.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |lent| {
-            granted = self.workers.saturating_sub(running.len() + lent).min(wanted);
+            granted = self.workers.saturating_sub(busy + lent).min(wanted);
             Some(lent + granted)
         });
         granted
@@ -609,14 +632,21 @@ pub fn dispatch(state: AppState) {
                 Err(e) => tracing::error!(error = %e, "cannot requeue expired jobs"),
             }
         }
-        if jobs.idle() == 0 {
+        if !jobs.reserve() {
             jobs.sleep(Duration::from_millis(500));
             continue;
         }
         let owner = jobs.next_owner();
-        match jobs.queue.claim(&owner, jobs.lease) {
-            Ok(Some(view)) => runner::start(&state, view, owner),
-            Ok(None) => jobs.sleep(Duration::from_millis(500)),
+        let claim = jobs.queue.claim(&owner, jobs.lease);
+        if let Ok(Some(view)) = claim {
+            // In the running set before the reservation ends: the worker stays counted busy throughout.
+            runner::start(&state, view, owner);
+            jobs.claimed();
+            continue;
+        }
+        jobs.claimed();
+        match claim {
+            Ok(_) => jobs.sleep(Duration::from_millis(500)),
             Err(e) => {
                 tracing::error!(error = %e, "cannot claim a job");
                 jobs.sleep(Duration::from_secs(1));

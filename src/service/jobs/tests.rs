@@ -260,3 +260,35 @@ fn a_full_queue_refuses_and_a_repeated_request_is_the_same_job() {
     assert_eq!((got.id, new), (again.id, false));
     assert_eq!(jobs.submitted.load(Ordering::Relaxed), 8);
 }
+
+/// Idle workers are lent, never the ones running a job (with its solver threads), set aside for a claim or lent
+/// already; a worker given back can be lent again; and a loan is wanted back while a job waits in the queue.
+#[test]
+fn only_idle_workers_are_lent() {
+    use kac_core::spectrum::Lender;
+    let clock = Arc::new(ManualClock::default());
+    let mut jobs = Jobs::new(4, 8, Arc::new(MemoryQueue::new(clock.clone())), LEASE, TIMEOUT, clock);
+    jobs.solver_threads = 1;
+    submit(&jobs, 1);
+    start(&jobs);
+    // One job on four workers: three idle, two granted of two asked, then one, then none.
+    assert_eq!(jobs.borrow(2), 2);
+    assert_eq!((jobs.lent(), jobs.idle_in(&jobs.running.lock().unwrap())), (2, 1));
+    assert!(jobs.reserve(), "the last idle worker is set aside for a claim");
+    assert_eq!(jobs.borrow(5), 0, "a worker set aside is not lent");
+    assert!(!jobs.reserve());
+    jobs.claimed();
+    assert_eq!(jobs.borrow(5), 1);
+    assert_eq!(jobs.borrow(5), 0);
+    jobs.give_back();
+    assert_eq!(jobs.lent(), 2);
+    assert!(!jobs.wanted_back(), "nothing waits in the queue");
+    submit(&jobs, 2);
+    assert!(jobs.wanted_back(), "a job waits in the queue");
+    jobs.give_back();
+    jobs.give_back();
+    assert_eq!(jobs.lent(), 0);
+    // A job's solver threads are busy: with two per job, one running job leaves two of four workers to lend.
+    jobs.solver_threads = 2;
+    assert_eq!(jobs.borrow(5), 2);
+}

@@ -117,6 +117,9 @@ pub fn render(state: &AppState) -> String {
         let _ = writeln!(out, "# TYPE kac_store_pool_waiting gauge");
         let _ = writeln!(out, "kac_store_pool_waiting {waiting}");
     }
+    let _ = writeln!(out, "# HELP kac_workers_lent Idle workers lent to running jobs' spectrum slices.");
+    let _ = writeln!(out, "# TYPE kac_workers_lent gauge");
+    let _ = writeln!(out, "kac_workers_lent {}", state.jobs.lent());
     let _ = writeln!(out, "# HELP kac_queue_capacity Configured queue capacity.");
     let _ = writeln!(out, "# TYPE kac_queue_capacity gauge");
     let _ = writeln!(out, "kac_queue_capacity {}", state.jobs.capacity);

@@ -885,7 +885,7 @@ impl JobQueue for Postgres {
             let rows = tx
                 .query(
                     "SELECT id, view, cancel FROM jobs WHERE status = 'processing' AND lease_until < now()
-                     AND owner <> ALL($1::text[]) FOR UPDATE SKIP LOCKED",
+                     AND (owner IS NULL OR owner <> ALL($1::text[])) FOR UPDATE SKIP LOCKED",
                     &[&held],
                 )
                 .await

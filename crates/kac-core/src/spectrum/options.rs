@@ -184,8 +184,9 @@ pub struct Control<'a> {
 /// it has slices beyond its own; each thread granted takes the next slice waiting, and after each slice it asks
 /// whether the host wants it back (work of its own is waiting), and gives it back when so or when no slice is left.
 ///
-/// A granted thread is a task spawned on the solve's pool: an idle thread of that pool runs it, and when none is
-/// idle after all, the solve's own threads do, so a grant the host cannot keep delays nothing.
+/// A granted thread is a task spawned on the solve's pool, which an idle thread of that pool runs; one that no
+/// thread has started when the solve's own thread runs out of slices ends at once, so a grant the host cannot keep
+/// delays nothing.
 pub trait Lender: Sync {
     /// Up to `wanted` threads for the solve's slices; the number granted.
     fn borrow(&self, wanted: usize) -> usize;

@@ -74,6 +74,42 @@ pub struct SliceReport {
 /// A thread lent by a [`Lender`], given back when dropped.
 struct Returned<'a>(&'a dyn Lender);
 
+/// The slice loops running as tasks of the pool, and whether the caller has closed the queue (its own loop found no
+/// slice left): a task that starts after that has nothing to do.
+#[derive(Default)]
+struct Tasks {
+    state: std::sync::Mutex<(usize, bool)>,
+    ended: std::sync::Condvar,
+}
+
+/// A task's loop, counted while it runs (its end signalled when dropped, a panic included).
+struct Started<'a>(&'a Tasks);
+
+impl Tasks {
+    fn start(&self) -> Option<Started<'_>> {
+        let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        if st.1 {
+            return None;
+        }
+        st.0 += 1;
+        Some(Started(self))
+    }
+    fn close_and_wait(&self) {
+        let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        st.1 = true;
+        while st.0 > 0 {
+            st = self.ended.wait(st).unwrap_or_else(|e| e.into_inner());
+        }
+    }
+}
+
+impl Drop for Started<'_> {
+    fn drop(&mut self) {
+        self.0.state.lock().unwrap_or_else(|e| e.into_inner()).0 -= 1;
+        self.0.ended.notify_all();
+    }
+}
+
 impl Drop for Returned<'_> {
     fn drop(&mut self) {
         self.0.give_back();
@@ -265,7 +301,7 @@ pub(crate) fn solve(
     let results: Vec<Outcome> = if own + lent > 1 {
         // One queue, the top slice first: it holds the k-th eigenvalue, often inside a cluster it must see whole, and
         // takes the most block steps (164k sphere, k = 1000, 8 slices: 99 steps and 9.7 s against 44 to 65 and
-        // 4.9 to 8.3 s). Each worker takes the next slice when it is free, so the longest does not start last
+        // 4.9 to 8.3 s). Each thread takes the next slice when it is free, so the longest does not start last
         // (rayon's halves gave one thread slices 0 to 3 and the other 4 to 7: 26.4 against 30.1 s). A lent
         // thread also leaves when its host wants it back, and is given back however it leaves (a panic included).
         let order: Vec<usize> = (0..slices.len()).rev().collect();
@@ -273,25 +309,38 @@ pub(crate) fn solve(
         let failed = std::sync::atomic::AtomicBool::new(false);
         let done: Vec<std::sync::Mutex<Option<Outcome>>> = slices.iter().map(|_| std::sync::Mutex::new(None)).collect();
         let (order, next, failed, slots, run_slice) = (&order, &next, &failed, &done, &run_slice);
+        let looper = |loan: Option<&Returned<'_>>| {
+            // After a failure the rest is not started (the plan falls back to one run, or the stop ends it).
+            while !failed.load(Ordering::Relaxed) {
+                let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
+                let r = run_slice(i);
+                if !matches!(r.0, Ok(Some(_))) {
+                    failed.store(true, Ordering::Relaxed);
+                }
+                *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                if loan.is_some_and(|l| l.0.wanted_back()) {
+                    break;
+                }
+            }
+        };
+        let tasks = Tasks::default();
+        let (looper, tasks) = (&looper, &tasks);
         rayon::scope(|scope| {
-            for t in 0..own + lent {
+            // The caller's own loop runs here; the other threads (its own beyond the first, then the lent ones) are
+            // tasks of the pool, taken by its idle threads.
+            for t in 1..own + lent {
                 let loan = lender.filter(|_| t >= own).map(Returned);
                 scope.spawn(move |_| {
-                    // After a failure the rest is not started (the plan falls back to one run, or the stop ends it).
-                    while !failed.load(Ordering::Relaxed) {
-                        let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
-                        let r = run_slice(i);
-                        if !matches!(r.0, Ok(Some(_))) {
-                            failed.store(true, Ordering::Relaxed);
-                        }
-                        *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
-                        if loan.as_ref().is_some_and(|l| l.0.wanted_back()) {
-                            break;
-                        }
-                    }
+                    let Some(_started) = tasks.start() else { return };
+                    looper(loan.as_ref());
                     drop(loan);
                 });
             }
+            looper(None);
+            // The caller waits for the tasks that started, blocked: a thread waiting inside the pool runs whatever
+            // work the pool has, another job's included, and this solve would end only when that job does. The
+            // tasks no thread has started return at once.
+            tasks.close_and_wait();
         });
         // Slices never started (after a failure) are left out: the failure is in the list, and ends the solve
         // below as in the sequential path.
