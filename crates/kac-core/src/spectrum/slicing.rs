@@ -25,8 +25,9 @@
 //!   faster on one thread and on two. The automatic plan slices from [`SLICING_MIN_PAIRS`] pairs on.
 //!
 //! - **Lent threads.** A host (the service) may lend idle threads of the solve's pool through [`Control::lender`]:
-//!   one per slice beyond the solve's own `threads`, each taking the next slice waiting until no slice is left or the
-//!   host wants it back ([`Lender`]). Each slice's report names the pool thread that solved it.
+//!   one per slice beyond the solve's own `threads` (asked again after each slice of the solve's own thread), each
+//!   taking the next slice waiting until no slice is left or the host wants it back ([`Lender`]). Each slice's report
+//!   names the pool thread that solved it.
 //!
 //! A plan the problem does not fit (a window holding more pairs than its subspace allows, a factor that is not
 //! backward stable, too few unknowns) is given up, and the k pairs are solved in one run instead.
@@ -298,7 +299,8 @@ pub(crate) fn solve(
     let own = threads.min(slices.len());
     let lender = control.lender.filter(|_| slices.len() > own);
     let lent = lender.map_or(0, |l| l.borrow(slices.len() - own));
-    let results: Vec<Outcome> = if own + lent > 1 {
+    // With a host, the threaded path even when nothing was lent at first: a thread may come free later.
+    let results: Vec<Outcome> = if own + lent > 1 || lender.is_some() {
         // One queue, the top slice first: it holds the k-th eigenvalue, often inside a cluster it must see whole, and
         // takes the most block steps (164k sphere, k = 1000, 8 slices: 99 steps and 9.7 s against 44 to 65 and
         // 4.9 to 8.3 s). Each thread takes the next slice when it is free, so the longest does not start last
@@ -309,7 +311,8 @@ pub(crate) fn solve(
         let failed = std::sync::atomic::AtomicBool::new(false);
         let done: Vec<std::sync::Mutex<Option<Outcome>>> = slices.iter().map(|_| std::sync::Mutex::new(None)).collect();
         let (order, next, failed, slots, run_slice) = (&order, &next, &failed, &done, &run_slice);
-        let looper = |loan: Option<&Returned<'_>>| {
+        // A thread's loop over the slices waiting, `after` run after each of its slices.
+        let looper = |loan: Option<&Returned<'_>>, after: &dyn Fn()| {
             // After a failure the rest is not started (the plan falls back to one run, or the stop ends it).
             while !failed.load(Ordering::Relaxed) {
                 let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
@@ -318,25 +321,45 @@ pub(crate) fn solve(
                     failed.store(true, Ordering::Relaxed);
                 }
                 *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                after();
                 if loan.is_some_and(|l| l.0.wanted_back()) {
                     break;
                 }
             }
         };
         let tasks = Tasks::default();
-        let (looper, tasks) = (&looper, &tasks);
+        // Loans spawned and not yet ended: the caller asks for more after each of its slices while more slices wait
+        // than threads take them (a worker the host could not lend at first, or that came free since, joins then).
+        let out = AtomicUsize::new(lent);
+        let (looper, tasks, out) = (&looper, &tasks, &out);
         rayon::scope(|scope| {
+            let spawn = |lent: bool| {
+                let loan = lender.filter(|_| lent).map(Returned);
+                scope.spawn(move |_| {
+                    if let Some(_started) = tasks.start() {
+                        looper(loan.as_ref(), &|| {});
+                    }
+                    if loan.is_some() {
+                        out.fetch_sub(1, Ordering::SeqCst);
+                    }
+                });
+            };
             // The caller's own loop runs here; the other threads (its own beyond the first, then the lent ones) are
             // tasks of the pool, taken by its idle threads.
             for t in 1..own + lent {
-                let loan = lender.filter(|_| t >= own).map(Returned);
-                scope.spawn(move |_| {
-                    let Some(_started) = tasks.start() else { return };
-                    looper(loan.as_ref());
-                    drop(loan);
-                });
+                spawn(t >= own);
             }
-            looper(None);
+            looper(None, &|| {
+                if let Some(l) = lender {
+                    let left = order.len().saturating_sub(next.load(Ordering::Relaxed));
+                    let waiting = left.saturating_sub(own + out.load(Ordering::SeqCst));
+                    let more = if waiting > 0 { l.borrow(waiting) } else { 0 };
+                    out.fetch_add(more, Ordering::SeqCst);
+                    for _ in 0..more {
+                        spawn(true);
+                    }
+                }
+            });
             // The caller waits for the tasks that started, blocked: a thread waiting inside the pool runs whatever
             // work the pool has, another job's included, and this solve would end only when that job does. The
             // tasks no thread has started return at once.
