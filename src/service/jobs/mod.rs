@@ -591,6 +591,11 @@ fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
 /// pool has: a lent worker is one of its threads, counted busy until given back.
 impl kac_core::spectrum::Lender for Jobs {
     fn borrow(&self, wanted: usize) -> usize {
+        // A job waiting in the queue comes first: no worker is lent while one waits (asked before the lock below,
+        // since the queue may be a database).
+        if self.queue.depth().map_or(true, |(enqueued, _)| enqueued > 0) {
+            return 0;
+        }
         // Under the running set's lock, so that two jobs asking together are not both granted the same worker.
         // A running job may use `solver_threads` threads of the pool: those are not idle.
         let running = self.running.lock().unwrap_or_else(|e| e.into_inner());

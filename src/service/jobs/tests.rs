@@ -262,7 +262,8 @@ fn a_full_queue_refuses_and_a_repeated_request_is_the_same_job() {
 }
 
 /// Idle workers are lent, never the ones running a job (with its solver threads), set aside for a claim or lent
-/// already; a worker given back can be lent again; and a loan is wanted back while a job waits in the queue.
+/// already, nor any while a job waits in the queue; a worker given back can be lent again; and a loan is wanted back
+/// while a job waits.
 #[test]
 fn only_idle_workers_are_lent() {
     use kac_core::spectrum::Lender;
@@ -285,10 +286,15 @@ fn only_idle_workers_are_lent() {
     assert!(!jobs.wanted_back(), "nothing waits in the queue");
     submit(&jobs, 2);
     assert!(jobs.wanted_back(), "a job waits in the queue");
+    assert_eq!(jobs.borrow(5), 0, "nothing is lent while a job waits");
     jobs.give_back();
     jobs.give_back();
     assert_eq!(jobs.lent(), 0);
-    // A job's solver threads are busy: with two per job, one running job leaves two of four workers to lend.
+    // The waiting job runs. A job's solver threads are busy: two jobs of two threads fill the four workers, of
+    // one thread leave two.
+    start(&jobs);
     jobs.solver_threads = 2;
+    assert_eq!(jobs.borrow(5), 0);
+    jobs.solver_threads = 1;
     assert_eq!(jobs.borrow(5), 2);
 }

@@ -181,7 +181,7 @@ pub struct Control<'a> {
 
 /// A host that lends idle threads of the pool a solve runs on (the service's idle workers) to a solve cut into
 /// spectrum slices ([`super::slicing`]). The solve asks when its slices are planned for as many threads as
-/// it has slices beyond its own, and again after each slice its own thread solves while more slices wait than
+/// it has slices beyond its own, and again after each slice the calling thread solves while more slices wait than
 /// threads take them (a thread that came free since joins then). Each thread granted takes the next slice waiting,
 /// and after each slice it asks whether the host wants it back (work of its own is waiting), and gives it back when
 /// so or when no slice is left.

@@ -72,8 +72,8 @@ pub struct SliceReport {
     pub worker: Option<usize>,
 }
 
-/// A thread lent by a [`Lender`], given back when dropped.
-struct Returned<'a>(&'a dyn Lender);
+/// A thread lent by a [`Lender`], given back when dropped, and taken off the count of loans out.
+struct Returned<'a>(&'a dyn Lender, &'a AtomicUsize);
 
 /// The slice loops running as tasks of the pool, and whether the caller has closed the queue (its own loop found no
 /// slice left): a task that starts after that has nothing to do.
@@ -113,6 +113,7 @@ impl Drop for Started<'_> {
 
 impl Drop for Returned<'_> {
     fn drop(&mut self) {
+        self.1.fetch_sub(1, Ordering::SeqCst);
         self.0.give_back();
     }
 }
@@ -321,6 +322,9 @@ pub(crate) fn solve(
                     failed.store(true, Ordering::Relaxed);
                 }
                 *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                if failed.load(Ordering::Relaxed) {
+                    break;
+                }
                 after();
                 if loan.is_some_and(|l| l.0.wanted_back()) {
                     break;
@@ -334,13 +338,14 @@ pub(crate) fn solve(
         let (looper, tasks, out) = (&looper, &tasks, &out);
         rayon::scope(|scope| {
             let spawn = |lent: bool| {
-                let loan = lender.filter(|_| lent).map(Returned);
+                let loan = lender.filter(|_| lent).map(|l| Returned(l, out));
                 scope.spawn(move |_| {
-                    if let Some(_started) = tasks.start() {
+                    let started = tasks.start();
+                    // Declared after `started`, so dropped before it (a panic included): the loan is given back
+                    // before the caller may leave its wait.
+                    let loan = loan;
+                    if started.is_some() {
                         looper(loan.as_ref(), &|| {});
-                    }
-                    if loan.is_some() {
-                        out.fetch_sub(1, Ordering::SeqCst);
                     }
                 });
             };
