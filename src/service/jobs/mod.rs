@@ -292,6 +292,11 @@ impl Jobs {
     pub fn lent(&self) -> usize {
         self.lent.load(Ordering::SeqCst)
     }
+    /// Whether a job waits in the queue (for any replica); a queue that cannot be read counts as one that has one, so
+    /// that no worker is lent, or kept lent, on a guess.
+    fn job_waits(&self) -> bool {
+        self.queue.depth().map_or(true, |(enqueued, _)| enqueued > 0)
+    }
     /// Workers neither running a job, nor set aside for one being claimed, nor lent.
     fn idle_in(&self, running: &HashMap<String, Arc<Job>>) -> usize {
         let starting = self.starting.load(Ordering::SeqCst);
@@ -593,7 +598,7 @@ impl kac_core::spectrum::Lender for Jobs {
     fn borrow(&self, wanted: usize) -> usize {
         // A job waiting in the queue comes first: no worker is lent while one waits (asked before the lock below,
         // since the queue may be a database).
-        if self.queue.depth().map_or(true, |(enqueued, _)| enqueued > 0) {
+        if self.job_waits() {
             return 0;
         }
         // Under the running set's lock, so that two jobs asking together are not both granted the same worker.
@@ -608,9 +613,8 @@ impl kac_core::spectrum::Lender for Jobs {
         granted
     }
     fn wanted_back(&self) -> bool {
-        // A job waiting in the queue (for any replica) takes precedence over more slices of one already running; a
-        // queue that cannot be read asks the worker back too.
-        self.queue.depth().map_or(true, |(enqueued, _)| enqueued > 0)
+        // A job waiting in the queue (for any replica) takes precedence over more slices of one already running.
+        self.job_waits()
     }
     fn give_back(&self) {
         let _ = self.lent.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |l| Some(l.saturating_sub(1)));

@@ -433,10 +433,10 @@ mod tests {
         }
     }
 
-    /// The block step's small products (Xᵀ Y of two row-major blocks, column dots, X T) against plain loops, on one thread and on
-    /// several (no rows, and row counts on both sides of the split's threshold; widths 1, 3 and 8, T with one column
-    /// fewer, so none at width 1), X T written into a run of columns of a wider column-major matrix and into a
-    /// row-major block, the columns beside them left as they were.
+    /// The block step's small products (Xᵀ Y of two row-major blocks, column dots, X T) against plain loops, on one
+    /// thread and on several (no rows, and row counts on both sides of the split's threshold; widths 1, 3 and 8, T
+    /// with one column fewer, so none at width 1), X T written into a run of columns of a wider column-major matrix
+    /// and into a row-major block, the columns beside them left as they were.
     #[test]
     fn block_products_match_the_definition_on_any_threads() {
         for &n in &[0usize, 7, PARALLEL_ROWS + 123, 3 * PARALLEL_ROWS] {

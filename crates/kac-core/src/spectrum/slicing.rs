@@ -119,10 +119,10 @@ impl Drop for Returned<'_> {
 }
 
 /// Columns added at most to the top slice's default subspace (as many as its pairs below that). Measured on the
-/// 164k-vertex sphere, k = 1000, 8 slices, two threads: the top slice (104 pairs, the 63-fold cluster at λ ≈ 992 across the 1000th eigenvalue) took 99 block
-/// steps and 13 restarts in the default 216 columns, 63 steps and 2 restarts with 100 more, 61–62 with 200 or 300;
-/// the whole solve 32.6–34.9 s against 29.9–31.5 s, its peak memory unchanged (2.9 GB: the top slice runs first,
-/// before the other slices' eigenvectors are held).
+/// 164k-vertex sphere, k = 1000, 8 slices, two threads: the top slice (104 pairs, the 63-fold cluster at λ ≈ 992
+/// across the 1000th eigenvalue) took 99 block steps and 13 restarts in the default 216 columns, 63 steps and 2
+/// restarts with 100 more, 61–62 with 200 or 300; the whole solve 32.6–34.9 s against 29.9–31.5 s, its peak memory
+/// unchanged (2.9 GB: the top slice runs first, before the other slices' eigenvectors are held).
 const TOP_EXTRA: usize = 100;
 
 /// The number of slices for `wanted` pairs (beyond the deflated ones) on `threads` threads, unless `asked`.
