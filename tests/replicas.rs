@@ -372,3 +372,72 @@ fn a_search_on_one_replica_sees_fingerprints_and_removals_made_on_another() {
     let (_, shape, _) = call(agent().get(&c.url(&format!("/v1/shapes/{}", ids[1]))).call()).unwrap();
     assert_eq!(shape["tags"], json!(["kept"]));
 }
+
+#[test]
+#[ignore = "needs PostgreSQL's server (scripts/test-all.sh installs it and runs this)"]
+fn slices_of_one_job_are_solved_on_another_replica() {
+    let cluster = pg::Cluster::start("slices");
+    let url = cluster.database("kac");
+    // One worker each: the replica that claims the job is busy with it, so a slice solved by a slice job was solved
+    // by the other replica.
+    let flags = ["--workers", "1", "--solver-threads", "1", "--cache-bytes", "0"];
+    let a = Replica::start(Some(&url), &flags);
+    let b = Replica::start(Some(&url), &flags);
+    let single = Replica::start(None, &flags);
+    let (_, shape, _) = call(agent().post(&a.url("/v1/shapes?format=off")).send_bytes(&off(5))).unwrap();
+    call(agent().post(&single.url("/v1/shapes?format=off")).send_bytes(&off(5))).unwrap();
+    let spectrum = |slices: usize| {
+        json!({ "shape_id": shape["id"], "analysis": "spectrum", "k": 400, "eigenvectors": false,
+                "solver": { "slices": slices } })
+    };
+    // Submitted to `to`, followed on `on`: the result (its values left out).
+    let solve = |to: &Replica, on: &Replica, req: Value| {
+        let (st, job, _) = call(agent().post(&to.url("/v1/jobs")).send_json(req)).unwrap();
+        assert!(st == 202 || st == 200, "{job}");
+        let id = job["id"].as_str().unwrap().to_string();
+        let t = Instant::now();
+        let done = loop {
+            let (_, v, _) = call(agent().get(&on.url(&format!("/v1/jobs/{id}"))).call()).unwrap();
+            if v["status"] != "enqueued" && v["status"] != "processing" {
+                break v;
+            }
+            assert!(t.elapsed() < Duration::from_secs(300), "the job did not finish: {v}");
+            std::thread::sleep(Duration::from_millis(100));
+        };
+        assert_eq!(done["status"], "succeeded", "{done}");
+        call(agent().get(&on.url(done["result"].as_str().unwrap())).call()).unwrap().1
+    };
+    let result = solve(&a, &b, spectrum(4));
+    let solver = &result["solver"];
+    let slices = solver["slices"].as_array().unwrap_or_else(|| panic!("no slices: {solver}"));
+    assert_eq!(slices.len(), 4, "{solver}");
+    let elsewhere: Vec<&Value> = slices.iter().filter(|s| !s["solved_by"].is_null()).collect();
+    let jobs = cluster.query("kac", "SELECT status, view::jsonb->>'analysis', claims, owner FROM jobs ORDER BY seq");
+    assert!(!elsewhere.is_empty(), "no slice was solved on the other replica: {solver}\n{jobs}");
+    for s in &elsewhere {
+        assert!(s["worker"].is_null() && s["pairs"].as_u64().unwrap() > 0, "{s}");
+    }
+    assert_eq!(solver["completeness"]["complete"], true, "{solver}");
+    // The slice jobs are not listed, each ended (succeeded on the other replica, or taken back), and none runs on.
+    let (_, list, _) = call(agent().get(&a.url("/v1/jobs")).call()).unwrap();
+    let listed: Vec<&str> = list["items"].as_array().unwrap().iter().map(|j| j["analysis"].as_str().unwrap()).collect();
+    assert_eq!(listed, vec!["spectrum"], "{list}");
+    let open = cluster.query("kac", "SELECT count(*) FROM jobs WHERE status IN ('enqueued', 'processing')");
+    assert_eq!(open, "0");
+    let solved = cluster.query(
+        "kac",
+        "SELECT count(*) FROM jobs WHERE view::jsonb->>'analysis' = 'spectrum-slice' AND status = 'succeeded'",
+    );
+    assert_eq!(solved.parse::<usize>().unwrap(), elsewhere.len());
+    // The same eigenvalues as one process solving all four slices itself, and as one run, to 10⁻⁸.
+    let values =
+        |r: &Value| -> Vec<f64> { r["eigenvalues"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    let shared = values(&result);
+    let by_one = values(&solve(&single, &single, spectrum(4)));
+    let one_run = values(&solve(&single, &single, spectrum(1)));
+    assert_eq!((shared.len(), by_one.len(), one_run.len()), (400, 400, 400));
+    for ((x, y), z) in shared.iter().zip(&by_one).zip(&one_run) {
+        assert!((x - y).abs() <= 1e-8 * y.abs().max(1.0), "{x} against {y} in one process");
+        assert!((x - z).abs() <= 1e-8 * z.abs().max(1.0), "{x} against {z} in one run");
+    }
+}

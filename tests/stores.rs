@@ -251,12 +251,20 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     let v = reopen().queue.get(&jid("j5")).unwrap().unwrap();
     assert_eq!((v.status, v.error.map(|p| p.code)), (Status::Canceled, Some("canceled".to_string())));
     assert!(q.claim("r1:5", lease).unwrap().is_none(), "a canceled job is not claimed again");
+    // A job claimed by its id (a job taking back its own slice job), by one claim only, and only while enqueued.
+    assert!(matches!(q.enqueue(job(&h("j6")), 9).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job(&h("j7")), 9).unwrap(), Enqueued::New(_)));
+    assert!(q.claim_id(&h("j5"), "r1:6", lease).unwrap().is_none(), "canceled");
+    let c7 = reopen().queue.claim_id(&h("j7"), "r2:3", lease).unwrap().unwrap();
+    assert_eq!((c7.id.clone(), c7.status), (h("j7"), Status::Processing));
+    assert!(q.claim_id(&h("j7"), "r1:6", lease).unwrap().is_none(), "claimed once");
+    assert_eq!(q.claim("r1:6", lease).unwrap().unwrap().id, h("j6"), "the older job was left to a claim");
     // Counts and the list.
     let counts = q.counts().unwrap();
     let of = |s: &str| counts.iter().find(|(n, _)| n == s).map_or(0, |c| c.1);
-    assert_eq!((of("succeeded"), of("processing"), of("canceled")), (1, 2, 1));
+    assert_eq!((of("succeeded"), of("processing"), of("canceled")), (1, 4, 1));
     let ids: Vec<String> = q.list().unwrap().into_iter().map(|v| v.id).collect();
-    assert_eq!(ids.len(), 4);
+    assert_eq!(ids.len(), 6);
     // Every transition was announced.
     let mut seen = std::collections::HashSet::new();
     let t = std::time::Instant::now();

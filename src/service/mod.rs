@@ -100,6 +100,7 @@ impl Inner {
         });
         let st = state.clone();
         std::thread::Builder::new().name("kac-dispatch".into()).spawn(move || jobs::dispatch(st))?;
+        jobs::wake_on_changes(&state.jobs)?;
         let st = state.clone();
         std::thread::Builder::new().name("kac-supervise".into()).spawn(move || jobs::supervise(st))?;
         Ok(state)

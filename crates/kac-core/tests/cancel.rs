@@ -22,7 +22,8 @@ fn stop_at(shape: &Shape, opts: &EigenOptions, phase: &str, nth: usize) -> (Resu
         }
     };
     let r =
-        eigs(&o.pair, opts, None, Control { progress: Some(&progress), stop: Some(&stop), lender: None }).map(|_| ());
+        eigs(&o.pair, opts, None, Control { progress: Some(&progress), stop: Some(&stop), lender: None, farm: None })
+            .map(|_| ());
     (r, phases.into_inner().unwrap())
 }
 

@@ -137,7 +137,7 @@ fn a_stop_inside_a_slice_cancels() {
         }
     };
     let o = EigenOptions { k: 150, slices: Some(4), threads: 1, method: Method::Sparse, ..Default::default() };
-    let r = eigs(&pair, &o, None, Control { progress: Some(&progress), stop: Some(&stop), lender: None });
+    let r = eigs(&pair, &o, None, Control { progress: Some(&progress), stop: Some(&stop), lender: None, farm: None });
     assert!(matches!(r, Err(EigenError::Canceled)), "{:?}", r.map(|s| s.values.len()));
     assert!(stop.load(Ordering::Relaxed));
 }
@@ -300,4 +300,96 @@ fn a_thread_that_comes_free_mid_solve_joins() {
     assert!(host.asked.load(Ordering::SeqCst) >= 1, "the thread lent after the first slice solved one");
     let workers: std::collections::HashSet<_> = sliced.stats.slices.iter().map(|s| s.worker).collect();
     assert_eq!(workers.len(), 2, "{:?}", sliced.stats.slices);
+}
+
+/// Another machine for a sliced solve ([`kac_core::spectrum::Farm`]): it holds a pencil it built itself from the same
+/// shape, starts the slices `starts` names as soon as they are offered (each on a thread of its own, by
+/// `solve_slice`), and leaves the others to be taken back. A slice in `corrupt` reaches it with a wrong pencil digest,
+/// so it refuses it and the solve must solve that slice itself.
+struct Machine {
+    pair: std::sync::Arc<operators::sparse::SparsePair>,
+    starts: Vec<usize>,
+    corrupt: Vec<usize>,
+    offered: std::sync::Mutex<Vec<usize>>,
+    running: std::sync::Mutex<Vec<(usize, std::thread::JoinHandle<Result<Spectrum, EigenError>>)>>,
+}
+
+impl kac_core::spectrum::Farm for Machine {
+    fn offer(&self, task: &kac_core::spectrum::slicing::SliceTask) -> bool {
+        self.offered.lock().unwrap().push(task.index);
+        if self.starts.contains(&task.index) {
+            let (pair, index, mut task) = (self.pair.clone(), task.index, task.clone());
+            if self.corrupt.contains(&task.index) {
+                task.pencil = "0".repeat(64);
+            }
+            let handle = std::thread::spawn(move || {
+                kac_core::spectrum::slicing::solve_slice(&pair, &task, 1, Control::default())
+            });
+            self.running.lock().unwrap().push((index, handle));
+        }
+        true
+    }
+    fn take_back(&self, task: &kac_core::spectrum::slicing::SliceTask) -> bool {
+        !self.starts.contains(&task.index)
+    }
+    fn collect(
+        &self,
+        task: &kac_core::spectrum::slicing::SliceTask,
+        _: &Control<'_>,
+    ) -> Result<Option<kac_core::spectrum::slicing::Solved>, EigenError> {
+        let mut running = self.running.lock().unwrap();
+        let at = running.iter().position(|(i, _)| *i == task.index).expect("collected once, after being started");
+        let (_, handle) = running.remove(at);
+        Ok(match handle.join().unwrap() {
+            Ok(spectrum) => Some(kac_core::spectrum::slicing::Solved { spectrum, seconds: 0.0, by: "b".into() }),
+            Err(EigenError::InvalidOption { name: "pencil", .. }) => None,
+            Err(e) => panic!("slice {} failed elsewhere: {e}", task.index),
+        })
+    }
+}
+
+/// One thread and another machine: the slices the thread does not start at once (2, 1 and 0; the top one first is its
+/// own) are offered; the machine solves slice 2, slice 1 is taken back, and slice 0, which the machine refuses (its
+/// pencil's digest differs), is solved here. The result is the one run's, M-orthonormal across every edge, and says
+/// who solved each slice.
+#[test]
+fn slices_solved_on_another_machine_are_stitched_in() {
+    let shape = Shape::TriangleMesh(generate::icosphere(4));
+    let pair = pair_of(&shape, Boundary::Neumann);
+    let k = 150;
+    let whole = solve(&pair, k, 1, 1);
+    let machine = Machine {
+        pair: std::sync::Arc::new(pair_of(&shape, Boundary::Neumann)),
+        starts: vec![2, 0],
+        corrupt: vec![0],
+        offered: Default::default(),
+        running: Default::default(),
+    };
+    let o = EigenOptions { k, slices: Some(4), threads: 1, method: Method::Sparse, ..Default::default() };
+    let sliced = eigs(&pair, &o, None, Control { farm: Some(&machine), ..Control::default() }).unwrap();
+    assert_eq!(*machine.offered.lock().unwrap(), vec![2, 1, 0]);
+    assert!(machine.running.lock().unwrap().is_empty(), "every slice started elsewhere was collected");
+    let by: Vec<Option<&str>> = sliced.stats.slices.iter().map(|s| s.solved_by.as_deref()).collect();
+    assert_eq!(by, vec![None, None, Some("b"), None]);
+    assert!(sliced.stats.slices[2].worker.is_none() && sliced.stats.slices[2].block_steps > 0);
+    assert_same_values(&sliced, &whole);
+    let defect = orthonormality_defect(&pair, &sliced);
+    assert!(defect < 1e-8, "ΦᵀMΦ − I reaches {defect:e}");
+    assert!(sliced.stats.completeness.as_ref().is_some_and(|c| c.complete));
+    // A pencil of another problem is refused outright.
+    let other = pair_of(&Shape::TriangleMesh(generate::icosphere(3)), Boundary::Neumann);
+    let task = kac_core::spectrum::slicing::SliceTask {
+        index: 1,
+        slices: 4,
+        lo: Some(10.0),
+        hi: Some(20.0),
+        sigma: 15.0,
+        total: None,
+        count: Some(10),
+        below_lo: 20,
+        options: EigenOptions { k: 10, ..Default::default() },
+        pencil: kac_core::spectrum::slicing::pencil_digest(&pair),
+    };
+    let refused = kac_core::spectrum::slicing::solve_slice(&other, &task, 1, Control::default());
+    assert!(matches!(refused, Err(EigenError::InvalidOption { name: "pencil", .. })), "{:?}", refused.err());
 }

@@ -20,9 +20,11 @@ use tokio::sync::{broadcast, watch};
 
 mod clock;
 mod runner;
+mod slices;
 pub use clock::{Clock, ManualClock, SystemClock};
 use runner::canceled;
 pub use runner::{result_of, supervise, Beats};
+pub use slices::{SliceRequest, SLICE_JOB};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
@@ -158,6 +160,8 @@ pub enum Work {
     Compare(super::compare::CompareRequest, Vec<Arc<StoredShape>>),
     /// The correspondence between two stored shapes (source, target).
     Correspondence(super::correspondence::CorrespondenceRequest, Arc<StoredShape>, Arc<StoredShape>),
+    /// One slice of another job's spectrum ([`slices`]).
+    Slice(SliceRequest, Arc<StoredShape>),
 }
 
 impl Job {
@@ -319,9 +323,11 @@ impl Jobs {
     pub fn held_claims(&self) -> Vec<String> {
         self.running.lock().unwrap_or_else(|e| e.into_inner()).values().map(|j| j.owner.clone()).collect()
     }
-    /// Every job, oldest first (live views for the ones running here).
+    /// Every job, oldest first (live views for the ones running here), slice jobs left out (each is part of a job
+    /// listed).
     pub fn list(&self) -> Result<Vec<JobView>, JobError> {
         let mut all = self.queue.list()?;
+        all.retain(|v| v.analysis != SLICE_JOB);
         for v in &mut all {
             if let Some(j) = self.local(&v.id) {
                 *v = j.snapshot();
@@ -574,6 +580,11 @@ fn work_of(state: &AppState, view: &JobView) -> Result<Work, NoWork> {
         let target = shape(&req.target_id, "the correspondence's target is no longer stored")?;
         return Ok(Work::Correspondence(req, source, target));
     }
+    if view.analysis == SLICE_JOB {
+        let req = serde_json::from_value::<SliceRequest>(view.request.clone())
+            .map_err(|_| NoWork::Gone("the stored request no longer parses"))?;
+        return Ok(Work::Slice(req, shape(&view.shape_id, "the job's shape is no longer stored")?));
+    }
     if view.analysis == "compare" {
         let req = serde_json::from_value::<super::compare::CompareRequest>(view.request.clone())
             .map_err(|_| NoWork::Gone("the stored request no longer parses"))?;
@@ -620,6 +631,23 @@ impl kac_core::spectrum::Lender for Jobs {
         let _ = self.lent.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |l| Some(l.saturating_sub(1)));
         self.notify();
     }
+}
+
+/// Wakes this replica's dispatcher whenever the queue announces a change (a job enqueued on any replica among
+/// them), so that an idle worker claims it at once rather than at its next poll. Ends with the queue.
+pub fn wake_on_changes(jobs: &Arc<Jobs>) -> std::io::Result<()> {
+    let mut changes = jobs.queue.changes();
+    let jobs = Arc::downgrade(jobs);
+    std::thread::Builder::new().name("kac-wake".into()).spawn(move || loop {
+        match changes.blocking_recv() {
+            Ok(_) | Err(broadcast::error::RecvError::Lagged(_)) => match jobs.upgrade() {
+                Some(j) => j.notify(),
+                None => return,
+            },
+            Err(broadcast::error::RecvError::Closed) => return,
+        }
+    })?;
+    Ok(())
 }
 
 /// The dispatcher of this replica: claims jobs from the queue while a worker is free and starts them on the pool;

@@ -10,6 +10,8 @@ pub(super) fn start(state: &AppState, view: JobView, owner: String) {
         "compare"
     } else if view.analysis == "correspondence" {
         "correspondence"
+    } else if view.analysis == SLICE_JOB {
+        SLICE_JOB
     } else {
         serde_json::from_value::<Analysis>(view.request.clone()).map_or("unknown", |a| a.name())
     };
@@ -183,9 +185,20 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
         });
     };
     let on_solve = |s: &kac_core::spectrum::Stats| state.metrics.record_solve(s);
+    // Slices of this job's spectrum that other replicas may solve (with a shared store); one operator per job, so
+    // analyses of one shape only.
+    let farm = match &work {
+        Work::Analysis(..) => slices::SliceFarm::of(state, &job.snapshot()),
+        _ => None,
+    };
     let hooks = Hooks {
         on_solve: Some(&on_solve),
-        control: Control { progress: Some(&progress), stop: Some(&job.stop), lender: Some(&*state.jobs) },
+        control: Control {
+            progress: Some(&progress),
+            stop: Some(&job.stop),
+            lender: Some(&*state.jobs),
+            farm: farm.as_ref().map(|f| f as &dyn kac_core::spectrum::Farm),
+        },
         cache: Some(&*state.cache),
         threads: state.config.solver_threads,
         limits: analysis::SolverLimits { max_pairs: state.config.max_k, max_values: state.config.max_output_values },
@@ -201,6 +214,7 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
             Work::Correspondence(req, s, t) => {
                 crate::service::correspondence::run(&s.validated, &t.validated, req, hooks)
             }
+            Work::Slice(req, shape) => slices::run(shape, req, hooks, &state.jobs.replica),
         }
     }));
     match result {

@@ -96,9 +96,19 @@ fn conformance(q: &dyn JobQueue, clock: &ManualClock) {
     assert_eq!(held.id, b.id);
     assert_eq!(q.recover().unwrap(), 1);
     assert_eq!(q.get(&jid(&b)).unwrap().unwrap().status, Status::Enqueued);
+    // A job claimed by its id: taken though an older one waits, once; one not enqueued is not claimed.
+    let d = view(4);
+    assert!(matches!(q.enqueue(d.clone(), 2).unwrap(), Enqueued::New(_)));
+    assert!(q.claim_id(&a.id, "w:5", LEASE).unwrap().is_none(), "succeeded");
+    assert!(q.claim_id(&c.id, "w:5", LEASE).unwrap().is_none(), "canceled");
+    let mine = q.claim_id(&d.id, "w:5", LEASE).unwrap().unwrap();
+    assert_eq!((mine.id.as_str(), mine.status), (d.id.as_str(), Status::Processing));
+    assert!(q.claim_id(&d.id, "w:6", LEASE).unwrap().is_none(), "claimed once");
+    assert_eq!(q.heartbeat(&d.id, "w:5", &progress("iterating"), LEASE).unwrap(), Lease::Held { cancel: false });
+    assert_eq!(q.get(&jid(&b)).unwrap().unwrap().status, Status::Enqueued, "the older job waits on");
     // Submission order, every job listed.
     let order: Vec<String> = q.list().unwrap().into_iter().map(|v| v.id).collect();
-    assert_eq!(order, vec![a.id.clone(), c.id.clone(), b.id.clone()]);
+    assert_eq!(order, vec![a.id.clone(), c.id.clone(), b.id.clone(), d.id.clone()]);
 }
 
 #[test]

@@ -41,6 +41,28 @@ impl MemoryQueue {
     fn announce(&self, id: &str) {
         let _ = self.changes.send(id.to_string());
     }
+    /// Claims the oldest enqueued job, or `only` if it is enqueued.
+    fn claim_where(&self, only: Option<&str>, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
+        let mut rows = self.rows();
+        let until = self.clock.wall_ms() + lease.as_millis() as i64;
+        let Some(row) = rows
+            .jobs
+            .values_mut()
+            .filter(|r| r.view.status == Status::Enqueued && only.is_none_or(|id| r.view.id == id))
+            .min_by_key(|r| r.seq)
+        else {
+            return Ok(None);
+        };
+        row.view.status = Status::Processing;
+        row.view.started_at = Some(now());
+        row.view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
+        row.owner = Some(owner.to_string());
+        row.lease_until = until;
+        let view = row.view.clone();
+        drop(rows);
+        self.announce(&view.id);
+        Ok(Some(view))
+    }
     fn requeue_if(&self, expired: impl Fn(&Row) -> bool) -> Vec<String> {
         let mut rows = self.rows();
         let mut ids = vec![];
@@ -84,21 +106,10 @@ impl JobQueue for MemoryQueue {
         Ok(Enqueued::New(view))
     }
     fn claim(&self, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
-        let mut rows = self.rows();
-        let until = self.clock.wall_ms() + lease.as_millis() as i64;
-        let Some(row) = rows.jobs.values_mut().filter(|r| r.view.status == Status::Enqueued).min_by_key(|r| r.seq)
-        else {
-            return Ok(None);
-        };
-        row.view.status = Status::Processing;
-        row.view.started_at = Some(now());
-        row.view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
-        row.owner = Some(owner.to_string());
-        row.lease_until = until;
-        let view = row.view.clone();
-        drop(rows);
-        self.announce(&view.id);
-        Ok(Some(view))
+        self.claim_where(None, owner, lease)
+    }
+    fn claim_id(&self, id: &str, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
+        self.claim_where(Some(id), owner, lease)
     }
     fn heartbeat(&self, id: &str, owner: &str, progress: &JobProgress, lease: Duration) -> std::io::Result<Lease> {
         let mut rows = self.rows();

@@ -94,6 +94,40 @@ impl Drop for Postgres {
 }
 
 impl Postgres {
+    /// Claims the oldest enqueued job, or `only` if it is enqueued.
+    fn claim_where(&self, only: Option<&str>, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
+        let (only, owner) = (only.map(str::to_string), owner.to_string());
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let Some(row) = tx
+                .query_opt(
+                    "SELECT id, view FROM jobs WHERE status = 'enqueued' AND ($1::text IS NULL OR id = $1)
+                     ORDER BY seq LIMIT 1 FOR UPDATE SKIP LOCKED",
+                    &[&only],
+                )
+                .await
+                .map_err(pg)?
+            else {
+                return Ok(None);
+            };
+            let id: String = row.get(0);
+            let mut view = view_of(row.get(1))?;
+            view.status = Status::Processing;
+            view.started_at = Some(now());
+            view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
+            tx.execute(
+                "UPDATE jobs SET status = 'processing', owner = $2, view = $3, claims = claims + 1,
+                 lease_until = now() + make_interval(secs => $4) WHERE id = $1",
+                &[&id, &owner, &text_of(&view)?, &secs(lease)],
+            )
+            .await
+            .map_err(pg)?;
+            tx.execute("SELECT pg_notify('kac_jobs', $1)", &[&id]).await.map_err(pg)?;
+            tx.commit().await.map_err(pg)?;
+            Ok(Some(view))
+        })
+    }
     /// Connects (a pool of `pool_size`, and one connection that listens), and migrates the schema.
     pub fn open(url: &str, pool_size: usize, max_vertices: usize, cache_bytes: usize) -> std::io::Result<Self> {
         let mut config: tokio_postgres::Config =
@@ -761,36 +795,10 @@ impl JobQueue for Postgres {
         })
     }
     fn claim(&self, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
-        let owner = owner.to_string();
-        self.run(move |pool| async move {
-            let mut c = pool.get().await.map_err(pg)?;
-            let tx = c.transaction().await.map_err(pg)?;
-            let Some(row) = tx
-                .query_opt(
-                    "SELECT id, view FROM jobs WHERE status = 'enqueued' ORDER BY seq LIMIT 1 FOR UPDATE SKIP LOCKED",
-                    &[],
-                )
-                .await
-                .map_err(pg)?
-            else {
-                return Ok(None);
-            };
-            let id: String = row.get(0);
-            let mut view = view_of(row.get(1))?;
-            view.status = Status::Processing;
-            view.started_at = Some(now());
-            view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
-            tx.execute(
-                "UPDATE jobs SET status = 'processing', owner = $2, view = $3, claims = claims + 1,
-                 lease_until = now() + make_interval(secs => $4) WHERE id = $1",
-                &[&id, &owner, &text_of(&view)?, &secs(lease)],
-            )
-            .await
-            .map_err(pg)?;
-            tx.execute("SELECT pg_notify('kac_jobs', $1)", &[&id]).await.map_err(pg)?;
-            tx.commit().await.map_err(pg)?;
-            Ok(Some(view))
-        })
+        self.claim_where(None, owner, lease)
+    }
+    fn claim_id(&self, id: &str, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
+        self.claim_where(Some(id), owner, lease)
     }
     fn heartbeat(&self, id: &str, owner: &str, progress: &JobProgress, lease: Duration) -> std::io::Result<Lease> {
         let (id, owner, progress) = (id.to_string(), owner.to_string(), progress.clone());

@@ -38,6 +38,9 @@ pub trait JobQueue: Send + Sync {
     /// Claims the oldest enqueued job for `owner` (a token unique to this claim) for `lease`: status
     /// `processing`, `started_at` now. None when nothing is enqueued.
     fn claim(&self, owner: &str, lease: Duration) -> Result<Option<JobView>>;
+    /// Claims the job `id` as [`JobQueue::claim`] does, if it is enqueued (a job that cut itself into slice jobs takes
+    /// back one that nobody started); None when it is not.
+    fn claim_id(&self, id: &str, owner: &str, lease: Duration) -> Result<Option<JobView>>;
     /// Renews the lease of a claimed job and records its progress.
     fn heartbeat(&self, id: &str, owner: &str, progress: &JobProgress, lease: Duration) -> Result<Lease>;
     /// Writes the final view (succeeded, failed or canceled) of a job this claim still holds; false (nothing

@@ -440,29 +440,10 @@ impl JobQueue for Database {
         Ok(Enqueued::New(view))
     }
     fn claim(&self, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
-        let mut c = self.conn();
-        let tx = c.transaction().map_err(db_err)?;
-        let next: Option<(String, String)> = tx
-            .query_row("SELECT id, view FROM jobs WHERE status = 'enqueued' ORDER BY seq LIMIT 1", [], |r| {
-                Ok((r.get(0)?, r.get(1)?))
-            })
-            .optional()
-            .map_err(db_err)?;
-        let Some((id, text)) = next else { return Ok(None) };
-        let mut view = view_of(&text)?;
-        view.status = Status::Processing;
-        view.started_at = Some(now());
-        view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
-        let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
-        tx.execute(
-            "UPDATE jobs SET status = 'processing', owner = ?2, lease_until = ?3, view = ?4 WHERE id = ?1",
-            rusqlite::params![id, owner, self.clock.wall_ms() + lease.as_millis() as i64, text],
-        )
-        .map_err(db_err)?;
-        tx.commit().map_err(db_err)?;
-        drop(c);
-        let _ = self.changes.send(id);
-        Ok(Some(view))
+        self.claim_where(None, owner, lease)
+    }
+    fn claim_id(&self, id: &str, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
+        self.claim_where(Some(id), owner, lease)
     }
     fn heartbeat(&self, id: &str, owner: &str, progress: &JobProgress, lease: Duration) -> std::io::Result<Lease> {
         let c = self.conn();
@@ -561,7 +542,34 @@ impl JobQueue for Database {
 }
 
 impl Database {
-    /// Puts the processing jobs matching `condition` (with `?1` bound to `arg`) back in the queue.
+    /// Claims the oldest enqueued job, or `only` if it is enqueued.
+    fn claim_where(&self, only: Option<&str>, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
+        let mut c = self.conn();
+        let tx = c.transaction().map_err(db_err)?;
+        let next: Option<(String, String)> = tx
+            .query_row(
+                "SELECT id, view FROM jobs WHERE status = 'enqueued' AND (?1 IS NULL OR id = ?1) ORDER BY seq LIMIT 1",
+                [only],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .optional()
+            .map_err(db_err)?;
+        let Some((id, text)) = next else { return Ok(None) };
+        let mut view = view_of(&text)?;
+        view.status = Status::Processing;
+        view.started_at = Some(now());
+        view.progress = JobProgress { phase: "operator".into(), converged: 0, wanted: 0 };
+        let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
+        tx.execute(
+            "UPDATE jobs SET status = 'processing', owner = ?2, lease_until = ?3, view = ?4 WHERE id = ?1",
+            rusqlite::params![id, owner, self.clock.wall_ms() + lease.as_millis() as i64, text],
+        )
+        .map_err(db_err)?;
+        tx.commit().map_err(db_err)?;
+        drop(c);
+        let _ = self.changes.send(id);
+        Ok(Some(view))
+    }
     /// Requeues the processing jobs that meet `condition` (on `arg`), except those whose owner is in `held`.
     fn requeue_where(&self, condition: &str, arg: i64, held: &[String]) -> std::io::Result<Vec<String>> {
         let mut c = self.conn();

@@ -177,6 +177,8 @@ pub struct Control<'a> {
     pub stop: Option<&'a AtomicBool>,
     /// Idle threads a host lends to a sliced solve beyond its own `threads` ([`Lender`]); none without one.
     pub lender: Option<&'a dyn Lender>,
+    /// Where slices may be solved by other machines ([`Farm`]); none without one.
+    pub farm: Option<&'a dyn Farm>,
 }
 
 /// A host that lends idle threads of the pool a solve runs on (the service's idle workers) to a solve cut into
@@ -196,6 +198,26 @@ pub trait Lender: Sync {
     fn wanted_back(&self) -> bool;
     /// One granted thread is given back.
     fn give_back(&self);
+}
+
+/// A host that has slices of a sliced solve solved elsewhere (the service's slice jobs, which any replica sharing its
+/// queue may claim). The solve offers the slices its own and lent threads do not start at once; a thread that comes
+/// to an offered slice takes it back when nobody has started it, and otherwise collects it once the solve has no
+/// slice of its own left. A slice that failed or was lost elsewhere is solved here after all, so an offer can only
+/// save time, never lose a slice.
+pub trait Farm: Sync {
+    /// Offers a slice; false when it was not taken (the solve keeps it).
+    fn offer(&self, task: &super::slicing::SliceTask) -> bool;
+    /// Takes an offered slice back when nobody has started it; true: it is the solve's to run now.
+    fn take_back(&self, task: &super::slicing::SliceTask) -> bool;
+    /// Waits for an offered slice solved elsewhere, watching `control`'s stop flag: its pairs (values and
+    /// M-orthonormal vectors of the whole problem), what the slice's run did, and who solved it. `None`: the slice
+    /// is the solve's to run after all (taken back, or failed or lost where it ran).
+    fn collect(
+        &self,
+        task: &super::slicing::SliceTask,
+        control: &Control<'_>,
+    ) -> Result<Option<super::slicing::Solved>, EigenError>;
 }
 
 impl Control<'_> {

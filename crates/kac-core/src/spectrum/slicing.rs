@@ -29,12 +29,21 @@
 //!   taking the next slice waiting until no slice is left or the host wants it back ([`Lender`]). Each slice's report
 //!   names the pool thread that solved it.
 //!
+//! - **Slices elsewhere.** A host may also have slices solved by other machines through [`Control::farm`] (the
+//!   service's slice jobs, which any replica sharing its queue claims): the slices the solve's own and lent threads
+//!   do not start at once are offered as [`SliceTask`]s; a thread that comes to an offered slice nobody has started
+//!   takes it back, and the solve's own threads collect the others once no slice of their own is left. The machine
+//!   that solves one rebuilds the pencil from the same request, checks it against the task's digest
+//!   ([`pencil_digest`]), and runs [`solve_slice`]: the same run as here. A slice that failed or was lost elsewhere
+//!   is solved here after all. Its report names who solved it.
+//!
 //! A plan the problem does not fit (a window holding more pairs than its subspace allows, a factor that is not
 //! backward stable, too few unknowns) is given up, and the k pairs are solved in one run instead.
 
 use super::lanczos::{self, Window};
 use super::*;
 use rayon::prelude::*;
+use serde::Deserialize;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The fewest pairs (beyond the known zero modes) the automatic plan slices: below, one run is faster on one thread
@@ -70,6 +79,188 @@ pub struct SliceReport {
     /// The thread of the solve's pool that solved this slice (its index there: in the service, the worker); null
     /// outside a pool. Slices of one job on several workers are the idle workers the service lent it.
     pub worker: Option<usize>,
+    /// Who solved the slice when another machine did (in the service, the replica whose slice job solved it;
+    /// `worker` is then null); null when the solve's own or lent threads did.
+    pub solved_by: Option<String>,
+}
+
+/// One slice as another machine solves it ([`Farm`], [`solve_slice`]): its window, the options of its run, and the
+/// digest of the pencil it belongs to.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SliceTask {
+    /// Its place among the solve's slices (0: the lowest), of `slices`.
+    pub index: usize,
+    pub slices: usize,
+    /// The window's lower end (null: the lowest slice, from the bottom of the spectrum).
+    pub lo: Option<f64>,
+    /// The window's upper end (null: the top slice, up to the `total`-th eigenvalue).
+    pub hi: Option<f64>,
+    pub sigma: f64,
+    pub total: Option<usize>,
+    pub count: Option<usize>,
+    pub below_lo: usize,
+    /// The run's options: `k` the pairs the window holds, its subspace (`threads` is the solving machine's own).
+    pub options: EigenOptions,
+    /// [`pencil_digest`] of the problem: a machine that built another pencil refuses the task.
+    pub pencil: String,
+}
+
+impl SliceTask {
+    fn window(&self) -> Window {
+        Window {
+            lo: self.lo.unwrap_or(f64::NEG_INFINITY),
+            hi: self.hi.unwrap_or(f64::INFINITY),
+            sigma: self.sigma,
+            total: self.total,
+            count: self.count,
+            below_lo: self.below_lo,
+        }
+    }
+}
+
+/// A slice solved elsewhere, as [`Farm::collect`] hands it back.
+pub struct Solved {
+    /// The slice's pairs; its statistics those [`PartStats`] carries.
+    pub spectrum: Spectrum,
+    pub seconds: f64,
+    pub by: String,
+}
+
+/// What a slice's run did, as it travels with the pairs from the machine that solved it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct PartStats {
+    pub sigma: f64,
+    pub block: usize,
+    pub subspace: usize,
+    pub restarts: usize,
+    pub block_steps: usize,
+    pub solves: usize,
+    pub factor_nnz: usize,
+    pub below_sigma: Option<usize>,
+    pub numeric_s: f64,
+    pub solve_s: f64,
+    pub orthogonalize_s: f64,
+    pub rayleigh_ritz_s: f64,
+    pub restart_s: f64,
+}
+
+impl PartStats {
+    pub fn of(s: &Stats) -> Self {
+        let t = &s.timings;
+        PartStats {
+            sigma: s.sigma,
+            block: s.block,
+            subspace: s.subspace,
+            restarts: s.restarts,
+            block_steps: s.block_steps,
+            solves: s.solves,
+            factor_nnz: s.factor_nnz,
+            below_sigma: s.below_sigma,
+            numeric_s: t.numeric_s,
+            solve_s: t.solve_s,
+            orthogonalize_s: t.orthogonalize_s,
+            rayleigh_ritz_s: t.rayleigh_ritz_s,
+            restart_s: t.restart_s,
+        }
+    }
+    pub fn stats(&self) -> Stats {
+        Stats {
+            method: "block-lanczos",
+            factorization: "ldlt",
+            sigma: self.sigma,
+            block: self.block,
+            subspace: self.subspace,
+            restarts: self.restarts,
+            block_steps: self.block_steps,
+            solves: self.solves,
+            factor_nnz: self.factor_nnz,
+            below_sigma: self.below_sigma,
+            timings: Timings {
+                numeric_s: self.numeric_s,
+                solve_s: self.solve_s,
+                orthogonalize_s: self.orthogonalize_s,
+                rayleigh_ritz_s: self.rayleigh_ritz_s,
+                restart_s: self.restart_s,
+                ..Default::default()
+            },
+            ..Default::default()
+        }
+    }
+}
+
+/// SHA-256 (hex) of a pencil: its size, dimension, pattern, both matrices' values to the bit, and what is known of
+/// its null space. Two machines that built the same operator from the same request agree on it; any other pencil
+/// differs.
+pub fn pencil_digest(pair: &SparsePair) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    let word = |h: &mut Sha256, x: u64| h.update(x.to_le_bytes());
+    word(&mut h, pair.n() as u64);
+    word(&mut h, pair.dimension.map_or(0, |d| 1 + d as u64));
+    word(&mut h, pair.mass_is_diagonal as u64);
+    for list in [&pair.pattern.col_ptr, &pair.pattern.row_idx] {
+        word(&mut h, list.len() as u64);
+        for &x in list.iter() {
+            word(&mut h, x as u64);
+        }
+    }
+    for values in [&pair.stiffness, &pair.mass] {
+        word(&mut h, values.len() as u64);
+        for &x in values.iter() {
+            word(&mut h, x.to_bits());
+        }
+    }
+    match &pair.kernel {
+        crate::operators::sparse::Kernel::Unknown => word(&mut h, 0),
+        crate::operators::sparse::Kernel::Components { weights, anchored } => {
+            word(&mut h, 1);
+            for &w in weights.iter().flat_map(|w| w.iter()) {
+                word(&mut h, w.to_bits());
+            }
+            word(&mut h, u64::MAX);
+            for &a in anchored.iter().flat_map(|a| a.iter()) {
+                word(&mut h, a as u64);
+            }
+        }
+    }
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Solves one slice of a sliced solve on this machine, as the machine that planned it would: the pencil's known
+/// zero modes deflated, its own symbolic analysis, and the task's window and options (on `threads` threads).
+/// A pencil other than the task's is refused.
+pub fn solve_slice(
+    pair: &SparsePair,
+    task: &SliceTask,
+    threads: usize,
+    control: Control<'_>,
+) -> Result<Spectrum, EigenError> {
+    let o = EigenOptions { threads, ..task.options.clone() };
+    o.check()?;
+    if pencil_digest(pair) != task.pencil {
+        return Err(EigenError::InvalidOption {
+            name: "pencil",
+            message: "the slice belongs to another pencil than the one built here".into(),
+        });
+    }
+    control.phase("null-space", 0, o.k)?;
+    let zeros = if o.deflate_null_space { null_space::zero_modes(pair) } else { null_space::ZeroModes::default() };
+    control.phase("symbolic", 0, o.k)?;
+    let sym = factor::Symbolic::analyze(&pair.pattern).map_err(|message| EigenError::Factorization { message })?;
+    let deflation = null_space::Deflation { sparse: &zeros.vectors, dense: None };
+    let zero_values = vec![0.0; zeros.len()];
+    let run = lanczos::Run {
+        deflation: &deflation,
+        deflated_values: &zero_values,
+        interior_shift: true,
+        window: Some(task.window()),
+        head: None,
+    };
+    lanczos::eigs_block_lanczos(pair, &o, Some(&sym), control, &run)?.ok_or(EigenError::NoConvergence {
+        converged: 0,
+        wanted: o.k,
+        steps: 0,
+    })
 }
 
 /// A thread lent by a [`Lender`], given back when dropped, and taken off the count of loans out.
@@ -271,63 +462,133 @@ pub(crate) fn solve(
     let inner = (threads / slices.len()).max(1);
     let converged: Vec<AtomicUsize> = slices.iter().map(|_| AtomicUsize::new(0)).collect();
     let k = o.k;
-    type Outcome = (Result<Option<Spectrum>, EigenError>, f64, Option<usize>);
-    let run_slice = |i: usize| -> Outcome {
-        let t = Instant::now();
+    // A slice's run: `pairs` sizes its subspace. The top slice ends at the k-th eigenvalue, not at an edge placed in
+    // a gap, and must see whole the cluster that may straddle it: its subspace gets as many more columns as its
+    // pairs, at most [`TOP_EXTRA`].
+    let options_of = |i: usize| -> EigenOptions {
         let (window, pairs) = slices[i];
-        let report = |p: Progress| {
-            if p.phase == "iterating" {
-                converged[i].store(p.converged, Ordering::Relaxed);
-                let sum: usize = converged.iter().map(|c| c.load(Ordering::Relaxed)).sum();
-                control.report("iterating", sum.min(k), k);
-            }
-        };
-        let slice_control = Control { progress: Some(&report), stop: control.stop, lender: None };
-        let run = lanczos::Run { deflation, deflated_values, interior_shift: true, window: Some(window), head: None };
-        // The top slice ends at the k-th eigenvalue, not at an edge placed in a gap, and must see whole the cluster
-        // that may straddle it: its subspace gets as many more columns as its pairs, at most [`TOP_EXTRA`].
         let sub = window.total.and_then(|_| {
             let own = EigenOptions { k: pairs, subspace: None, ..o.clone() };
             let (_, _, msize) = lanczos::plan(pair.n(), deflation.len(), &own)?;
             Some((msize + TOP_EXTRA.min(pairs)).min(pair.n()))
         });
-        let os = EigenOptions { k: pairs, threads: inner, subspace: sub, ..o.clone() };
-        let r = lanczos::eigs_block_lanczos(pair, &os, Some(sym), slice_control, &run);
-        (r, t.elapsed().as_secs_f64(), rayon::current_thread_index())
+        EigenOptions { k: pairs, threads: inner, subspace: sub, ..o.clone() }
+    };
+    // (pairs, seconds, pool thread, who solved it elsewhere)
+    type Outcome = (Result<Option<Spectrum>, EigenError>, f64, Option<usize>, Option<String>);
+    let progress_of = |i: usize, done: usize| {
+        converged[i].store(done, Ordering::Relaxed);
+        let sum: usize = converged.iter().map(|c| c.load(Ordering::Relaxed)).sum();
+        control.report("iterating", sum.min(k), k);
+    };
+    let run_slice = |i: usize| -> Outcome {
+        let t = Instant::now();
+        let report = |p: Progress| {
+            if p.phase == "iterating" {
+                progress_of(i, p.converged);
+            }
+        };
+        let slice_control = Control { progress: Some(&report), stop: control.stop, lender: None, farm: None };
+        let run =
+            lanczos::Run { deflation, deflated_values, interior_shift: true, window: Some(slices[i].0), head: None };
+        let r = lanczos::eigs_block_lanczos(pair, &options_of(i), Some(sym), slice_control, &run);
+        (r, t.elapsed().as_secs_f64(), rayon::current_thread_index(), None)
     };
     // The solve's own threads, and the idle threads its host lends for the slices beyond them (the service's idle
     // workers; see [`Lender`]).
     let own = threads.min(slices.len());
     let lender = control.lender.filter(|_| slices.len() > own);
     let lent = lender.map_or(0, |l| l.borrow(slices.len() - own));
-    // With a host, the threaded path even when nothing was lent at first: a thread may come free later.
-    let results: Vec<Outcome> = if own + lent > 1 || lender.is_some() {
-        // One queue, the top slice first: it holds the k-th eigenvalue, often inside a cluster it must see whole, and
-        // takes the most block steps (164k sphere, k = 1000, 8 slices: 99 steps and 9.7 s against 44 to 65 and
-        // 4.9 to 8.3 s). Each thread takes the next slice when it is free, so the longest does not start last
-        // (rayon's halves gave one thread slices 0 to 3 and the other 4 to 7: 26.4 against 30.1 s). A lent
-        // thread also leaves when its host wants it back, and is given back however it leaves (a panic included).
-        let order: Vec<usize> = (0..slices.len()).rev().collect();
+    // One queue, the top slice first: it holds the k-th eigenvalue, often inside a cluster it must see whole, and
+    // takes the most block steps (164k sphere, k = 1000, 8 slices: 99 steps and 9.7 s against 44 to 65 and 4.9 to
+    // 8.3 s). Each thread takes the next slice when it is free, so the longest does not start last (rayon's halves
+    // gave one thread slices 0 to 3 and the other 4 to 7: 26.4 against 30.1 s).
+    let order: Vec<usize> = (0..slices.len()).rev().collect();
+    // The slices no thread starts at once, offered to the host's other machines ([`Farm`]).
+    let farm = control.farm.filter(|_| slices.len() > own + lent);
+    let offers: Vec<Option<SliceTask>> = match farm {
+        Some(f) => {
+            let pencil = pencil_digest(pair);
+            let mut offers: Vec<Option<SliceTask>> = vec![None; slices.len()];
+            for &i in &order[own + lent..] {
+                let (w, _) = slices[i];
+                let task = SliceTask {
+                    index: i,
+                    slices: slices.len(),
+                    lo: w.lo.is_finite().then_some(w.lo),
+                    hi: w.hi.is_finite().then_some(w.hi),
+                    sigma: w.sigma,
+                    total: w.total,
+                    count: w.count,
+                    below_lo: w.below_lo,
+                    options: EigenOptions { threads: 0, ..options_of(i) },
+                    pencil: pencil.clone(),
+                };
+                if f.offer(&task) {
+                    offers[i] = Some(task);
+                }
+            }
+            offers
+        }
+        None => vec![],
+    };
+    let offered = |i: usize| offers.get(i).and_then(Option::as_ref);
+    let results: Vec<Outcome> = if own + lent > 1 || lender.is_some() || farm.is_some() {
+        // A lent thread also leaves when its host wants it back, and is given back however it leaves (a panic
+        // included).
         let next = AtomicUsize::new(0);
         let failed = std::sync::atomic::AtomicBool::new(false);
         let done: Vec<std::sync::Mutex<Option<Outcome>>> = slices.iter().map(|_| std::sync::Mutex::new(None)).collect();
-        let (order, next, failed, slots, run_slice) = (&order, &next, &failed, &done, &run_slice);
+        // Offered slices another machine started: collected by the solve's own threads once none of theirs is left.
+        let elsewhere = std::sync::Mutex::new(Vec::<usize>::new());
+        let (order, next, failed, slots, run_slice, elsewhere) =
+            (&order, &next, &failed, &done, &run_slice, &elsewhere);
+        let keep = |i: usize, r: Outcome| {
+            if !matches!(r.0, Ok(Some(_))) {
+                failed.store(true, Ordering::Relaxed);
+            }
+            *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+            !failed.load(Ordering::Relaxed)
+        };
         // A thread's loop over the slices waiting, `after` run after each of its slices.
         let looper = |loan: Option<&Returned<'_>>, after: &dyn Fn()| {
             // After a failure the rest is not started (the plan falls back to one run, or the stop ends it).
             while !failed.load(Ordering::Relaxed) {
                 let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
-                let r = run_slice(i);
-                if !matches!(r.0, Ok(Some(_))) {
-                    failed.store(true, Ordering::Relaxed);
+                if let (Some(f), Some(task)) = (farm, offered(i)) {
+                    if !f.take_back(task) {
+                        elsewhere.lock().unwrap_or_else(|e| e.into_inner()).push(i);
+                        continue;
+                    }
                 }
-                *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
-                if failed.load(Ordering::Relaxed) {
-                    break;
+                if !keep(i, run_slice(i)) {
+                    return;
                 }
                 after();
                 if loan.is_some_and(|l| l.0.wanted_back()) {
-                    break;
+                    return;
+                }
+            }
+            // A lent thread goes back to its host rather than wait for another machine.
+            let Some(f) = farm.filter(|_| loan.is_none()) else { return };
+            while !failed.load(Ordering::Relaxed) {
+                let Some(i) = elsewhere.lock().unwrap_or_else(|e| e.into_inner()).pop() else { break };
+                let Some(task) = offered(i) else { continue };
+                let r = match f.collect(task, &control) {
+                    // Pairs of this pencil's size, one vector per value (anything else is solved here).
+                    Ok(Some(solved))
+                        if solved.spectrum.vectors.nrows() == pair.n()
+                            && solved.spectrum.vectors.ncols() == solved.spectrum.values.len() =>
+                    {
+                        progress_of(i, solved.spectrum.values.len());
+                        (Ok(Some(solved.spectrum)), solved.seconds, None, Some(solved.by))
+                    }
+                    // Taken back, or failed or lost where it ran: solved here.
+                    Ok(_) => run_slice(i),
+                    Err(e) => (Err(e), 0.0, None, None),
+                };
+                if !keep(i, r) {
+                    return;
                 }
             }
         };
@@ -387,14 +648,14 @@ pub(crate) fn solve(
     };
     let mut parts = Vec::with_capacity(slices.len());
     let mut seconds = Vec::with_capacity(slices.len());
-    for (r, s, worker) in results {
+    for (r, s, worker, by) in results {
         match r {
             Ok(Some(spectrum)) => parts.push(spectrum),
             Err(EigenError::Canceled) => return Err(EigenError::Canceled),
             // The plan did not fit this problem (or too few unknowns): one run instead.
             Ok(None) | Err(_) => return Ok(None),
         }
-        seconds.push((s, worker));
+        seconds.push((s, worker, by));
     }
     if parts.len() < slices.len() {
         return Ok(None);
@@ -404,7 +665,7 @@ pub(crate) fn solve(
         .iter()
         .zip(&slices)
         .zip(&seconds)
-        .map(|((p, (w, _)), &(s, worker))| SliceReport {
+        .map(|((p, (w, _)), (s, worker, by))| SliceReport {
             lo: w.lo.is_finite().then_some(w.lo),
             hi: w.hi.is_finite().then_some(w.hi),
             sigma: w.sigma,
@@ -413,8 +674,9 @@ pub(crate) fn solve(
             block_steps: p.stats.block_steps,
             solves: p.stats.solves,
             restarts: p.stats.restarts,
-            seconds: s,
-            worker,
+            seconds: *s,
+            worker: *worker,
+            solved_by: by.clone(),
         })
         .collect();
     let mut s = stitch(pair, parts, head, &slices, &control, threads)?;

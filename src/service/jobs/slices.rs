@@ -1,0 +1,191 @@
+//! Slices of one job on other replicas: a job whose spectrum is cut into slices ([`kac_core::spectrum::slicing`])
+//! offers the slices its own and lent workers do not start at once as **slice jobs** in the shared queue, which any
+//! replica's dispatcher claims like any job. The replica that claims one reads the parent's request, builds the same
+//! operator, checks it against the slice's pencil digest, solves the slice and stores its pairs as a result
+//! (`eigenvalues` and the array `eigenvectors`). The parent takes back, when it comes to them, the slice jobs nobody
+//! has started, collects the others as they succeed, solves here any that failed or were lost (a replica that died:
+//! its lease expires and the job is back in the queue, where the parent takes it back), and cancels what it offered
+//! when it ends without them (canceled, timed out, or its plan given up).
+//!
+//! Slice jobs are offered where other replicas can claim them: with a shared store (PostgreSQL). With the embedded
+//! store one process holds the queue, and its idle workers join a job as lent workers instead ([`Jobs`]'s
+//! [`kac_core::spectrum::Lender`]). `GET /v1/jobs` leaves slice jobs out; each is a job of its own otherwise.
+
+use super::*;
+use kac_core::spectrum::slicing::{PartStats, SliceTask, Solved};
+use kac_core::spectrum::{EigenError, Farm};
+
+/// The analysis name of a slice job.
+pub const SLICE_JOB: &str = "spectrum-slice";
+
+/// What a slice job is asked: the parent job's request, and the slice.
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct SliceRequest {
+    /// The parent's id (for the logs; the slice's own id hashes the whole request).
+    pub parent: String,
+    /// The parent's analysis, canonical: the operator is built from it.
+    pub analysis: serde_json::Value,
+    pub task: SliceTask,
+}
+
+/// The offers of one running job.
+pub struct SliceFarm<'a> {
+    state: &'a AppState,
+    parent: JobView,
+    /// Slice index → (slice job id, settled: collected, taken back or found done).
+    offered: Mutex<HashMap<usize, (String, bool)>>,
+}
+
+impl<'a> SliceFarm<'a> {
+    /// A farm for the job `parent` when this replica shares its queue with others (a PostgreSQL store); None otherwise.
+    pub fn of(state: &'a AppState, parent: &JobView) -> Option<Self> {
+        let shared = state.config.store.as_deref().is_some_and(|s| s.starts_with("postgres"));
+        (shared && parent.analysis != SLICE_JOB).then(|| SliceFarm {
+            state,
+            parent: parent.clone(),
+            offered: Mutex::new(HashMap::new()),
+        })
+    }
+    fn id_of(&self, task: &SliceTask) -> Option<String> {
+        self.offered.lock().unwrap_or_else(|e| e.into_inner()).get(&task.index).map(|o| o.0.clone())
+    }
+    fn settle(&self, task: &SliceTask) {
+        if let Some(o) = self.offered.lock().unwrap_or_else(|e| e.into_inner()).get_mut(&task.index) {
+            o.1 = true;
+        }
+    }
+    /// The pairs a succeeded slice job stored, checked for shape; None when they cannot be read.
+    fn read(&self, id: &str) -> Option<Solved> {
+        let stored = self.state.results.get(&JobId::parse(id)?).ok()??;
+        let vectors = stored.arrays.iter().find(|a| a.name == "eigenvectors")?;
+        let values: Vec<f64> = serde_json::from_value(stored.summary.get("eigenvalues")?.clone()).ok()?;
+        let m = values.len();
+        if vectors.cols != m || vectors.data.len() != vectors.rows * m {
+            return None;
+        }
+        let stats: PartStats = serde_json::from_value(stored.summary.get("slice")?.clone()).ok()?;
+        let mut stats = stats.stats();
+        stats.timings.iteration_s = stored.summary.get("seconds").and_then(|s| s.as_f64()).unwrap_or(0.0);
+        let spectrum = kac_core::spectrum::Spectrum {
+            values,
+            vectors: faer::Mat::from_fn(vectors.rows, m, |i, j| vectors.data[i * m + j]),
+            residuals: vec![],
+            stats,
+        };
+        Some(Solved {
+            spectrum,
+            seconds: stored.summary.get("seconds").and_then(|s| s.as_f64()).unwrap_or(0.0),
+            by: stored.summary.get("replica").and_then(|s| s.as_str()).unwrap_or("another replica").to_string(),
+        })
+    }
+}
+
+impl Farm for SliceFarm<'_> {
+    fn offer(&self, task: &SliceTask) -> bool {
+        let request =
+            SliceRequest { parent: self.parent.id.clone(), analysis: self.parent.request.clone(), task: task.clone() };
+        let Ok(canonical) = serde_json::to_value(&request) else { return false };
+        let id = job_id(&self.parent.shape_id, &canonical);
+        match self.state.jobs.enqueue(id.clone(), self.parent.shape_id.clone(), SLICE_JOB, canonical) {
+            Ok(_) => {
+                self.offered.lock().unwrap_or_else(|e| e.into_inner()).insert(task.index, (id, false));
+                true
+            }
+            // A full queue, or a store away: the slice is solved here.
+            Err(_) => false,
+        }
+    }
+    fn take_back(&self, task: &SliceTask) -> bool {
+        let Some(id) = self.id_of(task) else { return true };
+        let jobs = &self.state.jobs;
+        let owner = jobs.next_owner();
+        match jobs.queue.claim_id(&id, &owner, jobs.lease) {
+            Ok(Some(mut view)) => {
+                // Finished at once under this claim, so that no lease of it expires and no replica runs it again.
+                view.status = Status::Canceled;
+                view.finished_at = Some(now());
+                view.error = Some(Problem::canceled());
+                view.progress.phase = "taken back by its job".into();
+                let _ = jobs.queue.finish(&id, &owner, &view);
+                self.settle(task);
+                true
+            }
+            _ => false,
+        }
+    }
+    fn collect(&self, task: &SliceTask, control: &Control<'_>) -> Result<Option<Solved>, EigenError> {
+        let Some(id) = self.id_of(task) else { return Ok(None) };
+        let Some(job) = JobId::parse(&id) else { return Ok(None) };
+        loop {
+            control.check()?;
+            match self.state.jobs.queue.get(&job) {
+                Ok(Some(v)) => match v.status {
+                    Status::Succeeded => {
+                        self.settle(task);
+                        return Ok(self.read(&id));
+                    }
+                    // Not started yet, or back in the queue after a lease expired: solved here.
+                    Status::Enqueued if self.take_back(task) => return Ok(None),
+                    Status::Enqueued | Status::Processing => {}
+                    Status::Failed | Status::Canceled => {
+                        self.settle(task);
+                        return Ok(None);
+                    }
+                },
+                Ok(None) => return Ok(None),
+                // The store is away for a moment: asked again.
+                Err(_) => {}
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for SliceFarm<'_> {
+    /// Slice jobs this job no longer waits for (it was canceled, timed out, or gave up its plan) are canceled: an
+    /// enqueued one at once, a running one at its replica's next heartbeat.
+    fn drop(&mut self) {
+        let offered = self.offered.get_mut().unwrap_or_else(|e| e.into_inner());
+        for (id, settled) in offered.values() {
+            if let (false, Some(job)) = (*settled, JobId::parse(id)) {
+                let _ = self.state.jobs.queue.cancel(&job, &Problem::canceled());
+            }
+        }
+    }
+}
+
+/// Runs a slice job: the parent's operator built again and checked against the slice's pencil, the slice solved,
+/// and its pairs: `eigenvalues` in the summary (JSON numbers read back to the bit) and the array `eigenvectors`
+/// (n × m, rows in the operator's numbering).
+pub fn run(
+    shape: &StoredShape,
+    request: &SliceRequest,
+    hooks: analysis::Hooks<'_>,
+    replica: &str,
+) -> Result<analysis::Output, analysis::AnalysisError> {
+    let parent = serde_json::from_value::<Analysis>(request.analysis.clone())
+        .map_err(|e| analysis::AnalysisError::not_applicable(format!("the parent's request does not parse: {e}")))?;
+    let spec = parent
+        .operator_spec()
+        .ok_or_else(|| analysis::AnalysisError::not_applicable("the parent analysis builds no operator"))?;
+    hooks.control.check()?;
+    let t0 = std::time::Instant::now();
+    let operator = analysis::build_operator(&shape.validated, spec)?;
+    hooks.control.check()?;
+    let s = kac_core::spectrum::slicing::solve_slice(&operator.pair, &request.task, hooks.threads, hooks.control)?;
+    let (n, m) = (s.vectors.nrows(), s.vectors.ncols());
+    let mut rows = Vec::with_capacity(n * m);
+    for i in 0..n {
+        rows.extend((0..m).map(|j| s.vectors[(i, j)]));
+    }
+    let summary = serde_json::json!({
+        "analysis": SLICE_JOB,
+        "parent": request.parent,
+        "eigenvalues": s.values,
+        "slice": PartStats::of(&s.stats),
+        "seconds": t0.elapsed().as_secs_f64(),
+        "replica": replica,
+    });
+    let arrays = vec![analysis::VertexArray { name: "eigenvectors", rows: n, cols: m, data: rows, columns: None }];
+    Ok(analysis::Output { summary, arrays, fingerprints: vec![] })
+}
