@@ -253,7 +253,11 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert!(q.claim("r1:5", lease).unwrap().is_none(), "a canceled job is not claimed again");
     // A job claimed by its id (a job taking back its own slice job), by one claim only, and only while enqueued.
     assert!(matches!(q.enqueue(job(&h("j6")), 9).unwrap(), Enqueued::New(_)));
-    assert!(matches!(q.enqueue(job(&h("j7")), 9).unwrap(), Enqueued::New(_)));
+    let mut slice = job(&h("j7"));
+    slice.analysis = "spectrum-slice".into();
+    assert!(matches!(q.enqueue(slice, 9).unwrap(), Enqueued::New(_)));
+    // Waiting jobs, slice jobs aside or not.
+    assert_eq!((q.waiting("spectrum-slice").unwrap(), q.waiting("spectrum").unwrap()), (1, 1));
     assert!(q.claim_id(&h("j5"), "r1:6", lease).unwrap().is_none(), "canceled");
     let c7 = reopen().queue.claim_id(&h("j7"), "r2:3", lease).unwrap().unwrap();
     assert_eq!((c7.id.clone(), c7.status), (h("j7"), Status::Processing));

@@ -311,8 +311,11 @@ struct Machine {
     starts: Vec<usize>,
     corrupt: Vec<usize>,
     offered: std::sync::Mutex<Vec<usize>>,
-    running: std::sync::Mutex<Vec<(usize, std::thread::JoinHandle<Result<Spectrum, EigenError>>)>>,
+    running: std::sync::Mutex<Vec<(usize, Solving)>>,
 }
+
+/// A slice being solved on the other machine.
+type Solving = std::thread::JoinHandle<Result<Spectrum, EigenError>>;
 
 impl kac_core::spectrum::Farm for Machine {
     fn offer(&self, task: &kac_core::spectrum::slicing::SliceTask) -> bool {
@@ -345,6 +348,9 @@ impl kac_core::spectrum::Farm for Machine {
             Err(EigenError::InvalidOption { name: "pencil", .. }) => None,
             Err(e) => panic!("slice {} failed elsewhere: {e}", task.index),
         })
+    }
+    fn release(&self, task: &kac_core::spectrum::slicing::SliceTask) {
+        panic!("slice {} released: no slice fails here", task.index);
     }
 }
 
@@ -392,4 +398,93 @@ fn slices_solved_on_another_machine_are_stitched_in() {
     };
     let refused = kac_core::spectrum::slicing::solve_slice(&other, &task, 1, Control::default());
     assert!(matches!(refused, Err(EigenError::InvalidOption { name: "pencil", .. })), "{:?}", refused.err());
+}
+
+/// Another machine that starts every offered slice at once and answers `take_back` slowly (1.5 s) on any thread but
+/// the solve's own: a lent thread comes to an offered slice, finds it started elsewhere, and hands it on only after
+/// the solve's own thread has run out of slices and collected what it knew of.
+struct LateMachine {
+    pair: std::sync::Arc<operators::sparse::SparsePair>,
+    caller: std::sync::Mutex<Option<std::thread::ThreadId>>,
+    entered: AtomicBool,
+    running: std::sync::Mutex<Vec<(usize, Solving)>>,
+    released: AtomicUsize,
+}
+
+impl kac_core::spectrum::Farm for LateMachine {
+    fn offer(&self, task: &kac_core::spectrum::slicing::SliceTask) -> bool {
+        let (pair, index, task) = (self.pair.clone(), task.index, task.clone());
+        let handle =
+            std::thread::spawn(move || kac_core::spectrum::slicing::solve_slice(&pair, &task, 1, Control::default()));
+        self.running.lock().unwrap().push((index, handle));
+        true
+    }
+    fn take_back(&self, _: &kac_core::spectrum::slicing::SliceTask) -> bool {
+        if *self.caller.lock().unwrap() != Some(std::thread::current().id()) {
+            self.entered.store(true, Ordering::SeqCst);
+            std::thread::sleep(std::time::Duration::from_millis(1500));
+        }
+        false
+    }
+    fn collect(
+        &self,
+        task: &kac_core::spectrum::slicing::SliceTask,
+        _: &Control<'_>,
+    ) -> Result<Option<kac_core::spectrum::slicing::Solved>, EigenError> {
+        let mut running = self.running.lock().unwrap();
+        let at = running.iter().position(|(i, _)| *i == task.index).expect("collected once");
+        let spectrum = running.remove(at).1.join().unwrap()?;
+        Ok(Some(kac_core::spectrum::slicing::Solved { spectrum, seconds: 0.0, by: "late".into() }))
+    }
+    fn release(&self, _: &kac_core::spectrum::slicing::SliceTask) {
+        self.released.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
+/// A lent thread that finds an offered slice started elsewhere only after the solve's own thread has collected and
+/// ended its loop: the solve still collects it (it is not lost, and the slices are not given up for one run).
+#[test]
+fn a_slice_a_lent_thread_hands_on_late_is_collected() {
+    let shape = Shape::TriangleMesh(generate::icosphere(4));
+    let pair = pair_of(&shape, Boundary::Neumann);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let whole = pool.install(|| solve(&pair, 150, 1, 1));
+    let machine = LateMachine {
+        pair: std::sync::Arc::new(pair_of(&shape, Boundary::Neumann)),
+        caller: Default::default(),
+        entered: AtomicBool::new(false),
+        running: Default::default(),
+        released: AtomicUsize::new(0),
+    };
+    let host = Host {
+        grant: 1,
+        back: false,
+        refuse: AtomicUsize::new(0),
+        borrowed: AtomicUsize::new(0),
+        asked: AtomicUsize::new(0),
+        returned: AtomicUsize::new(0),
+    };
+    // The solve's own thread holds its first slice until the lent thread is in `take_back` (at most 20 s).
+    let t0 = std::time::Instant::now();
+    let progress = |p: kac_core::spectrum::Progress| {
+        if p.phase == "iterating" && *machine.caller.lock().unwrap() == Some(std::thread::current().id()) {
+            while !machine.entered.load(Ordering::SeqCst) && t0.elapsed() < std::time::Duration::from_secs(20) {
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+        }
+    };
+    let o = EigenOptions { k: 150, slices: Some(3), threads: 1, method: Method::Sparse, ..Default::default() };
+    let control =
+        Control { progress: Some(&progress), lender: Some(&host), farm: Some(&machine), ..Control::default() };
+    let sliced = pool.install(|| {
+        *machine.caller.lock().unwrap() = Some(std::thread::current().id());
+        eigs(&pair, &o, None, control).unwrap()
+    });
+    assert!(machine.entered.load(Ordering::SeqCst));
+    assert_eq!(sliced.stats.slices.len(), 3, "the sliced solve was given up");
+    let by: Vec<Option<&str>> = sliced.stats.slices.iter().map(|s| s.solved_by.as_deref()).collect();
+    assert_eq!(by, vec![Some("late"), None, None]);
+    assert_same_values(&sliced, &whole);
+    assert_eq!(machine.released.load(Ordering::SeqCst), 0);
+    assert_eq!(host.returned.load(Ordering::SeqCst), host.borrowed.load(Ordering::SeqCst));
 }

@@ -296,10 +296,11 @@ impl Jobs {
     pub fn lent(&self) -> usize {
         self.lent.load(Ordering::SeqCst)
     }
-    /// Whether a job waits in the queue (for any replica); a queue that cannot be read counts as one that has one, so
+    /// Whether a job waits in the queue (for any replica), slice jobs aside: a worker lent to a job's slices does the
+    /// same work without building the operator again. A queue that cannot be read counts as one where a job waits, so
     /// that no worker is lent, or kept lent, on a guess.
     fn job_waits(&self) -> bool {
-        self.queue.depth().map_or(true, |(enqueued, _)| enqueued > 0)
+        self.queue.waiting(SLICE_JOB).map_or(true, |n| n > 0)
     }
     /// Workers neither running a job, nor set aside for one being claimed, nor lent.
     fn idle_in(&self, running: &HashMap<String, Arc<Job>>) -> usize {

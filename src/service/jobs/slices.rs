@@ -32,8 +32,9 @@ pub struct SliceRequest {
 pub struct SliceFarm<'a> {
     state: &'a AppState,
     parent: JobView,
-    /// Slice index → (slice job id, settled: collected, taken back or found done).
-    offered: Mutex<HashMap<usize, (String, bool)>>,
+    /// (pencil digest, slice index) → (slice job id, settled: collected, taken back, released or found ended). A job
+    /// may solve several pencils (an extrapolation's refinements), each sliced apart.
+    offered: Mutex<HashMap<(String, usize), (String, bool)>>,
 }
 
 impl<'a> SliceFarm<'a> {
@@ -46,12 +47,21 @@ impl<'a> SliceFarm<'a> {
             offered: Mutex::new(HashMap::new()),
         })
     }
+    fn key(task: &SliceTask) -> (String, usize) {
+        (task.pencil.clone(), task.index)
+    }
     fn id_of(&self, task: &SliceTask) -> Option<String> {
-        self.offered.lock().unwrap_or_else(|e| e.into_inner()).get(&task.index).map(|o| o.0.clone())
+        self.offered.lock().unwrap_or_else(|e| e.into_inner()).get(&Self::key(task)).map(|o| o.0.clone())
     }
     fn settle(&self, task: &SliceTask) {
-        if let Some(o) = self.offered.lock().unwrap_or_else(|e| e.into_inner()).get_mut(&task.index) {
+        if let Some(o) = self.offered.lock().unwrap_or_else(|e| e.into_inner()).get_mut(&Self::key(task)) {
             o.1 = true;
+        }
+    }
+    /// Cancels a slice job: an enqueued one at once, a running one at its replica's next heartbeat.
+    fn cancel(&self, id: &str) {
+        if let Some(job) = JobId::parse(id) {
+            let _ = self.state.jobs.queue.cancel(&job, &Problem::canceled());
         }
     }
     /// The pairs a succeeded slice job stored, checked for shape; None when they cannot be read.
@@ -88,7 +98,7 @@ impl Farm for SliceFarm<'_> {
         let id = job_id(&self.parent.shape_id, &canonical);
         match self.state.jobs.enqueue(id.clone(), self.parent.shape_id.clone(), SLICE_JOB, canonical) {
             Ok(_) => {
-                self.offered.lock().unwrap_or_else(|e| e.into_inner()).insert(task.index, (id, false));
+                self.offered.lock().unwrap_or_else(|e| e.into_inner()).insert(Self::key(task), (id, false));
                 true
             }
             // A full queue, or a store away: the slice is solved here.
@@ -106,11 +116,20 @@ impl Farm for SliceFarm<'_> {
                 view.finished_at = Some(now());
                 view.error = Some(Problem::canceled());
                 view.progress.phase = "taken back by its job".into();
-                let _ = jobs.queue.finish(&id, &owner, &view);
-                self.settle(task);
+                // Unless the store is away: then the claim is left to expire, and the cancel at the job's end (the
+                // job is not settled) keeps it from running again.
+                if jobs.queue.finish(&id, &owner, &view).unwrap_or(false) {
+                    self.settle(task);
+                }
                 true
             }
             _ => false,
+        }
+    }
+    fn release(&self, task: &SliceTask) {
+        if let Some(id) = self.id_of(task) {
+            self.cancel(&id);
+            self.settle(task);
         }
     }
     fn collect(&self, task: &SliceTask, control: &Control<'_>) -> Result<Option<Solved>, EigenError> {
@@ -142,13 +161,12 @@ impl Farm for SliceFarm<'_> {
 }
 
 impl Drop for SliceFarm<'_> {
-    /// Slice jobs this job no longer waits for (it was canceled, timed out, or gave up its plan) are canceled: an
-    /// enqueued one at once, a running one at its replica's next heartbeat.
+    /// Slice jobs this job never settled (it was canceled or timed out while they ran) are canceled.
     fn drop(&mut self) {
-        let offered = self.offered.get_mut().unwrap_or_else(|e| e.into_inner());
+        let offered = std::mem::take(self.offered.get_mut().unwrap_or_else(|e| e.into_inner()));
         for (id, settled) in offered.values() {
-            if let (false, Some(job)) = (*settled, JobId::parse(id)) {
-                let _ = self.state.jobs.queue.cancel(&job, &Problem::canceled());
+            if !settled {
+                self.cancel(id);
             }
         }
     }

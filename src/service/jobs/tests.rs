@@ -294,14 +294,22 @@ fn only_idle_workers_are_lent() {
     jobs.give_back();
     assert_eq!(jobs.lent(), 2);
     assert!(!jobs.wanted_back(), "nothing waits in the queue");
+    // A slice job waiting (a job's slices offered to other replicas) is no reason to take a worker back: a lent
+    // worker does the same work without building the operator again.
+    let slice = view(9);
+    jobs.enqueue(slice.id.clone(), slice.shape_id.clone(), SLICE_JOB, slice.request.clone()).unwrap();
+    assert_eq!(jobs.queue.depth().unwrap().0, 1);
+    assert!(!jobs.wanted_back(), "only a slice job waits");
+    let owner = jobs.next_owner();
+    assert!(jobs.queue.claim_id(&slice.id, &owner, LEASE).unwrap().is_some());
     submit(&jobs, 2);
     assert!(jobs.wanted_back(), "a job waits in the queue");
     assert_eq!(jobs.borrow(5), 0, "nothing is lent while a job waits");
     jobs.give_back();
     jobs.give_back();
     assert_eq!(jobs.lent(), 0);
-    // The waiting job runs. A job's solver threads are busy: two jobs of two threads fill the four workers, of
-    // one thread leave two.
+    // The waiting job runs (the slice job, claimed by its id, holds no worker of this replica's: another replica's
+    // claim). A job's solver threads are busy: two jobs of two threads fill the four workers, of one thread leave two.
     start(&jobs);
     jobs.solver_threads = 2;
     assert_eq!(jobs.borrow(5), 0);

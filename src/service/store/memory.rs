@@ -179,6 +179,9 @@ impl JobQueue for MemoryQueue {
         }
         Ok(counts.into_iter().map(|(s, n)| (s.to_string(), n)).collect())
     }
+    fn waiting(&self, except: &str) -> std::io::Result<usize> {
+        Ok(self.rows().jobs.values().filter(|r| r.view.status == Status::Enqueued && r.view.analysis != except).count())
+    }
     fn changes(&self) -> broadcast::Receiver<String> {
         self.changes.subscribe()
     }

@@ -944,6 +944,20 @@ impl JobQueue for Postgres {
             Ok(rows.iter().map(|r| (r.get::<_, String>(0), r.get::<_, i64>(1) as usize)).collect())
         })
     }
+    fn waiting(&self, except: &str) -> std::io::Result<usize> {
+        let except = except.to_string();
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let row = c
+                .query_one(
+                    "SELECT count(*) FROM jobs WHERE status = 'enqueued' AND view::jsonb->>'analysis' <> $1",
+                    &[&except],
+                )
+                .await
+                .map_err(pg)?;
+            Ok(row.get::<_, i64>(0) as usize)
+        })
+    }
     fn changes(&self) -> broadcast::Receiver<String> {
         self.changes.subscribe()
     }

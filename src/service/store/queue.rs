@@ -62,6 +62,8 @@ pub trait JobQueue: Send + Sync {
     fn list(&self) -> Result<Vec<JobView>>;
     /// Jobs by status name (statuses with none may be missing).
     fn counts(&self) -> Result<Vec<(String, usize)>>;
+    /// Enqueued jobs of any analysis but `except` (slice jobs: see `jobs::slices`).
+    fn waiting(&self, except: &str) -> Result<usize>;
     /// Jobs enqueued and processing.
     fn depth(&self) -> Result<(usize, usize)> {
         let counts = self.counts()?;

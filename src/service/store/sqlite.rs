@@ -536,6 +536,17 @@ impl JobQueue for Database {
         let rows = st.query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, i64>(1)? as usize))).map_err(db_err)?;
         Ok(rows.flatten().collect())
     }
+    fn waiting(&self, except: &str) -> std::io::Result<usize> {
+        let c = self.conn();
+        let n: i64 = c
+            .query_row(
+                "SELECT COUNT(*) FROM jobs WHERE status = 'enqueued' AND json_extract(view, '$.analysis') <> ?1",
+                [except],
+                |r| r.get(0),
+            )
+            .map_err(db_err)?;
+        Ok(n as usize)
+    }
     fn changes(&self) -> tokio::sync::broadcast::Receiver<String> {
         self.changes.subscribe()
     }

@@ -218,6 +218,9 @@ pub trait Farm: Sync {
         task: &super::slicing::SliceTask,
         control: &Control<'_>,
     ) -> Result<Option<super::slicing::Solved>, EigenError>;
+    /// The solve no longer waits for an offered slice (another slice failed, or the solve was stopped): whatever
+    /// solves it elsewhere may stop.
+    fn release(&self, task: &super::slicing::SliceTask);
 }
 
 impl Control<'_> {

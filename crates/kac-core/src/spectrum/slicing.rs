@@ -550,6 +550,31 @@ pub(crate) fn solve(
             *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
             !failed.load(Ordering::Relaxed)
         };
+        // The offered slices another machine started, collected (or solved here when they come back unsolved).
+        let collect_rest = || {
+            let Some(f) = farm else { return };
+            while !failed.load(Ordering::Relaxed) {
+                let Some(i) = elsewhere.lock().unwrap_or_else(|e| e.into_inner()).pop() else { break };
+                let Some(task) = offered(i) else { continue };
+                let r = match f.collect(task, &control) {
+                    // Pairs of this pencil's size, one vector per value (anything else is solved here).
+                    Ok(Some(solved))
+                        if solved.spectrum.vectors.nrows() == pair.n()
+                            && solved.spectrum.vectors.ncols() == solved.spectrum.values.len() =>
+                    {
+                        progress_of(i, solved.spectrum.values.len());
+                        (Ok(Some(solved.spectrum)), solved.seconds, None, Some(solved.by))
+                    }
+                    // Taken back, or failed or lost where it ran: solved here.
+                    Ok(_) => run_slice(i),
+                    Err(e) => (Err(e), 0.0, None, None),
+                };
+                if !keep(i, r) {
+                    return;
+                }
+            }
+        };
+        let collect_rest = &collect_rest;
         // A thread's loop over the slices waiting, `after` run after each of its slices.
         let looper = |loan: Option<&Returned<'_>>, after: &dyn Fn()| {
             // After a failure the rest is not started (the plan falls back to one run, or the stop ends it).
@@ -570,26 +595,8 @@ pub(crate) fn solve(
                 }
             }
             // A lent thread goes back to its host rather than wait for another machine.
-            let Some(f) = farm.filter(|_| loan.is_none()) else { return };
-            while !failed.load(Ordering::Relaxed) {
-                let Some(i) = elsewhere.lock().unwrap_or_else(|e| e.into_inner()).pop() else { break };
-                let Some(task) = offered(i) else { continue };
-                let r = match f.collect(task, &control) {
-                    // Pairs of this pencil's size, one vector per value (anything else is solved here).
-                    Ok(Some(solved))
-                        if solved.spectrum.vectors.nrows() == pair.n()
-                            && solved.spectrum.vectors.ncols() == solved.spectrum.values.len() =>
-                    {
-                        progress_of(i, solved.spectrum.values.len());
-                        (Ok(Some(solved.spectrum)), solved.seconds, None, Some(solved.by))
-                    }
-                    // Taken back, or failed or lost where it ran: solved here.
-                    Ok(_) => run_slice(i),
-                    Err(e) => (Err(e), 0.0, None, None),
-                };
-                if !keep(i, r) {
-                    return;
-                }
+            if loan.is_none() {
+                collect_rest();
             }
         };
         let tasks = Tasks::default();
@@ -630,7 +637,17 @@ pub(crate) fn solve(
             // work the pool has, another job's included, and this solve would end only when that job does. The
             // tasks no thread has started return at once.
             tasks.close_and_wait();
+            // A lent thread may have found an offered slice started elsewhere after the caller's own collecting ended.
+            collect_rest();
         });
+        // Offered slices the solve no longer waits for (after a failure) are released.
+        if let Some(f) = farm {
+            for (i, slot) in done.iter().enumerate() {
+                if let (None, Some(task)) = (&*slot.lock().unwrap_or_else(|e| e.into_inner()), offered(i)) {
+                    f.release(task);
+                }
+            }
+        }
         // Slices never started (after a failure) are left out: the failure is in the list, and ends the solve
         // below as in the sequential path.
         done.into_iter().filter_map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner())).collect()
