@@ -429,6 +429,8 @@ fn slices_of_one_job_are_solved_on_another_replica() {
         "SELECT count(*) FROM jobs WHERE view::jsonb->>'analysis' = 'spectrum-slice' AND status = 'succeeded'",
     );
     assert_eq!(solved.parse::<usize>().unwrap(), elsewhere.len());
+    // The slices' pairs left the store once read: the job's own result is the only one kept.
+    assert_eq!(cluster.query("kac", "SELECT count(*) FROM results"), "1");
     // The same eigenvalues as one process solving all four slices itself, and as one run, to 10⁻⁸.
     let values =
         |r: &Value| -> Vec<f64> { r["eigenvalues"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };

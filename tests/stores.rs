@@ -170,6 +170,14 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
         assert_eq!(first.small_body().is_some(), first_body.len() <= kac::service::store::SMALL_BODY);
     }
     assert!(reopen().results.get(&jid("abc2")).unwrap().is_none());
+    // Removed (a slice job's pairs, once read): gone for every reader, numbers included; a second removal finds none.
+    let gone = result(&h("abc4"), 300_000, 0.0);
+    b.results.put(gone).unwrap();
+    assert!(b.results.get(&jid("abc4")).unwrap().is_some());
+    assert!(b.results.remove(&jid("abc4")).unwrap());
+    assert!(b.results.get(&jid("abc4")).unwrap().is_none(), "removed where it was cached too");
+    assert!(reopen().results.get(&jid("abc4")).unwrap().is_none());
+    assert!(!reopen().results.remove(&jid("abc4")).unwrap());
 
     // Removal takes the shape's fingerprints with it.
     assert!(b.shapes.remove(&sid).unwrap());

@@ -286,6 +286,9 @@ pub trait ResultStore: Send + Sync {
     fn put(&self, result: Arc<StoredResult>) -> std::io::Result<Arc<StoredResult>>;
     /// The result (None: not stored; an error: the store cannot be read now).
     fn get(&self, id: &ResultId) -> std::io::Result<Option<Arc<StoredResult>>>;
+    /// Removes a result once it has served its one reader (a slice job's pairs, read by the job that offered it);
+    /// false when none was stored. Results of analyses are never removed.
+    fn remove(&self, id: &ResultId) -> std::io::Result<bool>;
 }
 
 /// Eigenpairs by (shape, operator, solver) key, bounded by bytes (least recently used first). An entry with k

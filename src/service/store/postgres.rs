@@ -728,6 +728,18 @@ impl ResultStore for Postgres {
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
         Ok(Some(r))
     }
+    fn remove(&self, id: &ResultId) -> std::io::Result<bool> {
+        let key = id.hex();
+        self.results.lock().unwrap_or_else(|e| e.into_inner()).remove(&key);
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let n = tx.execute("DELETE FROM results WHERE id = $1", &[&key]).await.map_err(pg)?;
+            tx.execute("DELETE FROM blobs WHERE kind = 'values' AND id = $1", &[&key]).await.map_err(pg)?;
+            tx.commit().await.map_err(pg)?;
+            Ok(n > 0)
+        })
+    }
 }
 
 /// The bytes of blob chunks as they arrive, as a reader (outside the store's runtime).

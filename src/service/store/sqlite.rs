@@ -750,6 +750,23 @@ impl ResultStore for FileResults {
         self.results.lock().unwrap_or_else(|e| e.into_inner()).put(id, r.clone(), result_size(&r));
         Ok(Some(r))
     }
+    fn remove(&self, id: &ResultId) -> std::io::Result<bool> {
+        let id = &*id.hex();
+        self.results.lock().unwrap_or_else(|e| e.into_inner()).remove(id);
+        let meta_path = file_in(&self.dir, &format!("{id}.result.json"))?;
+        let meta = match std::fs::read(&meta_path) {
+            Ok(m) => m,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+            Err(e) => return Err(e),
+        };
+        // The meta first: a result whose meta is gone is not stored, whatever became of its numbers.
+        std::fs::remove_file(&meta_path)?;
+        let meta: Value = serde_json::from_slice(&meta).unwrap_or_default();
+        if let Some(name) = meta["values_file"].as_str().filter(|n| !n.contains('/') && n.starts_with(id)) {
+            let _ = std::fs::remove_file(file_in(&self.dir, name)?);
+        }
+        Ok(true)
+    }
 }
 
 /// Writes a result's numbers to a file atomically, a megabyte at a time.
