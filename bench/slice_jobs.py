@@ -55,8 +55,11 @@ def run(kac, store, mesh, k, replicas):
             elsewhere = sum(1 for s in slices if s.get("solved_by"))
             assert res["solver"]["completeness"]["complete"], res["solver"]
             peaks = [round(peak_gb(p), 2) for p, _ in procs]
+            # Each slice: who solved it (null: the job's own replica), its pairs and seconds (elsewhere: from the
+            # claim of its slice job to its pairs stored, the operator built again included).
+            each = [[s.get("solved_by"), s["pairs"], round(s["seconds"], 2)] for s in slices]
             return {"seconds": round(wall, 2), "slices": len(slices), "solved_on_another_replica": elsewhere,
-                    "peak_gb": peaks, "eigenvalues": res["eigenvalues"]}
+                    "each_slice": each, "peak_gb": peaks, "eigenvalues": res["eigenvalues"]}
         finally:
             for p, _ in procs:
                 p.kill()

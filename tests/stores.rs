@@ -171,8 +171,15 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     }
     assert!(reopen().results.get(&jid("abc2")).unwrap().is_none());
     // Removed (a slice job's pairs, once read): gone for every reader, numbers included; a second removal finds none.
-    let gone = result(&h("abc4"), 300_000, 0.0);
-    b.results.put(gone).unwrap();
+    // Kept unhashed (a slice job's pairs): read back with the same ETag and numbers, the body written as any.
+    let r = result(&h("abc4"), 300_000, 0.0);
+    let gone = Arc::new(StoredResult::unhashed(&r.id, r.summary.clone(), r.arrays.clone()));
+    assert!(gone.etag.contains(&r.id) && gone.etag != r.etag);
+    b.results.put(gone.clone()).unwrap();
+    let back = reopen().results.get(&jid("abc4")).unwrap().expect("read back");
+    assert_eq!(back.etag, gone.etag);
+    assert!(back.arrays[0].data.iter().zip(&r.arrays[0].data).all(|(a, b)| a.to_bits() == b.to_bits()));
+    assert_eq!(body(&back), body(&r), "the same body as a hashed result's");
     assert!(b.results.get(&jid("abc4")).unwrap().is_some());
     assert!(b.results.remove(&jid("abc4")).unwrap());
     assert!(b.results.get(&jid("abc4")).unwrap().is_none(), "removed where it was cached too");

@@ -246,7 +246,13 @@ fn run_job(state: &AppState, job: &Arc<Job>) -> Option<Status> {
             // A store that is away for a moment (a restart) is waited for, as long as a lease lasts; then the claim
             // is given up and the job runs again elsewhere, never failed for it.
             let deadline = std::time::Instant::now() + state.jobs.lease;
-            let result = Arc::new(result_of(out, &id));
+            let (summary, arrays) = linked(out, &id);
+            let result = Arc::new(if job.name == SLICE_JOB {
+                // Read once, by the job that offered the slice, then removed: no body hash.
+                StoredResult::unhashed(&id, summary, arrays)
+            } else {
+                StoredResult::new(&id, summary, arrays)
+            });
             loop {
                 match state.results.put(result.clone()) {
                     Ok(_) => {
@@ -305,6 +311,12 @@ pub(super) fn canceled() -> Problem {
 /// A result to store: the summary with each array's shape and links (its values are written into the body per
 /// response), and the arrays themselves.
 pub fn result_of(out: analysis::Output, id: &str) -> StoredResult {
+    let (summary, arrays) = linked(out, id);
+    StoredResult::new(id, summary, arrays)
+}
+
+/// An output's summary with its result id and each array's shape and links, and its arrays.
+fn linked(out: analysis::Output, id: &str) -> (serde_json::Value, Vec<analysis::VertexArray>) {
     let mut summary = out.summary;
     let mut arrays = serde_json::Map::new();
     for a in &out.arrays {
@@ -334,7 +346,7 @@ pub fn result_of(out: analysis::Output, id: &str) -> StoredResult {
             o.insert("arrays".into(), serde_json::Value::Object(arrays));
         }
     }
-    StoredResult::new(id, summary, out.arrays)
+    (summary, out.arrays)
 }
 
 #[cfg(test)]

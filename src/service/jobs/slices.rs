@@ -78,14 +78,18 @@ impl<'a> SliceFarm<'a> {
         stats.timings.iteration_s = stored.summary.get("seconds").and_then(|s| s.as_f64()).unwrap_or(0.0);
         let spectrum = kac_core::spectrum::Spectrum {
             values,
-            vectors: faer::Mat::from_fn(vectors.rows, m, |i, j| vectors.data[i * m + j]),
+            vectors: faer::MatRef::from_row_major_slice(&vectors.data, vectors.rows, m).to_owned(),
             residuals: vec![],
             stats,
         };
-        // Read once, by this job: the numbers leave the store (a slice of 125 pairs at 164k vertices holds 160 MB).
-        if let Err(e) = self.state.results.remove(&JobId::parse(id)?) {
-            tracing::warn!(result = %id, error = %e, "cannot remove a slice's pairs once read");
-        }
+        // Read once, by this job: the numbers leave the store (a slice of 125 pairs at 164k vertices holds 160 MB),
+        // on a thread of their own while the job goes on.
+        let (results, rid) = (self.state.results.clone(), JobId::parse(id)?);
+        let _ = std::thread::Builder::new().name("kac-slice-remove".into()).spawn(move || {
+            if let Err(e) = results.remove(&rid) {
+                tracing::warn!(result = %rid.hex(), error = %e, "cannot remove a slice's pairs once read");
+            }
+        });
         Some(Solved {
             spectrum,
             seconds: stored.summary.get("seconds").and_then(|s| s.as_f64()).unwrap_or(0.0),
@@ -196,10 +200,8 @@ pub fn run(
     hooks.control.check()?;
     let s = kac_core::spectrum::slicing::solve_slice(&operator.pair, &request.task, hooks.threads, hooks.control)?;
     let (n, m) = (s.vectors.nrows(), s.vectors.ncols());
-    let mut rows = Vec::with_capacity(n * m);
-    for i in 0..n {
-        rows.extend((0..m).map(|j| s.vectors[(i, j)]));
-    }
+    let mut rows = vec![0.0; n * m];
+    faer::MatMut::from_row_major_slice_mut(&mut rows, n, m).copy_from(s.vectors.as_ref());
     let summary = serde_json::json!({
         "analysis": SLICE_JOB,
         "parent": request.parent,
