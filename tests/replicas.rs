@@ -451,3 +451,45 @@ fn slices_of_one_job_are_solved_on_another_replica() {
         assert!((x - z).abs() <= 1e-8 * z.abs().max(1.0), "{x} against {z} in one run");
     }
 }
+
+#[test]
+#[ignore = "needs PostgreSQL's server (scripts/test-all.sh installs it and runs this)"]
+fn a_canceled_job_cancels_its_slices_on_another_replica() {
+    let cluster = pg::Cluster::start("slice-cancel");
+    let url = cluster.database("kac");
+    // A holds the job 1.5 s before computing, so that B is up when the slices are offered; B holds every job it
+    // claims 20 s (in steps that see a cancel), so its slice job is still running when the job is canceled.
+    let a = Replica::start(Some(&url), &["--workers", "1", "--solver-threads", "1", "--test-job-delay-ms", "1500"]);
+    let (_, shape, _) = call(agent().post(&a.url("/v1/shapes?format=off")).send_bytes(&off(5))).unwrap();
+    let req = json!({ "shape_id": shape["id"], "analysis": "spectrum", "k": 400, "eigenvectors": false,
+                      "solver": { "slices": 4 } });
+    let (st, job, _) = call(agent().post(&a.url("/v1/jobs")).send_json(req)).unwrap();
+    assert_eq!(st, 202, "{job}");
+    let id = job["id"].as_str().unwrap().to_string();
+    let b = Replica::start(Some(&url), &["--workers", "1", "--solver-threads", "1", "--test-job-delay-ms", "20000"]);
+    let slices = |status: &str| {
+        let q = format!(
+            "SELECT count(*) FROM jobs WHERE view::jsonb->>'analysis' = 'spectrum-slice' AND status IN ({status})"
+        );
+        cluster.query("kac", &q).parse::<usize>().unwrap()
+    };
+    let t = Instant::now();
+    while slices("'processing'") == 0 {
+        assert!(t.elapsed() < Duration::from_secs(30), "B claimed no slice job");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // The job waits for B's slice; canceled on B, it ends canceled, and so does every slice job it offered.
+    let (st, _, _) = call(agent().post(&b.url(&format!("/v1/jobs/{id}/cancel"))).call()).unwrap();
+    assert_eq!(st, 202);
+    let t = Instant::now();
+    loop {
+        let (_, v, _) = call(agent().get(&a.url(&format!("/v1/jobs/{id}"))).call()).unwrap();
+        if v["status"] == "canceled" && slices("'enqueued', 'processing'") == 0 {
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(10), "still running 10 s after the cancel: {v}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(slices("'canceled'") >= 1);
+    assert_eq!(slices("'succeeded'"), 0, "B's slice never ran past its hold");
+}
