@@ -457,15 +457,21 @@ fn slices_of_one_job_are_solved_on_another_replica() {
 fn a_canceled_job_cancels_its_slices_on_another_replica() {
     let cluster = pg::Cluster::start("slice-cancel");
     let url = cluster.database("kac");
-    // A holds the job 1.5 s before computing, so that B is up when the slices are offered; B holds every job it
-    // claims 20 s (in steps that see a cancel), so its slice job is still running when the job is canceled.
-    let a = Replica::start(Some(&url), &["--workers", "1", "--solver-threads", "1", "--test-job-delay-ms", "1500"]);
+    // A holds the job 5 s before computing, so that B (started once A has claimed the job) is up when the slices
+    // are offered; B holds every job it claims 20 s (in steps that see a cancel), so its slice job is still running
+    // when the job is canceled.
+    let a = Replica::start(Some(&url), &["--workers", "1", "--solver-threads", "1", "--test-job-delay-ms", "5000"]);
     let (_, shape, _) = call(agent().post(&a.url("/v1/shapes?format=off")).send_bytes(&off(5))).unwrap();
     let req = json!({ "shape_id": shape["id"], "analysis": "spectrum", "k": 400, "eigenvectors": false,
                       "solver": { "slices": 4 } });
     let (st, job, _) = call(agent().post(&a.url("/v1/jobs")).send_json(req)).unwrap();
     assert_eq!(st, 202, "{job}");
     let id = job["id"].as_str().unwrap().to_string();
+    let t = Instant::now();
+    while call(agent().get(&a.url(&format!("/v1/jobs/{id}"))).call()).unwrap().1["status"] != "processing" {
+        assert!(t.elapsed() < Duration::from_secs(10), "A did not claim the job");
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let b = Replica::start(Some(&url), &["--workers", "1", "--solver-threads", "1", "--test-job-delay-ms", "20000"]);
     let slices = |status: &str| {
         let q = format!(

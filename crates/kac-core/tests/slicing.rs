@@ -377,7 +377,7 @@ fn slices_solved_on_another_machine_are_stitched_in() {
     assert!(machine.running.lock().unwrap().is_empty(), "every slice started elsewhere was collected");
     let by: Vec<Option<&str>> = sliced.stats.slices.iter().map(|s| s.solved_by.as_deref()).collect();
     assert_eq!(by, vec![None, None, Some("b"), None]);
-    assert!(sliced.stats.slices[2].worker.is_none() && sliced.stats.slices[2].block_steps > 0);
+    assert!(sliced.stats.slices[2].block_steps > 0, "the other machine's statistics");
     assert_same_values(&sliced, &whole);
     let defect = orthonormality_defect(&pair, &sliced);
     assert!(defect < 1e-8, "ΦᵀMΦ − I reaches {defect:e}");

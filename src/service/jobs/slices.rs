@@ -32,8 +32,8 @@ pub struct SliceRequest {
 pub struct SliceFarm<'a> {
     state: &'a AppState,
     parent: JobView,
-    /// (pencil digest, slice index) → (slice job id, settled: collected, taken back, released or found ended). A job
-    /// may solve several pencils (an extrapolation's refinements), each sliced apart.
+    /// (pencil digest, slice index) → (slice job id, settled: read, taken back, released, or found failed or
+    /// canceled). A job may solve several pencils (an extrapolation's refinements), each sliced apart.
     offered: Mutex<HashMap<(String, usize), (String, bool)>>,
 }
 
@@ -58,15 +58,44 @@ impl<'a> SliceFarm<'a> {
             o.1 = true;
         }
     }
-    /// Cancels a slice job: an enqueued one at once, a running one at its replica's next heartbeat.
-    fn cancel(&self, id: &str) {
-        if let Some(job) = JobId::parse(id) {
-            let _ = self.state.jobs.queue.cancel(&job, &Problem::canceled());
+    /// Slice jobs this job no longer waits for, on a thread of their own: each is canceled (an enqueued one at once,
+    /// a running one at its replica's next heartbeat), and once it has ended (for at most two leases), the pairs of
+    /// one that succeeded all the same (it was storing them) leave the store.
+    fn discard(&self, ids: Vec<String>) {
+        let ids: Vec<JobId> = ids.iter().filter_map(|id| JobId::parse(id)).collect();
+        if ids.is_empty() {
+            return;
         }
+        let state = self.state.clone();
+        let _ = std::thread::Builder::new().name("kac-slice-discard".into()).spawn(move || {
+            let queue = &state.jobs.queue;
+            let until = std::time::Instant::now() + 2 * state.jobs.lease;
+            for job in ids {
+                let _ = queue.cancel(&job, &Problem::canceled());
+                loop {
+                    match queue.get(&job) {
+                        Ok(Some(v)) if v.status == Status::Succeeded => {
+                            remove(&state, job);
+                            break;
+                        }
+                        Ok(Some(v)) if !v.status.terminal() && std::time::Instant::now() < until => {
+                            std::thread::sleep(Duration::from_millis(100));
+                        }
+                        Err(_) if std::time::Instant::now() < until => std::thread::sleep(Duration::from_millis(100)),
+                        _ => break,
+                    }
+                }
+            }
+        });
     }
     /// The pairs a succeeded slice job stored, checked for shape; None when they cannot be read.
     fn read(&self, id: &str) -> Option<Solved> {
-        let stored = self.state.results.get(&JobId::parse(id)?).ok()??;
+        let rid = JobId::parse(id)?;
+        let stored = self.state.results.get(&rid).ok()??;
+        // Read once, by this job, whatever it holds: the numbers leave the store (a slice of 125 pairs at 164k
+        // vertices holds 160 MB), on a thread of their own while the job goes on.
+        let state = self.state.clone();
+        let _ = std::thread::Builder::new().name("kac-slice-remove".into()).spawn(move || remove(&state, rid));
         let vectors = stored.arrays.iter().find(|a| a.name == "eigenvectors")?;
         let values: Vec<f64> = serde_json::from_value(stored.summary.get("eigenvalues")?.clone()).ok()?;
         let m = values.len();
@@ -82,19 +111,18 @@ impl<'a> SliceFarm<'a> {
             residuals: vec![],
             stats,
         };
-        // Read once, by this job: the numbers leave the store (a slice of 125 pairs at 164k vertices holds 160 MB),
-        // on a thread of their own while the job goes on.
-        let (results, rid) = (self.state.results.clone(), JobId::parse(id)?);
-        let _ = std::thread::Builder::new().name("kac-slice-remove".into()).spawn(move || {
-            if let Err(e) = results.remove(&rid) {
-                tracing::warn!(result = %rid.hex(), error = %e, "cannot remove a slice's pairs once read");
-            }
-        });
         Some(Solved {
             spectrum,
             seconds: stored.summary.get("seconds").and_then(|s| s.as_f64()).unwrap_or(0.0),
             by: stored.summary.get("replica").and_then(|s| s.as_str()).unwrap_or("another replica").to_string(),
         })
+    }
+}
+
+/// Removes a slice job's pairs from the store.
+fn remove(state: &AppState, id: JobId) {
+    if let Err(e) = state.results.remove(&id) {
+        tracing::warn!(result = %id.hex(), error = %e, "cannot remove a slice's pairs");
     }
 }
 
@@ -105,9 +133,15 @@ impl Farm for SliceFarm<'_> {
         let Ok(canonical) = serde_json::to_value(&request) else { return false };
         let id = job_id(&self.parent.shape_id, &canonical);
         match self.state.jobs.enqueue(id.clone(), self.parent.shape_id.clone(), SLICE_JOB, canonical) {
-            Ok(_) => {
+            // New, or waiting or running from an earlier run of this job (its replica died): this run's to collect.
+            Ok((v, new)) if new || !v.status.terminal() => {
                 self.offered.lock().unwrap_or_else(|e| e.into_inner()).insert(Self::key(task), (id, false));
                 true
+            }
+            // Solved for an earlier run that never read it: solved here, and its pairs leave the store.
+            Ok(_) => {
+                self.discard(vec![id]);
+                false
             }
             // A full queue, or a store away: the slice is solved here.
             Err(_) => false,
@@ -136,7 +170,7 @@ impl Farm for SliceFarm<'_> {
     }
     fn release(&self, task: &SliceTask) {
         if let Some(id) = self.id_of(task) {
-            self.cancel(&id);
+            self.discard(vec![id]);
             self.settle(task);
         }
     }
@@ -148,8 +182,12 @@ impl Farm for SliceFarm<'_> {
             match self.state.jobs.queue.get(&job) {
                 Ok(Some(v)) => match v.status {
                     Status::Succeeded => {
-                        self.settle(task);
-                        return Ok(self.read(&id));
+                        // Unread (the store was away), it stays unsettled: discarded at the job's end.
+                        let solved = self.read(&id);
+                        if solved.is_some() {
+                            self.settle(task);
+                        }
+                        return Ok(solved);
                     }
                     // Not started yet, or back in the queue after a lease expired: solved here.
                     Status::Enqueued if self.take_back(task) => return Ok(None),
@@ -169,14 +207,11 @@ impl Farm for SliceFarm<'_> {
 }
 
 impl Drop for SliceFarm<'_> {
-    /// Slice jobs this job never settled (it was canceled or timed out while they ran) are canceled.
+    /// Slice jobs this job never settled (it was canceled or timed out while they ran, or could not read one) are
+    /// discarded: canceled, and their pairs removed if they were stored all the same.
     fn drop(&mut self) {
         let offered = std::mem::take(self.offered.get_mut().unwrap_or_else(|e| e.into_inner()));
-        for (id, settled) in offered.values() {
-            if !settled {
-                self.cancel(id);
-            }
-        }
+        self.discard(offered.into_values().filter(|(_, settled)| !settled).map(|(id, _)| id).collect());
     }
 }
 

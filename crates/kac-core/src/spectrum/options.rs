@@ -203,8 +203,9 @@ pub trait Lender: Sync {
 /// A host that has slices of a sliced solve solved elsewhere (the service's slice jobs, which any replica sharing its
 /// queue may claim). The solve offers the slices its own and lent threads do not start at once; a thread that comes
 /// to an offered slice takes it back when nobody has started it, and otherwise collects it once the solve has no
-/// slice of its own left. A slice that failed or was lost elsewhere is solved here after all, so an offer can only
-/// save time, never lose a slice.
+/// slice of its own left. A slice that failed or was lost elsewhere is solved here after all, so no slice is lost;
+/// one that another machine has started is waited for, however slow that machine (one lost with its machine until
+/// the host gives it back: the service's lease).
 pub trait Farm: Sync {
     /// Offers a slice; false when it was not taken (the solve keeps it).
     fn offer(&self, task: &super::slicing::SliceTask) -> bool;
