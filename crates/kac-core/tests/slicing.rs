@@ -317,6 +317,36 @@ struct Machine {
 /// A slice being solved on the other machine.
 type Solving = std::thread::JoinHandle<Result<Spectrum, EigenError>>;
 
+/// The other machine's answer for slice `index`, taken from those it runs (each is collected once).
+fn join(running: &std::sync::Mutex<Vec<(usize, Solving)>>, index: usize) -> Result<Spectrum, EigenError> {
+    let mut running = running.lock().unwrap();
+    let at = running.iter().position(|(i, _)| *i == index).expect("collected once, after being started");
+    running.remove(at).1.join().unwrap()
+}
+
+/// A window's open ends travel as JSON null and come back infinite.
+#[test]
+fn a_slice_task_keeps_its_open_ends_through_json() {
+    for (lo, hi) in [(f64::NEG_INFINITY, 3.5), (2.0, f64::INFINITY), (1.0, 2.0)] {
+        let window =
+            kac_core::spectrum::lanczos::Window { lo, hi, sigma: 1.5, total: None, count: Some(4), below_lo: 7 };
+        let task = kac_core::spectrum::slicing::SliceTask {
+            index: 0,
+            window,
+            options: EigenOptions::default(),
+            pencil: "p".into(),
+        };
+        let text = serde_json::to_string(&task).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(
+            (json["window"]["lo"].is_null(), json["window"]["hi"].is_null()),
+            (!lo.is_finite(), !hi.is_finite())
+        );
+        let back: kac_core::spectrum::slicing::SliceTask = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, task);
+    }
+}
+
 impl kac_core::spectrum::Farm for Machine {
     fn offer(&self, task: &kac_core::spectrum::slicing::SliceTask) -> bool {
         self.offered.lock().unwrap().push(task.index);
@@ -340,10 +370,7 @@ impl kac_core::spectrum::Farm for Machine {
         task: &kac_core::spectrum::slicing::SliceTask,
         _: &Control<'_>,
     ) -> Result<Option<kac_core::spectrum::slicing::Solved>, EigenError> {
-        let mut running = self.running.lock().unwrap();
-        let at = running.iter().position(|(i, _)| *i == task.index).expect("collected once, after being started");
-        let (_, handle) = running.remove(at);
-        Ok(match handle.join().unwrap() {
+        Ok(match join(&self.running, task.index) {
             Ok(spectrum) => Some(kac_core::spectrum::slicing::Solved { spectrum, seconds: 0.0, by: "b".into() }),
             Err(EigenError::InvalidOption { name: "pencil", .. }) => None,
             Err(e) => panic!("slice {} failed elsewhere: {e}", task.index),
@@ -384,15 +411,17 @@ fn slices_solved_on_another_machine_are_stitched_in() {
     assert!(sliced.stats.completeness.as_ref().is_some_and(|c| c.complete));
     // A pencil of another problem is refused outright.
     let other = pair_of(&Shape::TriangleMesh(generate::icosphere(3)), Boundary::Neumann);
-    let task = kac_core::spectrum::slicing::SliceTask {
-        index: 1,
-        slices: 4,
-        lo: Some(10.0),
-        hi: Some(20.0),
+    let window = kac_core::spectrum::lanczos::Window {
+        lo: 10.0,
+        hi: 20.0,
         sigma: 15.0,
         total: None,
         count: Some(10),
         below_lo: 20,
+    };
+    let task = kac_core::spectrum::slicing::SliceTask {
+        index: 1,
+        window,
         options: EigenOptions { k: 10, ..Default::default() },
         pencil: kac_core::spectrum::slicing::pencil_digest(&pair),
     };
@@ -431,9 +460,7 @@ impl kac_core::spectrum::Farm for LateMachine {
         task: &kac_core::spectrum::slicing::SliceTask,
         _: &Control<'_>,
     ) -> Result<Option<kac_core::spectrum::slicing::Solved>, EigenError> {
-        let mut running = self.running.lock().unwrap();
-        let at = running.iter().position(|(i, _)| *i == task.index).expect("collected once");
-        let spectrum = running.remove(at).1.join().unwrap()?;
+        let spectrum = join(&self.running, task.index)?;
         Ok(Some(kac_core::spectrum::slicing::Solved { spectrum, seconds: 0.0, by: "late".into() }))
     }
     fn release(&self, _: &kac_core::spectrum::slicing::SliceTask) {

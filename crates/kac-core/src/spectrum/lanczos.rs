@@ -291,11 +291,14 @@ pub struct Run<'a> {
 }
 
 /// The part of the spectrum one slice returns: the pairs with λ in [lo, hi), found by shift-invert around `sigma`.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// In JSON (a slice solved on another machine) an open end is null, since JSON has no infinities.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Window {
     /// −∞ for the lowest slice.
+    #[serde(serialize_with = "open_end", deserialize_with = "from_below")]
     pub lo: f64,
     /// +∞ for the top slice, which returns pairs up to a count instead (`total`).
+    #[serde(serialize_with = "open_end", deserialize_with = "from_above")]
     pub hi: f64,
     pub sigma: f64,
     /// Top slice: the pairs wanted counted from the bottom of the spectrum (deflated ones included, guards too):
@@ -308,6 +311,21 @@ pub struct Window {
     /// The eigenvalues below `lo` (deflated ones included; Sylvester's inertia at `lo`): the top slice checks that it
     /// holds every eigenvalue in [lo, σ) against its own inertia at σ.
     pub below_lo: usize,
+}
+
+/// A window's end as JSON: null where it is open (infinite).
+fn open_end<S: serde::Serializer>(x: &f64, s: S) -> Result<S::Ok, S::Error> {
+    serde::Serialize::serialize(&x.is_finite().then_some(*x), s)
+}
+
+/// A lower end back from JSON: null is −∞.
+fn from_below<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(<Option<f64> as serde::Deserialize>::deserialize(d)?.unwrap_or(f64::NEG_INFINITY))
+}
+
+/// An upper end back from JSON: null is +∞.
+fn from_above<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(<Option<f64> as serde::Deserialize>::deserialize(d)?.unwrap_or(f64::INFINITY))
 }
 
 /// Where a run's wanted pairs lie among the Ritz candidates sorted by ascending λ: the pairs returned are

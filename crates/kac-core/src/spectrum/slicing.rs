@@ -88,34 +88,13 @@ pub struct SliceReport {
 /// digest of the pencil it belongs to.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SliceTask {
-    /// Its place among the solve's slices (0: the lowest), of `slices`.
+    /// Its place among the solve's slices (0: the lowest).
     pub index: usize,
-    pub slices: usize,
-    /// The window's lower end (null: the lowest slice, from the bottom of the spectrum).
-    pub lo: Option<f64>,
-    /// The window's upper end (null: the top slice, up to the `total`-th eigenvalue).
-    pub hi: Option<f64>,
-    pub sigma: f64,
-    pub total: Option<usize>,
-    pub count: Option<usize>,
-    pub below_lo: usize,
+    pub window: Window,
     /// The run's options: `k` the pairs the window holds, its subspace (`threads` is the solving machine's own).
     pub options: EigenOptions,
     /// [`pencil_digest`] of the problem: a machine that built another pencil refuses the task.
     pub pencil: String,
-}
-
-impl SliceTask {
-    fn window(&self) -> Window {
-        Window {
-            lo: self.lo.unwrap_or(f64::NEG_INFINITY),
-            hi: self.hi.unwrap_or(f64::INFINITY),
-            sigma: self.sigma,
-            total: self.total,
-            count: self.count,
-            below_lo: self.below_lo,
-        }
-    }
 }
 
 /// A slice solved elsewhere, as [`Farm::collect`] hands it back.
@@ -253,7 +232,7 @@ pub fn solve_slice(
         deflation: &deflation,
         deflated_values: &zero_values,
         interior_shift: true,
-        window: Some(task.window()),
+        window: Some(task.window),
         head: None,
     };
     lanczos::eigs_block_lanczos(pair, &o, Some(&sym), control, &run)?.ok_or(EigenError::NoConvergence {
@@ -511,16 +490,9 @@ pub(crate) fn solve(
             let pencil = pencil_digest(pair);
             let mut offers: Vec<Option<SliceTask>> = vec![None; slices.len()];
             for &i in &order[own + lent..] {
-                let (w, _) = slices[i];
                 let task = SliceTask {
                     index: i,
-                    slices: slices.len(),
-                    lo: w.lo.is_finite().then_some(w.lo),
-                    hi: w.hi.is_finite().then_some(w.hi),
-                    sigma: w.sigma,
-                    total: w.total,
-                    count: w.count,
-                    below_lo: w.below_lo,
+                    window: slices[i].0,
                     options: EigenOptions { threads: 0, ..options_of(i) },
                     pencil: pencil.clone(),
                 };
