@@ -186,6 +186,11 @@ pub fn cors_origin(o: &str) -> Result<(), String> {
 }
 
 impl Config {
+    /// Whether `--store` is PostgreSQL, which any number of replicas share (the store was checked at start).
+    pub fn shared_store(&self) -> bool {
+        self.store.as_deref().is_some_and(|s| s.starts_with("postgres://") || s.starts_with("postgresql://"))
+    }
+
     /// Every configured key (flag, environment, file). Fails closed: a keys file that is missing, unreadable, or
     /// holds no valid key, or any line of it that is not a valid key, is an error that stops the server at start
     /// (never a server open to everyone).

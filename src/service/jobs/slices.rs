@@ -40,8 +40,7 @@ pub struct SliceFarm<'a> {
 impl<'a> SliceFarm<'a> {
     /// A farm for the job `parent` when this replica shares its queue with others (a PostgreSQL store); None otherwise.
     pub fn of(state: &'a AppState, parent: &JobView) -> Option<Self> {
-        let shared = state.config.store.as_deref().is_some_and(|s| s.starts_with("postgres"));
-        (shared && parent.analysis != SLICE_JOB).then(|| SliceFarm {
+        (state.config.shared_store() && parent.analysis != SLICE_JOB).then(|| SliceFarm {
             state,
             parent: parent.clone(),
             offered: Mutex::new(HashMap::new()),

@@ -43,7 +43,7 @@ pub fn open(config: &super::config::Config) -> std::io::Result<Backend> {
         let index_snapshot = Some(dir.join("search-index.bin"));
         return Ok(Backend { shapes: db.clone(), fingerprints: db.clone(), results, queue: db, index_snapshot });
     }
-    if store.starts_with("postgres://") || store.starts_with("postgresql://") {
+    if config.shared_store() {
         let pg = Arc::new(Postgres::open(&store, config.pg_pool_size, config.max_vertices, config.store_cache_bytes)?);
         return Ok(Backend {
             shapes: pg.clone(),
