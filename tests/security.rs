@@ -3,7 +3,8 @@
 //! a configuration that would run open or with a broken limit stops the start; bearer keys with any case of the
 //! scheme; a body too large for `Expect: 100-continue` is refused before it is sent, a body trickled in is cut off
 //! at the rate floor, bodies in flight share a memory budget; settings no solve could honour are refused at
-//! submission; the default Krylov basis counts against the output limit; and the smaller items of the issue.
+//! submission; the default Krylov basis counts against the output limit, a sliced solve's by its slices' bases; and
+//! the smaller items of the issue.
 
 #[path = "support/faults.rs"]
 mod faults;
@@ -368,6 +369,40 @@ fn the_default_krylov_basis_counts_against_the_output_limit() {
     let r =
         reply(agent().post(&s.url("/v1/jobs")).send_json(json!({"shape_id": shape, "analysis": "spectrum", "k": 20})));
     assert_eq!(r.status, 202, "{}", r.body);
+}
+
+/// A sliced solve (from 400 pairs) is counted by its widest array: its slices' bases are each sized for a share of
+/// the pairs, where one run of the same k (`slices: 1`) holds a basis of twice k columns. The graph Laplacian has no
+/// Weyl's law to plan slices by, so it solves in one run: the solver checks that basis against the same limit before
+/// it is allocated, and the job fails with `output-too-large`.
+#[test]
+fn a_sliced_solve_counts_its_slices_bases_against_the_output_limit() {
+    let root = tempfile::tempdir().unwrap();
+    // 2,562 vertices × 401 eigenvectors = 1,027,362 values, below the limit (the zero mode aside, 400 pairs: the
+    // fewest the automatic plan slices); one run's basis of 826 columns is not.
+    let s = Server::start(&root.path().join("data"), &["--max-output-values", "1100000"]);
+    let shape = upload(&s, &off(4), "?format=off").body["id"].as_str().unwrap().to_string();
+    let submit = |body: Value| reply(agent().post(&s.url("/v1/jobs")).send_json(body));
+    let r = submit(json!({"shape_id": shape, "analysis": "spectrum", "k": 401, "solver": {"slices": 1}}));
+    assert_problem(&r, 413, "output-too-large");
+    assert!(r.body["detail"].as_str().unwrap().contains("2562 vertices × 826 columns"), "{}", r.body);
+
+    let r = submit(json!({"shape_id": shape, "analysis": "spectrum", "k": 401}));
+    assert_eq!(r.status, 202, "{}", r.body);
+    let id = r.body["id"].as_str().unwrap().to_string();
+    assert_eq!(wait_done(&s, &id)["status"], "succeeded");
+    let result = reply(agent().get(&s.url(&format!("/v1/results/{id}"))).call()).body;
+    assert_eq!(result["eigenvalues"].as_array().map(Vec::len), Some(401), "{}", result["solver"]);
+    let slices = result["solver"]["slices"].as_array().map_or(0, Vec::len);
+    assert!(slices >= 2, "{}", result["solver"]);
+    assert_eq!(result["solver"]["completeness"]["complete"], true, "{}", result["solver"]);
+
+    let r = submit(json!({"shape_id": shape, "analysis": "spectrum", "k": 401, "operator": {"operator": "graph"}}));
+    assert_eq!(r.status, 202, "{}", r.body);
+    let done = wait_done(&s, r.body["id"].as_str().unwrap());
+    assert_eq!(done["status"], "failed", "{done}");
+    assert_eq!(done["error"]["code"], "output-too-large", "{done}");
+    assert!(done["error"]["detail"].as_str().unwrap().contains("Krylov basis"), "{done}");
 }
 
 /// The smaller items: weak `If-None-Match`, a query fingerprint that would overflow distances, a truncated

@@ -135,7 +135,7 @@ pub fn eigenpairs(
     if k > n {
         return Err(AnalysisError::invalid_k(format!("k = {k} is out of range for {n} unknowns (1 ≤ k ≤ {n})")));
     }
-    let options = EigenOptions { max_factor_values: hooks.limits.max_values, ..solver.eigen_options(k, hooks.threads) };
+    let options = EigenOptions { max_values: hooks.limits.max_values, ..solver.eigen_options(k, hooks.threads) };
     let spectrum = spectrum::eigs(&operator.pair, &options, None, hooks.control)?;
     if let Some(f) = hooks.on_solve {
         f(&spectrum.stats);
@@ -186,7 +186,7 @@ pub fn band_pairs(
     let (operator, assembly_s) = assemble(v, spec, solver, hooks)?;
     let n = operator.pair.n();
     let max_pairs = hooks.limits.max_pairs.min(hooks.limits.max_values / n.max(1)).max(1);
-    let opts = EigenOptions { max_factor_values: hooks.limits.max_values, ..solver.eigen_options(0, hooks.threads) };
+    let opts = EigenOptions { max_values: hooks.limits.max_values, ..solver.eigen_options(0, hooks.threads) };
     let spectrum = spectrum::eigs_band(&operator.pair, band[0], band[1], max_pairs, &opts, hooks.control)?;
     if let Some(f) = hooks.on_solve {
         f(&spectrum.stats);

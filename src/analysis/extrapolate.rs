@@ -106,7 +106,7 @@ pub(crate) fn extrapolation(
                 _ => operators::build(&plain, &options)?,
             };
             let options =
-                EigenOptions { max_factor_values: hooks.limits.max_values, ..solver.eigen_options(k, hooks.threads) };
+                EigenOptions { max_values: hooks.limits.max_values, ..solver.eigen_options(k, hooks.threads) };
             let s = spectrum::eigs(&op.pair, &options, None, hooks.control)?;
             levels.push(ExtrapolationLevel {
                 unknowns: op.pair.n(),

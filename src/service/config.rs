@@ -47,7 +47,8 @@ pub struct Config {
     #[arg(long, env = "KAC_MAX_SAMPLES", default_value_t = 10_000, value_parser = at_least_one)]
     pub max_samples: usize,
     /// Largest number of values (vertices × columns) of any per-vertex array an analysis holds or returns,
-    /// eigenvectors included (k × vertices); beyond it, 413 `output-too-large` at submission.
+    /// eigenvectors (k × vertices) and the sparse solver's Krylov basis (each slice's, where the solve is sliced)
+    /// included; beyond it, 413 `output-too-large` at submission, or as the job's error where only the run shows it.
     #[arg(long, env = "KAC_MAX_OUTPUT_VALUES", default_value_t = 200_000_000, value_parser = at_least_one)]
     pub max_output_values: usize,
     /// Seconds a client has to send a request's whole header (also the longest idle time of a kept-alive

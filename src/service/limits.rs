@@ -145,12 +145,14 @@ pub fn check_work(config: &Config, a: &Analysis, vertices: usize) -> Result<(), 
         ))));
     }
     // The sparse solver's Krylov basis, as the solver will size it (its default included: about 3k columns for
-    // small k, 2k for large), and the block vectors beside it.
+    // small k, 2k for large; a sliced solve's widest slice, whose basis is sized for its share of the pairs), and the
+    // block vectors beside it. The solver checks each basis against the same limit before allocating it, where a
+    // spectrum that does not fit the slices' plan (or an operator without Weyl's law to plan by) needs one run's.
     let columns = match (a.solver(), eigenpairs(a)) {
         // Counted where the sparse path will run (the dense path's n² values are checked by the runner).
         (Some(s), Some(k)) if !kac_core::spectrum::use_dense(s.eigen_options(k, 0).method, vertices, vertices, k) => {
             let o = s.eigen_options(k, 0);
-            let basis = kac_core::spectrum::lanczos::plan(vertices.max(k + 2), 0, &o).map_or(0, |(b, _, m)| m + 2 * b);
+            let basis = kac_core::spectrum::slicing::widest_basis(vertices.max(k + 2), 0, &o).unwrap_or(0);
             columns.max(basis)
         }
         (Some(_), Some(_)) => columns,

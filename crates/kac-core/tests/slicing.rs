@@ -5,7 +5,7 @@
 
 use kac_core::geometry::{generate, Shape};
 use kac_core::operators::{self, Boundary, Mass, OperatorOptions};
-use kac_core::spectrum::{eigs, Control, EigenError, EigenOptions, Method, Spectrum};
+use kac_core::spectrum::{eigs, slicing, Control, EigenError, EigenOptions, Method, Spectrum};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 fn pair_of(shape: &Shape, boundary: Boundary) -> operators::sparse::SparsePair {
@@ -144,6 +144,30 @@ fn a_stop_inside_a_slice_cancels() {
 
 /// The automatic plan: one run below 400 pairs whatever the threads, then one slice per 125 pairs (at least one
 /// per thread); an asked count is kept within 1..=k/8.
+/// A limit on one array's values (`max_values`, the service's --max-output-values) is checked against each Krylov
+/// basis before it is allocated: a sliced solve holds its slices' bases, each sized for a share of the pairs, where one
+/// run of the same k holds a basis of twice k columns. `widest_basis` predicts both.
+#[test]
+fn the_values_limit_counts_each_slice_basis() {
+    let pair = pair_of(&Shape::TriangleMesh(generate::icosphere(4)), Boundary::Neumann);
+    let n = pair.n();
+    // The zero mode aside, 400 pairs: the fewest the automatic plan slices.
+    let k = 401;
+    let o = EigenOptions { k, threads: 2, method: Method::Sparse, ..Default::default() };
+    let one_run = EigenOptions { slices: Some(1), ..o.clone() };
+    let (sliced, one) = (slicing::widest_basis(n, 1, &o).unwrap(), slicing::widest_basis(n, 1, &one_run).unwrap());
+    assert!(sliced < k && one > 2 * k, "widest basis sliced {sliced}, one run {one}");
+    // Above the slices' bases, sized at run time for the pairs each window holds (a cluster more than the even share:
+    // up to 364 columns here), below one run's.
+    let limit = n * 450;
+    let s = eigs(&pair, &EigenOptions { max_values: limit, ..o }, None, Control::default()).unwrap();
+    assert!(s.stats.slices.len() >= 2, "{:?}", s.stats.slices);
+    assert_eq!(s.values.len(), k);
+    assert_eq!(s.stats.completeness.as_ref().map(|c| c.complete), Some(true));
+    let e = eigs(&pair, &EigenOptions { max_values: limit, ..one_run }, None, Control::default()).unwrap_err();
+    assert!(matches!(e, EigenError::TooLarge { .. }) && e.to_string().contains("Krylov basis"), "{e}");
+}
+
 #[test]
 fn slice_count_by_k_and_threads() {
     use kac_core::spectrum::slicing::slice_count;

@@ -541,3 +541,24 @@ fn cospectral_graphs_sound_the_same() {
     assert_ne!(ids[0], ids[1]);
     assert_close(&spectra[0], &spectra[1], 1e-12, "one spectrum");
 }
+
+/// One run on two threads against one thread, with thick restarts whose Ritz vectors are formed by row ranges on
+/// both threads (10,242 vertices: five chunks of the in-place product): the same eigenvalues to 10⁻¹⁰ and
+/// M-orthonormal eigenvectors with the sphere's residuals.
+#[test]
+fn one_run_on_two_threads_restarts_as_on_one() {
+    let shape = mesh(generate::icosphere(5));
+    let op = opts(Mass::Consistent, Boundary::Neumann);
+    let pair = operators::build(&shape, &op).unwrap().pair;
+    let run = |threads: usize| {
+        let o = EigenOptions { k: 50, threads, slices: Some(1), method: Method::Sparse, ..Default::default() };
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        pool.install(|| eigs(&pair, &o, None, Control::default()).unwrap())
+    };
+    let (one, two) = (run(1), run(2));
+    assert!(two.stats.restarts >= 1, "the run restarts: {:?}", two.stats.restarts);
+    assert_close(&two.values, &one.values, 1e-10, "two threads against one");
+    check_m_orthonormal(&shape, &op, &two, 1e-8);
+    let worst = two.residuals.iter().copied().fold(0.0f64, f64::max);
+    assert!(worst < 1e-7, "largest residual {worst:e}");
+}

@@ -29,7 +29,7 @@ thread_local! {
 }
 
 /// Runs `f` with a limit on the values of every factor the solvers of this thread make outside the eigensolver
-/// (which takes its own, [`super::EigenOptions::max_factor_values`]): Poisson, diffusion, geodesics, smoothing and
+/// (which takes its own, [`super::EigenOptions::max_values`]): Poisson, diffusion, geodesics, smoothing and
 /// interpolation check the symbolic analysis' fill against it before any numeric factorization.
 pub fn with_factor_limit<T>(limit: usize, f: impl FnOnce() -> T) -> T {
     let old = FACTOR_LIMIT.with(|l| l.replace(limit));

@@ -104,8 +104,12 @@ pub fn eigs(
             }
         };
         let symbolic_s = symbolic_t.elapsed().as_secs_f64();
-        if sym.inner.len_val() > options.max_factor_values {
-            return Err(EigenError::TooLarge { values: sym.inner.len_val(), limit: options.max_factor_values });
+        if sym.inner.len_val() > options.max_values {
+            return Err(EigenError::TooLarge {
+                what: "the factor of L − σM (the symbolic analysis' fill)".into(),
+                values: sym.inner.len_val(),
+                limit: options.max_values,
+            });
         }
         let deflation = Deflation { sparse: &zeros.vectors, dense: None };
         let zero_values = vec![0.0; z];

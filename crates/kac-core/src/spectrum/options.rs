@@ -41,9 +41,10 @@ pub struct EigenOptions {
     /// further solves only when eigenvalues were missed. `false` skips the check (the result then says
     /// `completeness: null`).
     pub verify: bool,
-    /// The most values a factor of L − σM may hold, predicted by the symbolic analysis before any numeric
-    /// factorization (default: no limit); a larger one is [`EigenError::TooLarge`].
-    pub max_factor_values: usize,
+    /// The most values one array of a sparse solve may hold (default: no limit): a factor of L − σM, predicted by
+    /// the symbolic analysis before any numeric factorization, and a Krylov basis (n × subspace, each slice's
+    /// own where the solve is sliced), checked before it is allocated. A larger one is [`EigenError::TooLarge`].
+    pub max_values: usize,
     /// Put the operator's known zero modes in the result exactly and iterate on their complement (default true;
     /// see [`null_space`]).
     pub deflate_null_space: bool,
@@ -150,7 +151,7 @@ impl Default for EigenOptions {
             threads: 0,
             method: Method::Auto,
             verify: true,
-            max_factor_values: usize::MAX,
+            max_values: usize::MAX,
             deflate_null_space: true,
             slices: None,
         }

@@ -128,10 +128,10 @@ pub enum EigenError {
          after {repairs} repair rounds"
     )]
     Incomplete { shift: f64, below: usize, found: usize, repairs: usize },
-    #[error(
-        "the factor of L − σM would hold {values} values (the symbolic analysis' fill), above the limit of {limit}"
-    )]
-    TooLarge { values: usize, limit: usize },
+    /// An array of the solve (`what`: the factor of L − σM or a Krylov basis) would hold more values than
+    /// [`EigenOptions::max_values`].
+    #[error("{what} would hold {values} values, above the limit of {limit}")]
+    TooLarge { what: String, values: usize, limit: usize },
 }
 
 impl EigenError {

@@ -306,6 +306,28 @@ pub fn slice_count(wanted: usize, threads: usize, asked: Option<usize>) -> usize
     wanted.div_ceil(PAIRS_PER_SLICE).max(threads.min(wanted / PAIRS_PER_SLICE)).max(1)
 }
 
+/// The columns of the widest Krylov basis a sparse solve of `o.k` pairs of `n` unknowns allocates where its plan
+/// holds, with the block vectors beside it (two blocks). `deflated` of the pairs are known zero modes, put in exactly
+/// and not iterated for (a caller that cannot know them yet counts none). Each slice's own basis when the options
+/// let the solve be sliced (the fewest slices `o` allows, each with an even share of the pairs, the top slice's extra
+/// columns included), else the one run's; `None` where the problem is too small for the Krylov method. At run time a
+/// slice sizes its basis for the pairs its window holds, and a plan that does not fit the spectrum (or an operator
+/// without a dimension for Weyl's law) is solved in one run: every basis is checked against
+/// [`EigenOptions::max_values`] before it is allocated, so what this predicts at submission is enforced where the
+/// memory is taken.
+pub fn widest_basis(n: usize, deflated: usize, o: &EigenOptions) -> Option<usize> {
+    let o = EigenOptions { k: o.k.saturating_sub(deflated), ..o.clone() };
+    let sliceable = o.sigma.is_none() && !(o.subspace.is_some() && o.slices.is_none());
+    let s = if sliceable { slice_count(o.k, 1, o.slices) } else { 1 };
+    if s < 2 {
+        let (b, _, m) = lanczos::plan(n, deflated, &o)?;
+        return Some(m + 2 * b);
+    }
+    let pairs = o.k.div_ceil(s);
+    let (b, _, m) = lanczos::plan(n, deflated, &EigenOptions { k: pairs, subspace: None, ..o })?;
+    Some((m + TOP_EXTRA.min(pairs)).min(n) + 2 * b)
+}
+
 /// The slices' windows by Weyl's law (each expected to hold the same number of pairs), or `None` where slicing does
 /// not apply (one slice, a fixed shift, an operator without a dimension for Weyl's law).
 pub(crate) fn plan(pair: &SparsePair, deflated: usize, wanted: usize, o: &EigenOptions) -> Option<Vec<Window>> {
