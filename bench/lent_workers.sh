@@ -4,8 +4,8 @@
 # (what such a job got before workers were lent) and on two (`kac spectrum --threads`), in the same run. Mesh: the
 # 163,842-vertex unit icosphere (bench/out/ico7.off), K pairs (default 1000). Prints one line per run: wall seconds
 # (the job: from submission to its end), the workers that solved slices, and peak RSS (the server's: VmHWM). The
-# server's --max-output-values is raised to 4·10⁸: its default (2·10⁸) refuses this job, counting the basis of one
-# run. CLI_THREADS="1 2" (default) selects the CLI runs; CLI_THREADS="" runs the service alone.
+# server runs with its default limits (before 994cc2b its --max-output-values refused this job, counting the basis of
+# one run). CLI_THREADS="1 2" (default) selects the CLI runs; CLI_THREADS="" runs the service alone.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 K=${K:-1000}
@@ -24,8 +24,8 @@ print(f"cli --threads {sys.argv[2]}: {t['total_s'] - t.get('read_s', 0):.2f} s, 
 PY
 done
 dir=$(mktemp -d)
-./target/release/kac serve --addr 127.0.0.1:0 --data-dir "$dir" --workers 2 --solver-threads 1 \
-  --max-output-values 400000000 > "$dir/out" 2> /dev/null &
+./target/release/kac serve --addr 127.0.0.1:0 --data-dir "$dir" --workers 2 --solver-threads 1 > "$dir/out" \
+  2> /dev/null &
 pid=$!
 trap 'kill $pid 2> /dev/null; rm -rf "$dir"' EXIT
 for _ in $(seq 100); do [ -s "$dir/out" ] && break; sleep 0.1; done

@@ -3,8 +3,9 @@
 sharing the PostgreSQL queue, against the same job on one replica alone, in the same run on this machine.
 
 Mesh: the 163,842-vertex unit icosphere (bench/out/ico7.off), K pairs (default 1000). Every replica runs one worker
-with one solver thread (two replicas on a 2-core machine: one core each), with --max-output-values 4·10⁸ (the default
-2·10⁸ refuses this job, counting the basis of one run). Each configuration gets a database of its own, so no slice
+with one solver thread (two replicas on a 2-core machine: one core each), and the default limits (before 994cc2b the
+default --max-output-values refused this job, counting the basis of one run). Each configuration gets a database of
+its own, so no slice
 job of one is found done by another. For each: wall seconds from submission to the job's end, the slices solved on
 the other replica, and the peak RSS (VmHWM) of each replica.
 
@@ -20,7 +21,7 @@ from pg_cluster import Cluster  # noqa: E402
 
 def serve(kac, store, work):
     args = [kac, "serve", "--addr", "127.0.0.1:0", "--data-dir", work, "--workers", "1", "--solver-threads", "1",
-            "--max-output-values", "400000000", "--store", store]
+            "--store", store]
     p = subprocess.Popen(args, env=dict(os.environ, RUST_LOG="error"), stdout=subprocess.PIPE,
                          stderr=subprocess.DEVNULL)
     return p, "http://" + json.loads(p.stdout.readline())["listening"]
