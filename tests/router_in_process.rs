@@ -172,6 +172,27 @@ async fn solver_settings_are_bounded_by_the_limits() {
     assert!(p["detail"].as_str().unwrap().contains("limit of 20"), "{p}");
 }
 
+/// Band mode asks for no more pairs than the sparse solver's widest Krylov basis allows within --max-output-values:
+/// on 2,562 vertices with room for 100 columns, a band beyond reach is the band's own refusal (narrow it), not the
+/// solver's basis found too large on the way; a band within reach is solved.
+#[tokio::test]
+async fn a_band_stops_where_its_basis_would_pass_the_output_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app_with(dir.path(), &["--max-output-values", "256200"]);
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(4));
+    let analyze = |request: Value| {
+        let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+        Request::post(uri).body(Body::from(off.clone())).unwrap()
+    };
+    let (status, p) = call(&app, analyze(json!({ "analysis": "spectrum", "band": [1.0, 500.0] }))).await;
+    assert_eq!((status, p["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-option")), "{p}");
+    let detail = p["detail"].as_str().unwrap();
+    let limit: usize = detail.split("limit of ").nth(1).and_then(|t| t.split(' ').next()).unwrap().parse().unwrap();
+    assert!((8..50).contains(&limit), "{detail}");
+    let (status, r) = call(&app, analyze(json!({ "analysis": "spectrum", "band": [1.0, 7.0] }))).await;
+    assert_eq!((status, r["k"].as_u64()), (StatusCode::OK, Some(8)), "{r}");
+}
+
 /// CORS: off by default (no header for any origin); with `--cors-origins`, a preflight from a listed origin is
 /// answered for every /v1 route before authentication, with the methods and headers a client sends and the
 /// response headers it may read; an origin not listed gets no `Access-Control-Allow-Origin`.

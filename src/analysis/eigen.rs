@@ -185,8 +185,27 @@ pub fn band_pairs(
 ) -> Result<Eigen, AnalysisError> {
     let (operator, assembly_s) = assemble(v, spec, solver, hooks)?;
     let n = operator.pair.n();
-    let max_pairs = hooks.limits.max_pairs.min(hooks.limits.max_values / n.max(1)).max(1);
     let opts = EigenOptions { max_values: hooks.limits.max_values, ..solver.eigen_options(0, hooks.threads) };
+    // As many pairs as the eigenvectors and the solver's widest Krylov basis allow within the limit (one run where the
+    // operator has no Weyl's law to plan slices by), so that a band beyond them is refused as such.
+    let slices = if operator.pair.dimension.is_some() { opts.slices } else { Some(1) };
+    let mut max_pairs = hooks.limits.max_pairs.min(hooks.limits.max_values / n.max(1)).max(1);
+    if opts.max_values < usize::MAX {
+        // The widest basis of every sparse solve up to k pairs (the band's solves double k), up to the first k it
+        // exceeds (the dense path holds no basis).
+        let mut widest = 0usize;
+        for k in 1..=max_pairs.min(n) {
+            if spectrum::use_dense(opts.method, n, n, k) {
+                continue;
+            }
+            let o = EigenOptions { k, slices, ..opts.clone() };
+            widest = widest.max(spectrum::slicing::widest_basis(n, 0, &o).unwrap_or(0));
+            if n.saturating_mul(widest) > opts.max_values {
+                max_pairs = (k - 1).max(1);
+                break;
+            }
+        }
+    }
     let spectrum = spectrum::eigs_band(&operator.pair, band[0], band[1], max_pairs, &opts, hooks.control)?;
     if let Some(f) = hooks.on_solve {
         f(&spectrum.stats);

@@ -81,8 +81,26 @@ pub fn unknowns(a: &Analysis, shape: &kac_core::Shape) -> usize {
 }
 
 /// Bounded work: every list or grid of the request against `--max-samples`, and the widest per-vertex array the
-/// analysis will hold (eigenvectors included) against `--max-output-values`, before anything is allocated.
-pub fn check_work(config: &Config, a: &Analysis, vertices: usize) -> Result<(), JobError> {
+/// analysis of `shape` will hold (eigenvectors included) against `--max-output-values`, before anything is allocated.
+pub fn check_work(config: &Config, a: &Analysis, validated: &kac_core::Validated) -> Result<(), JobError> {
+    use kac_core::geometry::validate::Facts;
+    let shape = &validated.shape;
+    let vertices = unknowns(a, shape);
+    // The most zero modes the operator can have: one per connected component (a point cloud's neighbourhood graph
+    // is not known before it is built).
+    let most_zero_modes = match &validated.report.facts {
+        Facts::Surface(f) => Some(f.components),
+        Facts::Solid(f) => Some(f.components),
+        Facts::Curve(f) => Some(f.components),
+        Facts::Graph(f) => Some(f.components),
+        Facts::Cloud(_) => None,
+    };
+    // Whether the solver can plan spectrum slices by Weyl's law for this operator (not for graph Laplacians).
+    let kind = a
+        .operator_spec()
+        .and_then(|o| o.operator)
+        .unwrap_or(kac_core::operators::OperatorKind::default_for(shape.kind()));
+    let weyl = kind.has_weyl_dimension();
     let len = |v: &Option<Vec<f64>>| v.as_ref().map(Vec::len);
     // (name of the field, its count) for every list or grid; and the columns of the widest per-vertex array.
     let (counts, columns): (Vec<(&str, usize)>, usize) = match a {
@@ -146,13 +164,19 @@ pub fn check_work(config: &Config, a: &Analysis, vertices: usize) -> Result<(), 
     }
     // The sparse solver's Krylov basis, as the solver will size it (its default included: about 3k columns for
     // small k, 2k for large; a sliced solve's widest slice, whose basis is sized for its share of the pairs), and the
-    // block vectors beside it. The solver checks each basis against the same limit before allocating it, where a
-    // spectrum that does not fit the slices' plan (or an operator without Weyl's law to plan by) needs one run's.
+    // block vectors beside it, for any number of zero modes up to the shape's components (the pairs beyond them
+    // decide whether the solve is sliced); one run where the operator has no Weyl's law to plan slices by. The solver checks each basis against
+    // the same limit before allocating it, where a spectrum that does not fit the slices' plan needs one run's.
     let columns = match (a.solver(), eigenpairs(a)) {
         // Counted where the sparse path will run (the dense path's n² values are checked by the runner).
         (Some(s), Some(k)) if !kac_core::spectrum::use_dense(s.eigen_options(k, 0).method, vertices, vertices, k) => {
-            let o = s.eigen_options(k, 0);
-            let basis = kac_core::spectrum::slicing::widest_basis(vertices.max(k + 2), 0, &o).unwrap_or(0);
+            let mut o = s.eigen_options(k, 0);
+            if !weyl {
+                o.slices = Some(1);
+            }
+            let most = most_zero_modes.unwrap_or(k);
+            let basis =
+                kac_core::spectrum::slicing::widest_basis_for_zero_modes(vertices.max(k + 2), &o, most).unwrap_or(0);
             columns.max(basis)
         }
         (Some(_), Some(_)) => columns,

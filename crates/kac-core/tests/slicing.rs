@@ -142,8 +142,6 @@ fn a_stop_inside_a_slice_cancels() {
     assert!(stop.load(Ordering::Relaxed));
 }
 
-/// The automatic plan: one run below 400 pairs whatever the threads, then one slice per 125 pairs (at least one
-/// per thread); an asked count is kept within 1..=k/8.
 /// A limit on one array's values (`max_values`, the service's --max-output-values) is checked against each Krylov
 /// basis before it is allocated: a sliced solve holds its slices' bases, each sized for a share of the pairs, where one
 /// run of the same k holds a basis of twice k columns. `widest_basis` predicts both.
@@ -165,7 +163,60 @@ fn the_values_limit_counts_each_slice_basis() {
     assert_eq!(s.values.len(), k);
     assert_eq!(s.stats.completeness.as_ref().map(|c| c.complete), Some(true));
     let e = eigs(&pair, &EigenOptions { max_values: limit, ..one_run }, None, Control::default()).unwrap_err();
-    assert!(matches!(e, EigenError::TooLarge { .. }) && e.to_string().contains("Krylov basis"), "{e}");
+    assert!(matches!(e, EigenError::TooLarge { .. }) && e.to_string().contains("× 808 columns"), "{e}");
+    // Below the slices' own bases: the slice that meets the limit says so (one run's basis would be wider still).
+    let e = eigs(&pair, &EigenOptions { max_values: n * 250, ..o }, None, Control::default()).unwrap_err();
+    let text = e.to_string();
+    assert!(matches!(e, EigenError::TooLarge { .. }) && text.contains("Krylov basis") && !text.contains("808"), "{e}");
+}
+
+/// Where the zero modes are not known yet (at submission) but at most `most`, the prediction bounds the widest basis
+/// for every number of them up to that: for the automatic plan (one run below 400 pairs beyond the zero modes), an
+/// asked slice count, a fixed shift, a chosen subspace and another block, on problems from far larger than k to
+/// barely larger. With no bound (k), it grows with k.
+#[test]
+fn the_widest_basis_for_unknown_zero_modes_bounds_every_count() {
+    use kac_core::spectrum::slicing::{widest_basis, widest_basis_for_zero_modes};
+    let variants = [
+        EigenOptions::default(),
+        EigenOptions { slices: Some(3), ..Default::default() },
+        EigenOptions { sigma: Some(-0.5), ..Default::default() },
+        EigenOptions { subspace: Some(700), ..Default::default() },
+        EigenOptions { block: Some(16), ..Default::default() },
+    ];
+    for n in [1_000_000, 5_000, 1_300] {
+        for o in &variants {
+            let mut before = 0;
+            for k in (1..=1_200.min(n - 2)).step_by(7) {
+                let o = EigenOptions { k, ..o.clone() };
+                for most in [0, 1, 3, 50, k] {
+                    let bound = widest_basis_for_zero_modes(n, &o, most).unwrap_or(0);
+                    let every = (0..=most.min(k)).filter_map(|z| widest_basis(n, z, &o)).max().unwrap_or(0);
+                    assert!(bound >= every, "n = {n}, k = {k}, at most {most}: {bound} < {every} for {o:?}");
+                }
+                let any = widest_basis_for_zero_modes(n, &o, k).unwrap_or(0);
+                assert!(any >= before, "n = {n}, k = {k}: {any} after {before} for {o:?}");
+                before = any;
+            }
+        }
+    }
+    // The automatic plan around its threshold, on a surface of one component: 400 pairs with its zero mode are one
+    // run of 399 (822 columns with the block vectors); 401 are sliced, and stay sliced without the zero mode.
+    let o = EigenOptions { k: 400, ..Default::default() };
+    assert_eq!(widest_basis(1_000_000, 1, &o), Some(822));
+    assert_eq!(widest_basis_for_zero_modes(1_000_000, &o, 1), Some(822));
+    assert!(widest_basis_for_zero_modes(1_000_000, &EigenOptions { k: 401, ..o }, 1).unwrap() < 400);
+}
+
+/// Options queued with a slice task by a build from before `max_values` was named so still parse, their limit kept.
+#[test]
+fn options_from_before_the_limit_was_renamed_keep_it() {
+    let mut v = serde_json::to_value(EigenOptions { max_values: 12_345, ..Default::default() }).unwrap();
+    let fields = v.as_object_mut().unwrap();
+    let limit = fields.remove("max_values").unwrap();
+    fields.insert("max_factor_values".into(), limit);
+    let o: EigenOptions = serde_json::from_value(v).unwrap();
+    assert_eq!(o.max_values, 12_345);
 }
 
 #[test]

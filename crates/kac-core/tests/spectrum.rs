@@ -195,6 +195,9 @@ fn every_operator_solves() {
         (OperatorKind::PointCloud, Mass::Lumped),
     ] {
         let o = OperatorOptions { operator: Some(op), mass: Some(mass), ..Default::default() };
+        // What the service plans by before it builds the operator.
+        let dimension = operators::build(&sphere, &o).unwrap().pair.dimension;
+        assert_eq!(dimension.is_some(), op.has_weyl_dimension(), "{op:?}: {dimension:?}");
         let s = solve(&sphere, o, 10, Method::Sparse);
         assert!(s.values[0].abs() < 1e-8, "{op:?}: {:?}", s.values);
         assert!(s.values.windows(2).all(|w| w[0] <= w[1] + 1e-12), "{op:?} ascending");
@@ -546,7 +549,7 @@ fn cospectral_graphs_sound_the_same() {
 /// both threads (10,242 vertices: five chunks of the in-place product): the same eigenvalues to 10⁻¹⁰ and
 /// M-orthonormal eigenvectors with the sphere's residuals.
 #[test]
-fn one_run_on_two_threads_restarts_as_on_one() {
+fn one_run_with_restarts_on_two_threads_matches_one_thread() {
     let shape = mesh(generate::icosphere(5));
     let op = opts(Mass::Consistent, Boundary::Neumann);
     let pair = operators::build(&shape, &op).unwrap().pair;

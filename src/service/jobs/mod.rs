@@ -426,7 +426,7 @@ pub fn submit(
 ) -> Result<(JobView, bool), JobError> {
     analysis.supported(&shape.validated.shape).map_err(JobError::Analysis)?;
     super::limits::check_limits(config, &analysis)?;
-    super::limits::check_work(config, &analysis, super::limits::unknowns(&analysis, &shape.validated.shape))?;
+    super::limits::check_work(config, &analysis, &shape.validated)?;
     let canonical = serde_json::to_value(&analysis).map_err(|e| JobError::Internal(e.to_string()))?;
     let id = job_id(&shape.id, &canonical);
     let shape_id = shape.id.clone();
@@ -455,7 +455,7 @@ pub fn submit_compare(
         operator: request.operator.clone(),
         solver: crate::analysis::SolverSpec::default(),
     };
-    if let Some(largest) = shapes.iter().map(|s| s.validated.shape.vertex_count()).max() {
+    if let Some(largest) = shapes.iter().map(|s| &s.validated).max_by_key(|v| v.shape.vertex_count()) {
         super::limits::check_work(config, &dna, largest)?;
     }
     request.shape_ids = Some(shapes.iter().map(|s| s.id.clone()).collect());

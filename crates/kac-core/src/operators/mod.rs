@@ -96,6 +96,12 @@ impl OperatorKind {
     fn is_graph(self) -> bool {
         matches!(self, OperatorKind::Graph | OperatorKind::GraphNormalized | OperatorKind::GraphRandomWalk)
     }
+    /// Whether the operator's pair carries a dimension for Weyl's law, by which the eigensolver places its shift and
+    /// plans spectrum slices: every operator but the graph Laplacians (a point cloud in Rⁿ only where its intrinsic
+    /// dimension is at most 3).
+    pub fn has_weyl_dimension(self) -> bool {
+        !self.is_graph()
+    }
 }
 
 /// Boundary conditions.

@@ -43,7 +43,9 @@ pub struct EigenOptions {
     pub verify: bool,
     /// The most values one array of a sparse solve may hold (default: no limit): a factor of L − σM, predicted by
     /// the symbolic analysis before any numeric factorization, and a Krylov basis (n × subspace, each slice's
-    /// own where the solve is sliced), checked before it is allocated. A larger one is [`EigenError::TooLarge`].
+    /// own where the solve is sliced), checked before it is allocated. A larger one is [`EigenError::TooLarge`]. A
+    /// slice task queued by a build from before the name was changed carries it as `max_factor_values`.
+    #[serde(alias = "max_factor_values")]
     pub max_values: usize,
     /// Put the operator's known zero modes in the result exactly and iterate on their complement (default true;
     /// see [`null_space`]).

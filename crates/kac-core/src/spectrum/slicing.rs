@@ -308,13 +308,15 @@ pub fn slice_count(wanted: usize, threads: usize, asked: Option<usize>) -> usize
 
 /// The columns of the widest Krylov basis a sparse solve of `o.k` pairs of `n` unknowns allocates where its plan
 /// holds, with the block vectors beside it (two blocks). `deflated` of the pairs are known zero modes, put in exactly
-/// and not iterated for (a caller that cannot know them yet counts none). Each slice's own basis when the options
-/// let the solve be sliced (the fewest slices `o` allows, each with an even share of the pairs, the top slice's extra
-/// columns included), else the one run's; `None` where the problem is too small for the Krylov method. At run time a
-/// slice sizes its basis for the pairs its window holds, and a plan that does not fit the spectrum (or an operator
-/// without a dimension for Weyl's law) is solved in one run: every basis is checked against
-/// [`EigenOptions::max_values`] before it is allocated, so what this predicts at submission is enforced where the
-/// memory is taken.
+/// and not iterated for ([`widest_basis_for_zero_modes`] where their number is not known yet). Each slice's own
+/// basis when the options let the solve be sliced: the fewest slices `o` allows, each with an even share of the pairs,
+/// the top slice with the guard pairs above the k-th and its extra columns. Else the one run's. `None` where the
+/// problem is too small for the Krylov method.
+///
+/// At run time a slice sizes its basis for the pairs its window holds, which can be a cluster more than its share,
+/// and a plan that does not fit the spectrum (or an operator without a dimension for Weyl's law) is solved in one
+/// run. Every basis is checked against [`EigenOptions::max_values`] before it is allocated, so the limit holds
+/// where this prediction is short.
 pub fn widest_basis(n: usize, deflated: usize, o: &EigenOptions) -> Option<usize> {
     let o = EigenOptions { k: o.k.saturating_sub(deflated), ..o.clone() };
     let sliceable = o.sigma.is_none() && !(o.subspace.is_some() && o.slices.is_none());
@@ -323,9 +325,21 @@ pub fn widest_basis(n: usize, deflated: usize, o: &EigenOptions) -> Option<usize
         let (b, _, m) = lanczos::plan(n, deflated, &o)?;
         return Some(m + 2 * b);
     }
-    let pairs = o.k.div_ceil(s);
+    let guard = (o.block.unwrap_or(8) / 2).max(2);
+    let pairs = o.k.div_ceil(s) + guard;
     let (b, _, m) = lanczos::plan(n, deflated, &EigenOptions { k: pairs, subspace: None, ..o })?;
     Some((m + TOP_EXTRA.min(pairs)).min(n) + 2 * b)
+}
+
+/// [`widest_basis`] where the number of known zero modes is not known yet but is at most `most` (a request at
+/// submission: a Neumann operator's null space holds one constant per connected component; `o.k` where nothing
+/// bounds it): the widest basis of a solve of k − `most` to k pairs, which bounds the solve for every such number (the
+/// pairs beyond the zero modes decide whether and how the solve is sliced; n is taken whole). O(`most`) plans.
+pub fn widest_basis_for_zero_modes(n: usize, o: &EigenOptions, most: usize) -> Option<usize> {
+    let k = o.k;
+    (k.saturating_sub(most).max(1)..=k)
+        .filter_map(|wanted| widest_basis(n, 0, &EigenOptions { k: wanted, ..o.clone() }))
+        .max()
 }
 
 /// The slices' windows by Weyl's law (each expected to hold the same number of pairs), or `None` where slicing does
@@ -663,6 +677,8 @@ pub(crate) fn solve(
         match r {
             Ok(Some(spectrum)) => parts.push(spectrum),
             Err(EigenError::Canceled) => return Err(EigenError::Canceled),
+            // A slice's basis over the limit: one run's would be wider still.
+            Err(e @ EigenError::TooLarge { .. }) => return Err(e),
             // The plan did not fit this problem (or too few unknowns): one run instead.
             Ok(None) | Err(_) => return Ok(None),
         }
