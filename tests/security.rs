@@ -373,9 +373,9 @@ fn the_default_krylov_basis_counts_against_the_output_limit() {
 
 /// A sliced solve (from 400 pairs beyond the zero modes) is counted by its widest array: its slices' bases are each
 /// sized for a share of the pairs, where one run of the same k (`slices: 1`) holds a basis of twice k columns. Exactly
-/// 400 pairs on a sphere (one component: at most one zero mode) may be one run of 399; a point cloud's zero modes are
-/// not known before its operator is built, so 401 pairs of one may be too; and the graph Laplacian has no Weyl's law
-/// to plan slices by: each is refused at submission, not admitted to fail later.
+/// 400 pairs on a sphere (one component: at most one zero mode) may be one run of 399; the point-cloud operator's zero
+/// modes (of a cloud, or of a mesh's vertices) are not known before it is built, so 401 pairs of it may be too; and the
+/// graph Laplacian has no Weyl's law to plan slices by: each is refused at submission, not admitted to fail later.
 #[test]
 fn a_sliced_solve_counts_its_slices_bases_against_the_output_limit() {
     let root = tempfile::tempdir().unwrap();
@@ -407,6 +407,10 @@ fn a_sliced_solve_counts_its_slices_bases_against_the_output_limit() {
     for (body, columns) in [
         (json!({"shape_id": shape, "analysis": "spectrum", "k": 400}), "× 822 columns"),
         (json!({"shape_id": cloud, "analysis": "spectrum", "k": 401}), "× 822 columns"),
+        (
+            json!({"shape_id": shape, "analysis": "spectrum", "k": 401, "operator": {"operator": "point-cloud"}}),
+            "× 822 columns",
+        ),
         (
             json!({"shape_id": shape, "analysis": "spectrum", "k": 401, "operator": {"operator": "graph"}}),
             "× 826 columns",

@@ -186,24 +186,32 @@ pub fn band_pairs(
     let (operator, assembly_s) = assemble(v, spec, solver, hooks)?;
     let n = operator.pair.n();
     let opts = EigenOptions { max_values: hooks.limits.max_values, ..solver.eigen_options(0, hooks.threads) };
-    // As many pairs as the eigenvectors and the solver's widest Krylov basis allow within the limit (one run where the
-    // operator has no Weyl's law to plan slices by), so that a band beyond them is refused as such.
-    let slices = if operator.pair.dimension.is_some() { opts.slices } else { Some(1) };
+    // As many pairs as the eigenvectors and the solver's Krylov bases allow within the limit, so that a band beyond
+    // them is refused as such: the band's solves ask for 16, 32, 64, … pairs (`eigs_band`), each counted for the
+    // zero modes the operator can have (its components) and as one run where it has no Weyl's law to plan slices by.
     let mut max_pairs = hooks.limits.max_pairs.min(hooks.limits.max_values / n.max(1)).max(1);
     if opts.max_values < usize::MAX {
-        // The widest basis of every sparse solve up to k pairs (the band's solves double k), up to the first k it
-        // exceeds (the dense path holds no basis).
-        let mut widest = 0usize;
-        for k in 1..=max_pairs.min(n) {
-            if spectrum::use_dense(opts.method, n, n, k) {
-                continue;
-            }
+        let slices = if operator.pair.dimension.is_some() { opts.slices } else { Some(1) };
+        let most = operator.pair.components().1;
+        let fits = |k: usize| {
+            let sparse = |z: usize| !spectrum::use_dense(opts.method, n, n.saturating_sub(z), k.saturating_sub(z));
             let o = EigenOptions { k, slices, ..opts.clone() };
-            widest = widest.max(spectrum::slicing::widest_basis(n, 0, &o).unwrap_or(0));
-            if n.saturating_mul(widest) > opts.max_values {
-                max_pairs = (k - 1).max(1);
+            !(sparse(0) || sparse(most.min(k)))
+                || spectrum::slicing::widest_basis_for_zero_modes(n, &o, most)
+                    .is_none_or(|c| n.saturating_mul(c) <= opts.max_values)
+        };
+        let (limit, mut k, mut last) = (n.saturating_sub(1).max(1), 16usize.min(n.saturating_sub(1)).max(1), 0);
+        loop {
+            let k_asked = k.min(max_pairs);
+            if !fits(k_asked) {
+                max_pairs = last.max(1);
                 break;
             }
+            if k_asked >= max_pairs || k_asked >= limit {
+                break;
+            }
+            last = k_asked;
+            k = (2 * k_asked).min(limit);
         }
     }
     let spectrum = spectrum::eigs_band(&operator.pair, band[0], band[1], max_pairs, &opts, hooks.control)?;

@@ -86,21 +86,23 @@ pub fn check_work(config: &Config, a: &Analysis, validated: &kac_core::Validated
     use kac_core::geometry::validate::Facts;
     let shape = &validated.shape;
     let vertices = unknowns(a, shape);
-    // The most zero modes the operator can have: one per connected component (a point cloud's neighbourhood graph
-    // is not known before it is built).
+    use kac_core::operators::OperatorKind;
+    let kind = a.operator_spec().and_then(|o| o.operator).unwrap_or(OperatorKind::default_for(shape.kind()));
+    // The most zero modes the operator can have: one per connected component of the shape's own elements. The
+    // point-cloud operator's come from its heat-kernel neighbourhoods, on any shape, which are not known before it is
+    // built.
     let most_zero_modes = match &validated.report.facts {
+        _ if kind == OperatorKind::PointCloud => None,
         Facts::Surface(f) => Some(f.components),
         Facts::Solid(f) => Some(f.components),
         Facts::Curve(f) => Some(f.components),
         Facts::Graph(f) => Some(f.components),
         Facts::Cloud(_) => None,
     };
-    // Whether the solver can plan spectrum slices by Weyl's law for this operator (not for graph Laplacians).
-    let kind = a
-        .operator_spec()
-        .and_then(|o| o.operator)
-        .unwrap_or(kac_core::operators::OperatorKind::default_for(shape.kind()));
-    let weyl = kind.has_weyl_dimension();
+    // Whether the solver can plan spectrum slices by Weyl's law for this operator: not for graph Laplacians, nor for
+    // points in Rⁿ beyond space, whose intrinsic dimension (estimated when the operator is built) may be above 3.
+    let weyl =
+        kind.has_weyl_dimension() && !matches!(&validated.report.facts, Facts::Cloud(c) if c.ambient_dimension > 3);
     let len = |v: &Option<Vec<f64>>| v.as_ref().map(Vec::len);
     // (name of the field, its count) for every list or grid; and the columns of the widest per-vertex array.
     let (counts, columns): (Vec<(&str, usize)>, usize) = match a {
@@ -165,11 +167,17 @@ pub fn check_work(config: &Config, a: &Analysis, validated: &kac_core::Validated
     // The sparse solver's Krylov basis, as the solver will size it (its default included: about 3k columns for
     // small k, 2k for large; a sliced solve's widest slice, whose basis is sized for its share of the pairs), and the
     // block vectors beside it, for any number of zero modes up to the shape's components (the pairs beyond them
-    // decide whether the solve is sliced); one run where the operator has no Weyl's law to plan slices by. The solver checks each basis against
-    // the same limit before allocating it, where a spectrum that does not fit the slices' plan needs one run's.
+    // decide whether the solve is sliced); one run where the operator has no Weyl's law to plan slices by. The
+    // solver checks each basis against the same limit before allocating it, where a spectrum that does not fit the
+    // slices' plan needs one run's.
+    let sparse = |method, k: usize, most: usize| {
+        // Dense only where it is for any number of zero modes (fewer pairs beyond them can tip it to sparse).
+        let dense = |z: usize| kac_core::spectrum::use_dense(method, vertices, vertices - z, k - z);
+        !(dense(0) && dense(most.min(k).min(vertices)))
+    };
     let columns = match (a.solver(), eigenpairs(a)) {
         // Counted where the sparse path will run (the dense path's n² values are checked by the runner).
-        (Some(s), Some(k)) if !kac_core::spectrum::use_dense(s.eigen_options(k, 0).method, vertices, vertices, k) => {
+        (Some(s), Some(k)) if sparse(s.eigen_options(k, 0).method, k, most_zero_modes.unwrap_or(k)) => {
             let mut o = s.eigen_options(k, 0);
             if !weyl {
                 o.slices = Some(1);

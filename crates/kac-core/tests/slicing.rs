@@ -167,13 +167,14 @@ fn the_values_limit_counts_each_slice_basis() {
     // Below the slices' own bases: the slice that meets the limit says so (one run's basis would be wider still).
     let e = eigs(&pair, &EigenOptions { max_values: n * 250, ..o }, None, Control::default()).unwrap_err();
     let text = e.to_string();
-    assert!(matches!(e, EigenError::TooLarge { .. }) && text.contains("Krylov basis") && !text.contains("808"), "{e}");
+    let one_run = text.contains("× 808 columns");
+    assert!(matches!(e, EigenError::TooLarge { .. }) && text.contains("Krylov basis") && !one_run, "{e}");
 }
 
 /// Where the zero modes are not known yet (at submission) but at most `most`, the prediction bounds the widest basis
 /// for every number of them up to that: for the automatic plan (one run below 400 pairs beyond the zero modes), an
 /// asked slice count, a fixed shift, a chosen subspace and another block, on problems from far larger than k to
-/// barely larger. With no bound (k), it grows with k.
+/// barely larger.
 #[test]
 fn the_widest_basis_for_unknown_zero_modes_bounds_every_count() {
     use kac_core::spectrum::slicing::{widest_basis, widest_basis_for_zero_modes};
@@ -186,7 +187,6 @@ fn the_widest_basis_for_unknown_zero_modes_bounds_every_count() {
     ];
     for n in [1_000_000, 5_000, 1_300] {
         for o in &variants {
-            let mut before = 0;
             for k in (1..=1_200.min(n - 2)).step_by(7) {
                 let o = EigenOptions { k, ..o.clone() };
                 for most in [0, 1, 3, 50, k] {
@@ -194,9 +194,6 @@ fn the_widest_basis_for_unknown_zero_modes_bounds_every_count() {
                     let every = (0..=most.min(k)).filter_map(|z| widest_basis(n, z, &o)).max().unwrap_or(0);
                     assert!(bound >= every, "n = {n}, k = {k}, at most {most}: {bound} < {every} for {o:?}");
                 }
-                let any = widest_basis_for_zero_modes(n, &o, k).unwrap_or(0);
-                assert!(any >= before, "n = {n}, k = {k}: {any} after {before} for {o:?}");
-                before = any;
             }
         }
     }

@@ -449,14 +449,14 @@ pub fn submit_compare(
     if request.dna.k > config.max_k {
         return Err(JobError::Limit(Limit::Pairs(format!("k = {} is above --max-k {}", request.dna.k, config.max_k))));
     }
-    // Each shape's shape-DNA within the limits a shape-dna job of it would have (the largest decides).
+    // Each shape's shape-DNA within the limits a shape-dna job of it would have.
     let dna = Analysis::ShapeDna {
         options: request.options(),
         operator: request.operator.clone(),
         solver: crate::analysis::SolverSpec::default(),
     };
-    if let Some(largest) = shapes.iter().map(|s| &s.validated).max_by_key(|v| v.shape.vertex_count()) {
-        super::limits::check_work(config, &dna, largest)?;
+    for s in &shapes {
+        super::limits::check_work(config, &dna, &s.validated)?;
     }
     request.shape_ids = Some(shapes.iter().map(|s| s.id.clone()).collect());
     let canonical = serde_json::to_value(&request).map_err(|e| JobError::Internal(e.to_string()))?;

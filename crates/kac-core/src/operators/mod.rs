@@ -96,9 +96,9 @@ impl OperatorKind {
     fn is_graph(self) -> bool {
         matches!(self, OperatorKind::Graph | OperatorKind::GraphNormalized | OperatorKind::GraphRandomWalk)
     }
-    /// Whether the operator's pair carries a dimension for Weyl's law, by which the eigensolver places its shift and
-    /// plans spectrum slices: every operator but the graph Laplacians (a point cloud in Rⁿ only where its intrinsic
-    /// dimension is at most 3).
+    /// Whether the operator's pair can carry a dimension for Weyl's law, by which the eigensolver places its shift and
+    /// plans spectrum slices: every operator but the graph Laplacians. A point cloud's pair has one where its intrinsic
+    /// dimension is at most 3, which for points in Rⁿ beyond space only the points tell.
     pub fn has_weyl_dimension(self) -> bool {
         !self.is_graph()
     }
