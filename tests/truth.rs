@@ -319,6 +319,25 @@ fn poisson_counts_its_factor_against_the_limit() {
     assert!(analysis::run(&v, &a, Hooks::default()).is_ok());
 }
 
+/// Extrapolation counts its finest level's Krylov basis as the solver sizes it, before any level is solved: a
+/// 441-vertex square with Dirichlet conditions refined twice has 5,776 unknowns, whose default basis for k = 2 (70
+/// columns with the block vectors) is over a limit of 300,000 values that 3k + 16 columns (the count before) were
+/// under. The solver would have found its basis (54 columns) too large only after the coarser levels were solved.
+#[test]
+fn extrapolation_counts_its_finest_basis_against_the_limit() {
+    let v = validated(&generate::unit_square(20));
+    let a: Analysis = serde_json::from_value(
+        json!({"analysis": "spectrum", "k": 2, "extrapolate": true, "operator": {"boundary": "dirichlet"}}),
+    )
+    .unwrap();
+    let limits = analysis::SolverLimits { max_pairs: 100, max_values: 300_000 };
+    let e = analysis::run(&v, &a, Hooks { limits, ..Default::default() }).unwrap_err();
+    assert_eq!(e.code(), "output-too-large", "{e}");
+    assert!(e.to_string().contains("5776 unknowns"), "{e}");
+    let limits = analysis::SolverLimits { max_pairs: 100, max_values: 600_000 };
+    assert!(analysis::run(&v, &a, Hooks { limits, ..Default::default() }).is_ok());
+}
+
 fn codes(out: &analysis::Output) -> Vec<String> {
     out.summary["warnings"]
         .as_array()

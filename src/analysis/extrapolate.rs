@@ -53,11 +53,22 @@ pub(crate) fn extrapolation(
     let mut options = operator_options(v, spec)?;
     // Refinement splits the straight edges: the input's curved edge nodes would fit its first level only.
     let curved = options.edge_nodes.take().map(|n| n.len());
-    // What the finest level holds: its unknowns times the Krylov basis (about 3k columns); checked on the input
-    // before any refinement (grading moves vertices, it does not change the count).
+    // What the finest level holds: its unknowns times its widest array, the Krylov basis as the solver will size it
+    // (a sliced solve's per slice, for the zero modes its components allow) or the k eigenvectors; checked on the
+    // input before any refinement (grading moves vertices, it does not change the count; refinement keeps the
+    // components). The solver checks each level's basis again before it allocates it.
     let coarse = operators::build(&v.shape, &options)?;
     let finest = coarse.pair.n().saturating_mul(factor.pow(refinements as u32));
-    let held = finest.saturating_mul(3 * k + 16);
+    let o = solver.eigen_options(k, hooks.threads);
+    let o = EigenOptions { slices: if coarse.pair.dimension.is_some() { o.slices } else { Some(1) }, ..o };
+    let most = coarse.pair.components().1.min(k);
+    let dense = |z: usize| kac_core::spectrum::use_dense(o.method, finest, finest - z, k - z);
+    let basis = if dense(0) && dense(most) {
+        None
+    } else {
+        kac_core::spectrum::slicing::widest_basis_for_zero_modes(finest, &o, most)
+    };
+    let held = finest.saturating_mul(basis.unwrap_or(0).max(k));
     if held > hooks.limits.max_values {
         return Err(AnalysisError::TooLarge(format!(
             "{refinements} refinement(s) make about {finest} unknowns, whose eigensolve holds about {held} values, \
