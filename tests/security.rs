@@ -24,6 +24,12 @@ fn off(level: u32) -> Vec<u8> {
     kac_core::io::write::off(&kac_core::geometry::generate::icosphere(level)).into_bytes()
 }
 
+/// The vertices of the icosphere of `level` as an XYZ point cloud.
+fn xyz(level: u32) -> Vec<u8> {
+    let sphere = kac_core::geometry::generate::icosphere(level);
+    sphere.vertices.iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect::<String>().into_bytes()
+}
+
 fn upload(s: &Server, bytes: &[u8], query: &str) -> server::Reply {
     reply(agent().post(&s.url(&format!("/v1/shapes{query}"))).send_bytes(bytes))
 }
@@ -398,12 +404,7 @@ fn a_sliced_solve_counts_its_slices_bases_against_the_output_limit() {
     assert!(slices >= 2, "{}", result["solver"]);
     assert_eq!(result["solver"]["completeness"]["complete"], true, "{}", result["solver"]);
 
-    let cloud: String = kac_core::geometry::generate::icosphere(4)
-        .vertices
-        .iter()
-        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
-        .collect();
-    let cloud = upload(&s, cloud.as_bytes(), "?format=xyz").body["id"].as_str().unwrap().to_string();
+    let cloud = upload(&s, &xyz(4), "?format=xyz").body["id"].as_str().unwrap().to_string();
     for (body, columns) in [
         (json!({"shape_id": shape, "analysis": "spectrum", "k": 400}), "× 822 columns"),
         (json!({"shape_id": cloud, "analysis": "spectrum", "k": 401}), "× 822 columns"),
@@ -468,12 +469,7 @@ fn the_smaller_items_of_the_issue() {
     assert!(r.body.to_string().contains("cut short"), "{}", r.body);
 
     // A point-cloud kernel narrower than the spacing joins nothing: refused, not eigenvalues of 0 called complete.
-    let cloud: String = kac_core::geometry::generate::icosphere(3)
-        .vertices
-        .iter()
-        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
-        .collect();
-    let id = upload(&s, cloud.as_bytes(), "?format=xyz").body["id"].as_str().unwrap().to_string();
+    let id = upload(&s, &xyz(3), "?format=xyz").body["id"].as_str().unwrap().to_string();
     let r = reply(
         agent()
             .post(&s.url("/v1/jobs"))
