@@ -191,14 +191,10 @@ pub fn band_pairs(
     // zero modes the operator can have (its components) and as one run where it has no Weyl's law to plan slices by.
     let mut max_pairs = hooks.limits.max_pairs.min(hooks.limits.max_values / n.max(1)).max(1);
     if opts.max_values < usize::MAX {
-        let slices = if operator.pair.dimension.is_some() { opts.slices } else { Some(1) };
-        let most = operator.pair.components().1;
+        let (most, weyl) = (operator.pair.components().1, operator.pair.dimension.is_some());
         let fits = |k: usize| {
-            let sparse = |z: usize| !spectrum::use_dense(opts.method, n, n.saturating_sub(z), k.saturating_sub(z));
-            let o = EigenOptions { k, slices, ..opts.clone() };
-            !(sparse(0) || sparse(most.min(k)))
-                || spectrum::slicing::widest_basis_for_zero_modes(n, &o, most)
-                    .is_none_or(|c| n.saturating_mul(c) <= opts.max_values)
+            spectrum::slicing::predicted_basis(n, &EigenOptions { k, ..opts.clone() }, most, weyl)
+                .is_none_or(|c| n.saturating_mul(c) <= opts.max_values)
         };
         let (limit, mut k, mut last) = (n.saturating_sub(1).max(1), 16usize.min(n.saturating_sub(1)).max(1), 0);
         loop {

@@ -59,15 +59,9 @@ pub(crate) fn extrapolation(
     // components). The solver checks each level's basis again before it allocates it.
     let coarse = operators::build(&v.shape, &options)?;
     let finest = coarse.pair.n().saturating_mul(factor.pow(refinements as u32));
+    let (most, weyl) = (coarse.pair.components().1, coarse.pair.dimension.is_some());
     let o = solver.eigen_options(k, hooks.threads);
-    let o = EigenOptions { slices: if coarse.pair.dimension.is_some() { o.slices } else { Some(1) }, ..o };
-    let most = coarse.pair.components().1.min(k);
-    let dense = |z: usize| kac_core::spectrum::use_dense(o.method, finest, finest - z, k - z);
-    let basis = if dense(0) && dense(most) {
-        None
-    } else {
-        kac_core::spectrum::slicing::widest_basis_for_zero_modes(finest, &o, most)
-    };
+    let basis = kac_core::spectrum::slicing::predicted_basis(finest, &o, most, weyl);
     let held = finest.saturating_mul(basis.unwrap_or(0).max(k));
     if held > hooks.limits.max_values {
         return Err(AnalysisError::TooLarge(format!(

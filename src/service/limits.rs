@@ -170,24 +170,13 @@ pub fn check_work(config: &Config, a: &Analysis, validated: &kac_core::Validated
     // decide whether the solve is sliced); one run where the operator has no Weyl's law to plan slices by. The
     // solver checks each basis against the same limit before allocating it, where a spectrum that does not fit the
     // slices' plan needs one run's.
-    let sparse = |method, k: usize, most: usize| {
-        // Dense only where it is for any number of zero modes (fewer pairs beyond them can tip it to sparse).
-        let dense = |z: usize| kac_core::spectrum::use_dense(method, vertices, vertices - z, k - z);
-        !(dense(0) && dense(most.min(k).min(vertices)))
-    };
     let columns = match (a.solver(), eigenpairs(a)) {
         // Counted where the sparse path will run (the dense path's n² values are checked by the runner).
-        (Some(s), Some(k)) if sparse(s.eigen_options(k, 0).method, k, most_zero_modes.unwrap_or(k)) => {
-            let mut o = s.eigen_options(k, 0);
-            if !weyl {
-                o.slices = Some(1);
-            }
+        (Some(s), Some(k)) => {
             let most = most_zero_modes.unwrap_or(k);
-            let basis =
-                kac_core::spectrum::slicing::widest_basis_for_zero_modes(vertices.max(k + 2), &o, most).unwrap_or(0);
-            columns.max(basis)
+            let basis = kac_core::spectrum::slicing::predicted_basis(vertices, &s.eigen_options(k, 0), most, weyl);
+            columns.max(basis.unwrap_or(0))
         }
-        (Some(_), Some(_)) => columns,
         (Some(s), None) => columns.max(s.subspace.unwrap_or(0)).max(s.block.unwrap_or(0).saturating_mul(2)),
         (None, _) => columns,
     };

@@ -342,6 +342,22 @@ pub fn widest_basis_for_zero_modes(n: usize, o: &EigenOptions, most: usize) -> O
         .max()
 }
 
+/// The widest Krylov basis (columns, with the block vectors) a solve of `o.k` pairs of `n` unknowns may allocate,
+/// predicted before the operator is built: for any number of known zero modes up to `most`
+/// ([`widest_basis_for_zero_modes`]), and as one run where the operator has no dimension for Weyl's law to plan slices
+/// by (`weyl` false). `None` where the solve is dense for every such number of zero modes (it holds no basis) or too
+/// small for the Krylov method.
+pub fn predicted_basis(n: usize, o: &EigenOptions, most: usize, weyl: bool) -> Option<usize> {
+    let (k, most) = (o.k, most.min(o.k).min(n));
+    // Dense only where it is for any number of zero modes (fewer pairs beyond them can tip it to sparse).
+    let dense = |z: usize| super::use_dense(o.method, n, n - z, k - z);
+    if dense(0) && dense(most) {
+        return None;
+    }
+    let o = EigenOptions { slices: if weyl { o.slices } else { Some(1) }, ..o.clone() };
+    widest_basis_for_zero_modes(n, &o, most)
+}
+
 /// The slices' windows by Weyl's law (each expected to hold the same number of pairs), or `None` where slicing does
 /// not apply (one slice, a fixed shift, an operator without a dimension for Weyl's law).
 pub(crate) fn plan(pair: &SparsePair, deflated: usize, wanted: usize, o: &EigenOptions) -> Option<Vec<Window>> {
