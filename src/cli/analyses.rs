@@ -68,10 +68,7 @@ pub(super) fn emit(mut out: Output, args: &OutArgs) -> Result<(), Failure> {
 }
 
 pub(super) fn run(v: &Validated, a: &Analysis, o: &OutArgs) -> Result<Output, Failure> {
-    if o.threads > 0 {
-        let _ = rayon::ThreadPoolBuilder::new().num_threads(o.threads).build_global();
-    }
-    Ok(analysis::run(v, a, Hooks { threads: o.threads, ..Default::default() })?)
+    Ok(super::on_pool(o.threads, || analysis::run(v, a, Hooks { threads: o.threads, ..Default::default() }))?)
 }
 
 fn solver(o: &OutArgs) -> SolverSpec {

@@ -49,9 +49,6 @@ pub fn run(a: CorrespondenceCmd) -> Result<(), Failure> {
         ShapeArgs { file: file.clone(), format: None, weld: kac_core::Weld::Exact, keep_degenerate: false }.load()
     };
     let ((s, _), (t, _)) = (load(&a.source)?, load(&a.target)?);
-    if a.out.threads > 0 {
-        let _ = rayon::ThreadPoolBuilder::new().num_threads(a.out.threads).build_global();
-    }
     let mut options = a.options.clone();
     options.landmarks = a.landmarks.clone();
     let hooks = Hooks { threads: a.out.threads, ..Default::default() };
@@ -59,7 +56,9 @@ pub fn run(a: CorrespondenceCmd) -> Result<(), Failure> {
         Some(path) => Some(correspond::Transfer { values: read_function(path)?, labels: a.transfer_labels }),
         None => None,
     };
-    let result = correspond::correspondence(&s, &t, &options, &a.op, &a.out.solver, transfer.as_ref(), hooks)?;
+    let result = super::on_pool(a.out.threads, || {
+        correspond::correspondence(&s, &t, &options, &a.op, &a.out.solver, transfer.as_ref(), hooks)
+    })?;
     let (mut out, arrays) = (result.summary, result.arrays);
     match &a.map {
         Some(path) => {

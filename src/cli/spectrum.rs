@@ -55,9 +55,6 @@ pub struct SpectrumCmd {
 }
 
 pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
-    if a.threads > 0 {
-        let _ = rayon::ThreadPoolBuilder::new().num_threads(a.threads).build_global();
-    }
     let band = match a.band.as_deref() {
         None => None,
         Some(&[lo, hi]) => Some([lo, hi]),
@@ -79,7 +76,8 @@ pub fn run(a: SpectrumCmd) -> Result<(), Failure> {
     let t0 = Instant::now();
     let (v, _) = a.shape.load()?;
     let read_s = t0.elapsed().as_secs_f64();
-    let mut out = analysis::run(&v, &request, Hooks { threads: a.threads, ..Default::default() })?;
+    let hooks = Hooks { threads: a.threads, ..Default::default() };
+    let mut out = super::on_pool(a.threads, || analysis::run(&v, &request, hooks))?;
     if let Some(path) = &a.eigenvectors {
         let e = &out.arrays[0];
         std::fs::write(path, kac_core::io::npy::encode_f64(e.rows, e.cols, &e.data))

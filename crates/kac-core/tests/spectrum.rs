@@ -546,8 +546,8 @@ fn cospectral_graphs_sound_the_same() {
 }
 
 /// One run on two threads against one thread, with thick restarts whose Ritz vectors are formed by row ranges on
-/// both threads (10,242 vertices: five chunks of the in-place product): the same eigenvalues to 10⁻¹⁰ and
-/// M-orthonormal eigenvectors with the sphere's residuals.
+/// both threads (10,242 vertices: five chunks of the in-place product): the same eigenvalues to 10⁻¹⁰,
+/// M-orthonormal eigenvectors with the sphere's residuals, the same sign convention and a proven count.
 #[test]
 fn one_run_with_restarts_on_two_threads_matches_one_thread() {
     let shape = mesh(generate::icosphere(5));
@@ -560,6 +560,16 @@ fn one_run_with_restarts_on_two_threads_matches_one_thread() {
     };
     let (one, two) = (run(1), run(2));
     assert!(two.stats.restarts >= 1, "the run restarts: {:?}", two.stats.restarts);
+    // Both proven complete (on two threads the check's factorization ran beside the residuals), and every vector
+    // signed with its largest-magnitude entry positive (on two threads the columns are negated side by side).
+    for s in [&one, &two] {
+        assert!(s.stats.completeness.as_ref().is_some_and(|c| c.complete), "{:?}", s.stats.completeness);
+        for j in 0..s.values.len() {
+            let col = s.vectors.col(j);
+            let big = col.iter().copied().fold(0.0f64, |a, x| if x.abs() > a.abs() { x } else { a });
+            assert!(big > 0.0, "pair {j}: largest-magnitude entry {big}");
+        }
+    }
     assert_close(&two.values, &one.values, 1e-10, "two threads against one");
     check_m_orthonormal(&shape, &op, &two, 1e-8);
     let worst = two.residuals.iter().copied().fold(0.0f64, f64::max);

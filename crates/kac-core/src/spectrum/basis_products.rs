@@ -103,6 +103,19 @@ fn by_rows<T: Send>(n: usize, threads: usize, part: impl Fn(usize, usize) -> T +
     row_ranges(n, threads).into_par_iter().map(|(a, e)| part(a, e)).collect()
 }
 
+/// DST = SRC for two blocks of the same length, on `threads` threads by equal pieces (one below
+/// [`PARALLEL_ROWS`] values or on one thread).
+pub fn copy_par(dst: &mut [f64], src: &[f64], threads: usize) {
+    use rayon::prelude::*;
+    assert_eq!(dst.len(), src.len(), "copy_par: blocks of different lengths");
+    if threads <= 1 || dst.len() < PARALLEL_ROWS {
+        dst.copy_from_slice(src);
+        return;
+    }
+    let piece = dst.len().div_ceil(threads);
+    dst.par_chunks_mut(piece).zip(src.par_chunks(piece)).for_each(|(d, s)| d.copy_from_slice(s));
+}
+
 /// The column-wise inner products ⟨x_c, y_c⟩ of two row-major n × b blocks (the diagonal of Xᵀ Y), on `threads`
 /// threads by ranges of rows.
 pub fn col_dots_par(x: &[f64], y: &[f64], b: usize, threads: usize) -> Vec<f64> {

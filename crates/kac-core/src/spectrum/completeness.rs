@@ -25,6 +25,38 @@ pub(crate) fn check_shift(values: &[f64], wanted: usize) -> Option<(f64, usize)>
     Some((0.5 * (values[j] + values[j + 1]), j + 1))
 }
 
+/// The gap the check counts in for the ascending `values` and `wanted` pairs: (lo, hi, pairs found below it). With
+/// no gap at all (every value found is one cluster), just below the cluster, where nothing may lie.
+pub(crate) fn gap_to_count(pair: &SparsePair, values: &[f64], wanted: usize) -> (f64, f64, usize) {
+    match check_shift(values, wanted) {
+        Some((_, found)) => (values[found - 1], values[found], found),
+        None => {
+            let v0 = values[0];
+            let scale = v0.abs().max(lanczos::default_sigma(pair).abs());
+            (v0 - 2.0 * GAP * scale, v0 - GAP * scale, 0)
+        }
+    }
+}
+
+/// A count taken ahead of [`verify_and_repair`]: τ and the eigenvalues below it by inertia, or the count's error,
+/// with the seconds it took.
+pub(crate) type EarlyCount = (Result<(f64, usize), EigenError>, f64);
+
+/// The first count of [`verify_and_repair`], taken beside [`finish`] at a shift placed from the solver's values
+/// (`finish` replaces them by Rayleigh quotients, which moves them by rounding only).
+pub(crate) fn early_count(
+    sym: &factor::Symbolic,
+    pair: &SparsePair,
+    values: &[f64],
+    k: usize,
+    control: &Control<'_>,
+    par: faer::Par,
+) -> EarlyCount {
+    let t = Instant::now();
+    let (lo, hi, _) = gap_to_count(pair, values, k);
+    (inertia_in_gap(sym, pair, (lo, hi), control, par), t.elapsed().as_secs_f64())
+}
+
 /// The largest backward error of a test solve accepted from the check's LDLᵀ factor (as for the solver's own
 /// factor: [`lanczos`]'s LDLᵀ stability test); beyond it the count may be wrong and τ moves within its gap.
 pub(crate) const CHECK_BACKWARD_ERROR: f64 = 1e-10;
@@ -95,7 +127,9 @@ pub fn check_completeness(
 /// found, every found pair is deflated and the iteration runs again (σ below the spectrum, another seed) for the
 /// missing ones, which are the smallest of what is left; their pairs join the others and the count is taken
 /// again. `s` holds the k wanted pairs and any converged guard pairs, ascending, the first `zeros.len()` the known
-/// zero modes.
+/// zero modes. `early` is a first count taken beside [`finish`] ([`early_count`]): it stands where its τ lies in the
+/// middle half of the gap this check would count in, and is taken again otherwise.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn verify_and_repair(
     pair: &SparsePair,
     sym: &factor::Symbolic,
@@ -104,24 +138,26 @@ pub(crate) fn verify_and_repair(
     (zeros, blocks): (&ZeroModes, Option<&Blocks>),
     s: &mut Spectrum,
     k: usize,
+    mut early: Option<EarlyCount>,
 ) -> Result<(), EigenError> {
     let t = Instant::now();
     let z = zeros.len();
     let mut repairs = 0;
     let mut repaired_pairs = 0;
+    let mut early_s = 0.0;
     loop {
-        // The gap to count in; with no gap at all (every value found is one cluster), just below the cluster,
-        // where nothing may lie.
-        let (lo, hi, found) = match check_shift(&s.values, k) {
-            Some((_, found)) => (s.values[found - 1], s.values[found], found),
-            None => {
-                let v0 = s.values[0];
-                let scale = v0.abs().max(lanczos::default_sigma(pair).abs());
-                (v0 - 2.0 * GAP * scale, v0 - GAP * scale, 0)
-            }
-        };
+        let (lo, hi, found) = gap_to_count(pair, &s.values, k);
         control.phase("verifying", k, k)?;
-        let (tau, below) = inertia_in_gap(sym, pair, (lo, hi), &control, options.par())?;
+        // A count taken early stands where its τ lies in the middle half of this gap (it was placed in the middle
+        // of the same gap of the values before their Rayleigh quotients); otherwise the count is taken again here.
+        let (tau, below) = match early.take() {
+            Some((Err(EigenError::Canceled), _)) => return Err(EigenError::Canceled),
+            Some((Ok((tau, below)), seconds)) if tau > lo + 0.25 * (hi - lo) && tau < hi - 0.25 * (hi - lo) => {
+                early_s = seconds;
+                (tau, below)
+            }
+            _ => inertia_in_gap(sym, pair, (lo, hi), &control, options.par())?,
+        };
         control.check()?;
         let c = Completeness {
             method: "inertia",
@@ -181,10 +217,12 @@ pub(crate) fn verify_and_repair(
         repaired_pairs += extra.values.len().min(missing);
         merge(s, extra);
     }
+    // The seconds of the check's work, an early count's included (it ran beside `finish`).
+    let seconds = t.elapsed().as_secs_f64() + early_s;
     if let Some(c) = s.stats.completeness.as_mut() {
-        c.seconds = t.elapsed().as_secs_f64();
+        c.seconds = seconds;
     }
-    s.stats.timings.verify_s = t.elapsed().as_secs_f64();
+    s.stats.timings.verify_s = seconds;
     Ok(())
 }
 
@@ -217,4 +255,73 @@ pub(crate) fn merge(s: &mut Spectrum, extra: Spectrum) {
     s.stats.block_steps += extra.stats.block_steps;
     s.stats.solves += extra.stats.solves;
     s.stats.restarts += extra.stats.restarts;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{generate, Shape};
+    use crate::operators;
+
+    /// A verified sparse solve of the 642-vertex sphere, its options, and the check run again on the result with
+    /// an early count given.
+    fn solved() -> (SparsePair, Spectrum, EigenOptions) {
+        let shape = Shape::TriangleMesh(generate::icosphere(3));
+        let pair = operators::build(&shape, &Default::default()).unwrap().pair;
+        let o = EigenOptions { k: 20, method: Method::Sparse, threads: 1, ..Default::default() };
+        let s = eigs(&pair, &o, None, Control::default()).unwrap();
+        (pair, s, o)
+    }
+
+    fn check_again(
+        pair: &SparsePair,
+        s: &Spectrum,
+        o: &EigenOptions,
+        early: Option<EarlyCount>,
+    ) -> Result<Spectrum, EigenError> {
+        let sym = factor::Symbolic::analyze(&pair.pattern).unwrap();
+        let zeros = null_space::zero_modes(pair);
+        let blocks = Blocks::of(pair);
+        let mut s = s.clone();
+        s.stats.completeness = None;
+        verify_and_repair(pair, &sym, o, Control::default(), (&zeros, blocks.as_ref()), &mut s, o.k, early)?;
+        Ok(s)
+    }
+
+    /// An early count stands only where its τ lies in the middle half of the final values' gap: one there is taken
+    /// as it is (its seconds counted in the check's), one elsewhere, or one that failed, is counted again; a stop
+    /// during the early count stops the check.
+    #[test]
+    fn an_early_count_stands_only_inside_the_gap() {
+        let (pair, s, o) = solved();
+        // The check of the k pairs returned (the solve's own check also saw its guard pairs), counted now.
+        let truth = check_again(&pair, &s, &o, None).unwrap().stats.completeness.unwrap();
+        assert!(truth.complete);
+        let sym = factor::Symbolic::analyze(&pair.pattern).unwrap();
+        let (lo, hi, found) = gap_to_count(&pair, &s.values, o.k);
+        assert_eq!((Some(found), truth.shift), (truth.found_below_shift, Some(0.5 * (lo + hi))));
+
+        // Inside: taken as it is, even a count the check would not have made (a τ a little off the middle).
+        let tau = lo + 0.4 * (hi - lo);
+        let early = early_count(&sym, &pair, &s.values, o.k, &Control::default(), faer::Par::Seq);
+        let below = early.0.as_ref().unwrap().1;
+        let c = check_again(&pair, &s, &o, Some((Ok((tau, below)), 100.0))).unwrap().stats.completeness.unwrap();
+        assert_eq!((c.shift, c.below_shift, c.complete), (Some(tau), Some(below), true));
+        assert!(c.seconds >= 100.0, "{}", c.seconds);
+
+        // Outside the middle half, or above the gap: counted again at the gap's middle.
+        for tau in [lo + 0.1 * (hi - lo), hi + 1.0] {
+            let c = check_again(&pair, &s, &o, Some((Ok((tau, 0)), 100.0))).unwrap().stats.completeness.unwrap();
+            assert_eq!((c.shift, c.below_shift, c.complete), (truth.shift, truth.below_shift, true), "τ = {tau}");
+            assert!(c.seconds < 100.0);
+        }
+        // A failed early count is counted again; a stopped one stops the check.
+        let failed = Err(EigenError::Factorization { message: "test".into() });
+        let c = check_again(&pair, &s, &o, Some((failed, 0.0))).unwrap().stats.completeness.unwrap();
+        assert_eq!((c.shift, c.complete), (truth.shift, true));
+        assert!(matches!(
+            check_again(&pair, &s, &o, Some((Err(EigenError::Canceled), 0.0))),
+            Err(EigenError::Canceled)
+        ));
+    }
 }

@@ -71,9 +71,26 @@ pub fn eigs(
     let k = options.k;
     options.check()?;
     control.phase("null-space", 0, k)?;
-    let zeros = if options.deflate_null_space { null_space::zero_modes(pair) } else { ZeroModes::default() };
+    let threads = if options.threads == 0 { rayon::current_num_threads() } else { options.threads };
+    let kernel = || {
+        let zeros = if options.deflate_null_space { null_space::zero_modes(pair) } else { ZeroModes::default() };
+        (zeros, Blocks::of(pair))
+    };
+    // The symbolic analysis (a serial AMD ordering: 0.1 s at 164k vertices) runs beside the null space on more
+    // than one thread where the solve can only be sparse: past 8,000 unknowns, which no automatic choice solves
+    // densely unless the shape falls apart into small components (then the analysis is dropped unused).
+    let analyze = || {
+        let t = Instant::now();
+        (factor::Symbolic::analyze(&pair.pattern), t.elapsed().as_secs_f64())
+    };
+    let ahead = threads > 1 && options.method != Method::Dense && n > 8000 && !symbolic.is_some_and(|s| s.fits(pair));
+    let ((zeros, blocks), mut analyzed) = if ahead {
+        let (kernel, analyzed) = rayon::join(kernel, analyze);
+        (kernel, Some(analyzed))
+    } else {
+        (kernel(), None)
+    };
     let z = zeros.len();
-    let blocks = Blocks::of(pair);
     control.check()?;
     let dense = use_dense(options.method, blocks.as_ref().map_or(n, |b| b.largest), n - z, k.saturating_sub(z));
     let max = if dense { n } else { n.saturating_sub(1) };
@@ -93,17 +110,15 @@ pub fn eigs(
         dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, control)?
     } else {
         control.phase("symbolic", 0, k)?;
-        let symbolic_t = Instant::now();
         let owned;
-        let (sym, reused) = match symbolic {
-            Some(s) if s.fits(pair) => (s, true),
+        let (sym, reused, symbolic_s) = match symbolic {
+            Some(s) if s.fits(pair) => (s, true, 0.0),
             _ => {
-                owned = factor::Symbolic::analyze(&pair.pattern)
-                    .map_err(|message| EigenError::Factorization { message })?;
-                (&owned, false)
+                let (result, seconds) = analyzed.take().unwrap_or_else(analyze);
+                owned = result.map_err(|message| EigenError::Factorization { message })?;
+                (&owned, false, seconds)
             }
         };
-        let symbolic_s = symbolic_t.elapsed().as_secs_f64();
         if sym.inner.len_val() > options.max_values {
             return Err(EigenError::TooLarge {
                 what: "the factor of L − σM (the symbolic analysis' fill)".into(),
@@ -136,9 +151,23 @@ pub fn eigs(
         control.check()?;
         s.stats.symbolic_reused = reused;
         s.stats.timings.symbolic_s = symbolic_s;
-        finish(pair, &mut s, z, options.threads, control)?;
-        if options.verify && s.stats.method == "block-lanczos" {
-            verify_and_repair(pair, sym, options, control, (&zeros, blocks.as_ref()), &mut s, k)?;
+        let verify = options.verify && s.stats.method == "block-lanczos";
+        // On more than one thread the check's first factorization runs beside `finish` (neither keeps two cores
+        // busy on its own: 164k vertices, k = 200, two threads, 0.2 s each before).
+        let early = if verify && threads > 1 {
+            let values = s.values.clone();
+            let (done, early) = rayon::join(
+                || finish(pair, &mut s, z, options.threads, control),
+                || completeness::early_count(sym, pair, &values, k, &control, options.par()),
+            );
+            done?;
+            Some(early)
+        } else {
+            finish(pair, &mut s, z, options.threads, control)?;
+            None
+        };
+        if verify {
+            verify_and_repair(pair, sym, options, control, (&zeros, blocks.as_ref()), &mut s, k, early)?;
         }
         s
     };
@@ -344,17 +373,6 @@ pub(crate) fn finish(
     let n = pair.n();
     let k = s.values.len();
     let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);
-    for j in 0..k {
-        let (mut big, mut sign) = (0.0f64, 1.0);
-        for &x in s.vectors.col(j).iter() {
-            if x.abs() > big {
-                (big, sign) = (x.abs(), x.signum());
-            }
-        }
-        if sign < 0.0 {
-            s.vectors.col_mut(j).iter_mut().for_each(|x| *x = -*x);
-        }
-    }
     s.residuals = vec![0.0; k];
     // Eight columns at a time as one row-major block: the block products take it without transposing. The blocks
     // are split into runs of consecutive blocks, one per thread up to four, side by side (164k vertices, k = 1000:
@@ -363,16 +381,24 @@ pub(crate) fn finish(
     let blocks: Vec<usize> = (0..k).step_by(B).collect();
     let vectors = s.vectors.as_ref();
     let values = &s.values;
-    let block_run = |run: &[usize]| -> Result<Vec<(usize, f64, f64)>, EigenError> {
+    // Each pair: (column, Rayleigh quotient, residual, whether its largest-magnitude entry is negative). The sign is
+    // found as the column is copied for the products (a serial pass over every vector before: 65 ms of 3.9 s at
+    // 164k vertices, k = 200, two threads); the quotient and the residual do not depend on it.
+    let block_run = |run: &[usize]| -> Result<Vec<(usize, f64, f64, bool)>, EigenError> {
         let mut scratch = Vec::new();
         let (mut xr, mut lr, mut mr) = (vec![0.0; n * B], vec![0.0; n * B], vec![0.0; n * B]);
         let mut out = Vec::with_capacity(run.len() * B);
         for &j0 in run {
             control.check()?;
             let bw = B.min(k - j0);
+            let mut negative = [false; B];
             for c in 0..bw {
+                let mut big = 0.0f64;
                 for (i, &x) in vectors.col(j0 + c).iter().enumerate() {
                     xr[i * bw + c] = x;
+                    if x.abs() > big {
+                        (big, negative[c]) = (x.abs(), x < 0.0);
+                    }
                 }
             }
             let x = faer::MatRef::from_row_major_slice(&xr[..n * bw], n, bw);
@@ -408,7 +434,8 @@ pub(crate) fn finish(
                 }
             }
             for c in 0..bw {
-                out.push((j0 + c, lam[c], r[c].sqrt() / (lam[c].abs().max(sigma_floor) * mnorm[c].sqrt())));
+                let res = r[c].sqrt() / (lam[c].abs().max(sigma_floor) * mnorm[c].sqrt());
+                out.push((j0 + c, lam[c], res, negative[c]));
             }
         }
         Ok(out)
@@ -416,18 +443,32 @@ pub(crate) fn finish(
     // At most four runs: each holds three n × 8 buffers (192 MB at 10⁶ unknowns).
     let threads = if threads == 0 { rayon::current_num_threads() } else { threads }.clamp(1, blocks.len().clamp(1, 4));
     let runs: Vec<&[usize]> = blocks.chunks(blocks.len().div_ceil(threads).max(1)).collect();
-    type Rows = Vec<(usize, f64, f64)>;
+    type Rows = Vec<(usize, f64, f64, bool)>;
     let results: Vec<Result<Rows, EigenError>> = if runs.len() > 1 {
         use rayon::prelude::*;
         runs.par_iter().with_max_len(1).map(|run| block_run(run)).collect()
     } else {
         runs.iter().map(|run| block_run(run)).collect()
     };
+    let mut flip = vec![false; k];
     for r in results {
-        for (j, lam, res) in r? {
+        for (j, lam, res, negative) in r? {
             s.values[j] = lam;
             s.residuals[j] = res;
+            flip[j] = negative;
         }
+    }
+    // Signs fixed: the largest-magnitude entry of each vector positive.
+    let negate = |(j, col): (usize, faer::ColMut<'_, f64>)| {
+        if flip[j] {
+            col.iter_mut().for_each(|x| *x = -*x);
+        }
+    };
+    if threads > 1 {
+        use rayon::prelude::*;
+        s.vectors.par_col_iter_mut().enumerate().for_each(negate);
+    } else {
+        s.vectors.col_iter_mut().enumerate().for_each(negate);
     }
     // Members of a cluster may trade places by rounding.
     if s.values.windows(2).any(|w| w[0] > w[1]) {
