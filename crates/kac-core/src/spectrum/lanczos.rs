@@ -90,7 +90,7 @@ fn lap(t: &mut Instant) -> f64 {
 /// threads each takes a contiguous range of whole chunks with a scratch of its own and runs its products on one
 /// thread: the rows are disjoint, and faer's product splits a chunk's 2048 × ma × p product less evenly (restarts
 /// and Ritz vectors at 164k vertices, k = 200, two threads: 1.3× the one-thread speed split inside each product).
-fn ritz_in_place(
+pub(crate) fn ritz_in_place(
     v: &mut Mat<f64>,
     a0: usize,
     ma: usize,
