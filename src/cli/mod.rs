@@ -205,14 +205,17 @@ pub fn run() -> i32 {
     }
 }
 
-/// Runs `f` on a worker of the global rayon pool (built with `threads` workers when given) and waits for it. The
-/// solver's serial parts then run on the pool beside its parallel ones, and each parallel step is a fork on the pool
-/// instead of a hand-off from this thread and back (164k vertices, k = 200, two threads: 3.8 → 3.6 s; 10k vertices,
-/// k = 50: 0.110 → 0.092 s).
-pub(crate) fn on_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+/// Runs `f` on this thread made one of the global rayon pool's workers (built with `threads` workers when given,
+/// `use_current_thread`). The solver's serial parts then run on the pool beside its parallel ones, and each parallel
+/// step is a fork on the pool instead of a hand-off from this thread and back (164k vertices, k = 200, two threads:
+/// 3.8 → 3.6 s; 10k vertices, k = 50: 0.110 → 0.092 s). This thread, not a spawned worker, keeps the solve's large
+/// allocations: on a spawned worker glibc's arena for that thread held about 60 MB more at the peak (10⁶ vertices,
+/// k = 100). Where the pool was built already, `f` runs here as before.
+pub(crate) fn on_pool<T>(threads: usize, f: impl FnOnce() -> T) -> T {
+    let mut pool = rayon::ThreadPoolBuilder::new().use_current_thread();
     if threads > 0 {
-        let _ = rayon::ThreadPoolBuilder::new().num_threads(threads).build_global();
+        pool = pool.num_threads(threads);
     }
-    // From a thread outside the pool, `rayon::scope` runs its body on one of the pool's workers and blocks.
-    rayon::scope(|_| f())
+    let _ = pool.build_global();
+    f()
 }
