@@ -208,7 +208,7 @@ pub fn run() -> i32 {
 /// Runs `f` on this thread made one of the global rayon pool's workers (built with `threads` workers when given,
 /// `use_current_thread`). The solver's serial parts then run on the pool beside its parallel ones, and each parallel
 /// step is a fork on the pool instead of a hand-off from this thread and back (164k vertices, k = 200, two threads:
-/// 3.8 → 3.6 s; 10k vertices, k = 50: 0.110 → 0.092 s). This thread, not a spawned worker, keeps the solve's large
+/// 3.9 → 3.6 s; 10k vertices, k = 50: 0.110 → 0.092 s). This thread, not a spawned worker, keeps the solve's large
 /// allocations: on a spawned worker glibc's arena for that thread held about 60 MB more at the peak (10⁶ vertices,
 /// k = 100). Where the pool was built already, `f` runs here as before.
 pub(crate) fn on_pool<T>(threads: usize, f: impl FnOnce() -> T) -> T {

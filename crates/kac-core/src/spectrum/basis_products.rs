@@ -103,12 +103,12 @@ fn by_rows<T: Send>(n: usize, threads: usize, part: impl Fn(usize, usize) -> T +
     row_ranges(n, threads).into_par_iter().map(|(a, e)| part(a, e)).collect()
 }
 
-/// DST = SRC for two blocks of the same length, on `threads` threads by equal pieces (one below
-/// [`PARALLEL_ROWS`] values or on one thread).
-pub fn copy_par(dst: &mut [f64], src: &[f64], threads: usize) {
+/// DST = SRC for two row-major n × b blocks, on `threads` threads by equal pieces (one below [`PARALLEL_ROWS`]
+/// rows or on one thread).
+pub fn copy_par(dst: &mut [f64], src: &[f64], b: usize, threads: usize) {
     use rayon::prelude::*;
     assert_eq!(dst.len(), src.len(), "copy_par: blocks of different lengths");
-    if threads <= 1 || dst.len() < PARALLEL_ROWS {
+    if threads <= 1 || dst.len() / b.max(1) < PARALLEL_ROWS {
         dst.copy_from_slice(src);
         return;
     }

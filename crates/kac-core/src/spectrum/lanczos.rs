@@ -574,12 +574,14 @@ pub fn eigs_block_lanczos(
     let threads = if o.threads == 0 { rayon::current_num_threads() } else { o.threads };
     // V: the basis. It is the largest allocation (1.3 GB at 164k × 1006): filled column group by column group, so
     // that a stop during its first touch of memory (about a second there) takes effect. On more than one thread it
-    // is made beside the numeric factorization, whose serial parts leave a core free (164k vertices, two threads:
-    // 0.2 s of factorization at 1.1× one thread).
+    // is made on one of them beside the numeric factorization on the others, which gains little from a second
+    // thread (164k vertices: 0.20 s on two threads against 0.23 s on one). If the factorization fails, the basis
+    // was made for nothing: the solve ends with the factorization's error.
     let (shifted, mut v) = if threads > 1 {
+        let fpar = if threads > 2 { Par::rayon(threads - 1) } else { Par::Seq };
         let (shifted, v) = rayon::join(
-            || factor_shift(pair, o, &sym, par, run, &control),
-            || super::zeros_checked(n, msize, &control, threads),
+            || factor_shift(pair, o, &sym, fpar, run, &control),
+            || super::zeros_checked(n, msize, &control, 1),
         );
         (shifted?, Some(v?))
     } else {
@@ -651,7 +653,7 @@ pub fn eigs_block_lanczos(
         let mut t = Instant::now();
         // Expand the waiting block while it fits.
         if m + 2 * b <= msize {
-            basis_products::copy_par(&mut w.data, &mq.data, ctx.threads);
+            basis_products::copy_par(&mut w.data, &mq.data, b, ctx.threads);
             chol.solve_in_place(w.as_mut(), par);
             clock.solve += lap(&mut t);
             solves += b;

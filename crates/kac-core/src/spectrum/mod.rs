@@ -77,8 +77,9 @@ pub fn eigs(
         (zeros, Blocks::of(pair))
     };
     // The symbolic analysis (a serial AMD ordering: 0.1 s at 164k vertices) runs beside the null space on more
-    // than one thread where the solve can only be sparse: past 8,000 unknowns, which no automatic choice solves
-    // densely unless the shape falls apart into small components (then the analysis is dropped unused).
+    // than one thread where the solve is almost surely sparse: past 8,000 unknowns, which the automatic choice
+    // solves densely only where the shape falls apart into small components or k nearly reaches the unknowns (then
+    // the analysis is dropped unused). Both are serial: two threads.
     let analyze = || {
         let t = Instant::now();
         (factor::Symbolic::analyze(&pair.pattern), t.elapsed().as_secs_f64())
@@ -153,12 +154,15 @@ pub fn eigs(
         s.stats.timings.symbolic_s = symbolic_s;
         let verify = options.verify && s.stats.method == "block-lanczos";
         // On more than one thread the check's first factorization runs beside `finish` (neither keeps two cores
-        // busy on its own: 164k vertices, k = 200, two threads, 0.2 s each before).
+        // busy on its own: 164k vertices, k = 200, two threads, 0.2 s each before), on one of the threads given and
+        // `finish` on the others. `finish` then holds at most one run's three n × 8 blocks per 24 basis columns the
+        // solve held, so that with the check's factor beside them the phase stays below the iteration's memory.
         let early = if verify && threads > 1 {
             let values = s.values.clone();
+            let runs = (threads - 1).min(s.stats.subspace / 24).max(1);
             let (done, early) = rayon::join(
-                || finish(pair, &mut s, z, options.threads, control),
-                || completeness::early_count(sym, pair, &values, k, &control, options.par()),
+                || finish(pair, &mut s, z, runs, control),
+                || completeness::early_count(sym, pair, &values, k, &control, faer::Par::Seq),
             );
             done?;
             Some(early)
@@ -458,7 +462,7 @@ pub(crate) fn finish(
             flip[j] = negative;
         }
     }
-    // Signs fixed: the largest-magnitude entry of each vector positive.
+    // Signs fixed: the largest-magnitude entry of each vector positive (in as many pieces as runs above).
     let negate = |(j, col): (usize, faer::ColMut<'_, f64>)| {
         if flip[j] {
             col.iter_mut().for_each(|x| *x = -*x);
@@ -466,7 +470,7 @@ pub(crate) fn finish(
     };
     if threads > 1 {
         use rayon::prelude::*;
-        s.vectors.par_col_iter_mut().enumerate().for_each(negate);
+        s.vectors.par_col_iter_mut().enumerate().with_min_len(k.div_ceil(threads)).for_each(negate);
     } else {
         s.vectors.col_iter_mut().enumerate().for_each(negate);
     }
