@@ -334,7 +334,13 @@ impl Columns {
         let groups = count.div_ceil(GROUP);
         let threads = if threads == 0 { rayon::current_num_threads() } else { threads };
         if threads > 1 && groups > 1 {
-            (0..groups).into_par_iter().with_max_len(1).try_for_each(group)?;
+            // One contiguous run of groups per thread given: a pool shared with other jobs (the service's) lends
+            // this solve no more threads than it was given.
+            let runs = threads.min(groups);
+            (0..runs)
+                .into_par_iter()
+                .with_max_len(1)
+                .try_for_each(|t| (groups * t / runs..groups * (t + 1) / runs).try_for_each(group))?;
         } else {
             (0..groups).try_for_each(group)?;
         }
@@ -599,6 +605,28 @@ mod tests {
         let control = super::Control { stop: Some(&stop), ..super::Control::default() };
         let r = pool.install(|| super::zeros_checked(n, m, &control, 2));
         assert!(matches!(r, Err(super::EigenError::Canceled)));
+    }
+
+    /// Columns made on a pool of four threads for a solve given two are made by at most two of them (each group of
+    /// columns waits a little, so that idle threads of the pool would take groups if they were offered).
+    #[test]
+    fn columns_keep_to_the_threads_given() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
+        let seen = std::sync::Mutex::new(std::collections::HashSet::new());
+        let (n, m) = (100, 64 * 16);
+        let made = pool.install(|| {
+            super::columns_checked(n, m, &super::Control::default(), 2, |j, col| {
+                if j % 64 == 0 {
+                    seen.lock().unwrap().insert(rayon::current_thread_index());
+                    std::thread::sleep(std::time::Duration::from_millis(2));
+                }
+                col[0] = j as f64;
+            })
+        });
+        let made = made.unwrap();
+        assert!((0..m).all(|j| made[(0, j)] == j as f64));
+        let seen = seen.into_inner().unwrap();
+        assert!(seen.len() <= 2, "threads used: {seen:?}");
     }
 
     /// Released columns read as zeros (or as they were, on a page shared with a kept column) and can be written
