@@ -571,7 +571,7 @@ pub fn eigs_block_lanczos(
     let symbolic_s = t0.elapsed().as_secs_f64();
     control.phase("factorization", 0, k)?;
     let t1 = Instant::now();
-    let threads = if o.threads == 0 { rayon::current_num_threads() } else { o.threads };
+    let threads = o.thread_count();
     // V: the basis. It is the largest allocation (1.3 GB at 164k × 1006): filled column group by column group, so
     // that a stop during its first touch of memory (about a second there) takes effect. On more than one thread it
     // is made on one of them beside the numeric factorization on the others, which gains little from a second

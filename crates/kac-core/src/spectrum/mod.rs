@@ -71,7 +71,7 @@ pub fn eigs(
     let k = options.k;
     options.check()?;
     control.phase("null-space", 0, k)?;
-    let threads = if options.threads == 0 { rayon::current_num_threads() } else { options.threads };
+    let threads = options.thread_count();
     let kernel = || {
         let zeros = if options.deflate_null_space { null_space::zero_modes(pair) } else { ZeroModes::default() };
         (zeros, Blocks::of(pair))
@@ -514,7 +514,7 @@ fn permute_columns(m: &mut Mat<f64>, idx: &[usize]) {
 }
 
 /// Column `from` of `m` copied over column `to`.
-fn copy_column(m: &mut Mat<f64>, from: usize, to: usize) {
+pub(crate) fn copy_column(m: &mut Mat<f64>, from: usize, to: usize) {
     use faer::reborrow::Reborrow;
     if from == to {
         return;

@@ -77,6 +77,14 @@ impl EigenOptions {
             faer::Par::rayon(self.threads)
         }
     }
+    /// The threads a solve with these options uses: `threads`, or the current rayon pool's where it is 0.
+    pub fn thread_count(&self) -> usize {
+        if self.threads == 0 {
+            rayon::current_num_threads()
+        } else {
+            self.threads
+        }
+    }
     /// Checks the settings no solve could honour, before anything is computed: a tolerance outside
     /// [`MIN_TOL`, `MAX_TOL`], a shift that is not finite, zero or beyond ±[`MAX_ABS_SIGMA`], a block outside
     /// 1..=[`MAX_BLOCK`], a subspace that cannot hold the pairs asked for, or no steps. Each error names the setting.

@@ -370,7 +370,7 @@ pub(crate) fn plan(pair: &SparsePair, deflated: usize, wanted: usize, o: &EigenO
     if !(measure > 0.0) || !measure.is_finite() {
         return None;
     }
-    let threads = if o.threads == 0 { rayon::current_num_threads() } else { o.threads };
+    let threads = o.thread_count();
     let s = slice_count(wanted, threads, o.slices);
     if s < 2 {
         return None;
@@ -424,7 +424,7 @@ pub(crate) fn solve(
 ) -> Result<Option<Spectrum>, EigenError> {
     let t0 = Instant::now();
     let Some(slices) = plan(pair, deflation.len(), o.k, o) else { return Ok(None) };
-    let threads = if o.threads == 0 { rayon::current_num_threads() } else { o.threads };
+    let threads = o.thread_count();
     control.phase("factorization", 0, o.k)?;
     // Sylvester's inertia at every edge between two slices: each window's count exactly, so its subspace is
     // sized for what it holds (Weyl's even split meets clustered spectra unevenly: a sphere's window can hold a
@@ -867,9 +867,7 @@ pub(crate) fn rayleigh_ritz(
         // A direction held twice: the columns after the edge move down over the p − r dropped ones.
         let total = s.values.len() - (p - r);
         for j in a + r..total {
-            let from = j + (p - r);
-            let (left, right) = s.vectors.as_mut().split_at_col_mut(from);
-            left.col_mut(j).copy_from(right.col(0));
+            super::copy_column(&mut s.vectors, j + (p - r), j);
         }
         s.values.drain(a + r..b);
         s.vectors.truncate(n, total);
