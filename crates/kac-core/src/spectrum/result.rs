@@ -3,7 +3,9 @@
 
 use super::*;
 
-/// Seconds spent in each phase.
+/// Seconds spent in each phase. On more than one thread some phases run beside each other (the symbolic analysis
+/// beside the null space, the numeric factorization beside the basis' allocation, the completeness check's first count
+/// beside the final residuals); each phase counts its own seconds, so the phases can add up to more than `total_s`.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Timings {
     pub symbolic_s: f64,
@@ -17,7 +19,8 @@ pub struct Timings {
     pub rayleigh_ritz_s: f64,
     /// Inside the iteration: Ritz vectors at thick restarts and at the end.
     pub restart_s: f64,
-    /// The completeness check (inertia) and any repair solves.
+    /// The completeness check (inertia) and any repair solves, with the first count's seconds where it ran beside the
+    /// final residuals.
     pub verify_s: f64,
     pub total_s: f64,
 }
