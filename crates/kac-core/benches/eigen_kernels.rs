@@ -143,7 +143,16 @@ fn main() {
             std::hint::black_box(&flush);
             let cold = stat(cold);
             let mut scratch = Vec::new();
-            let spmm = time(|| sparse::spmm(&pair.pattern, &pair.mass, x.as_ref(), y.as_mut(), &mut scratch));
+            let spmm = time(|| {
+                sparse::spmm(
+                    &pair.pattern,
+                    &pair.mass,
+                    x.as_ref(),
+                    y.as_mut(),
+                    &mut scratch,
+                    rayon::current_num_threads(),
+                )
+            });
             println!(
                 "{{\"vertices\": {n}, \"factor_nnz\": {}, \"rhs\": {b}, \"solve_ms\": {:.3}, \"solve_ms_per_rhs\": {:.3}, \"solve_avx2_ms\": {:.3}, \"solve_after_flush_ms\": {:.3}, \"solve_ldlt_ms\": {:.3}, \"mass_product_ms\": {:.3}}}",
                 chol.factor_nnz(),

@@ -80,8 +80,8 @@ fn main() {
     };
     let (mut lx, mut mx, mut scratch) = (Mat::<f64>::zeros(n, p), Mat::<f64>::zeros(n, p), Vec::new());
     let mut products = |x: &Mat<f64>, lx: &mut Mat<f64>, mx: &mut Mat<f64>| {
-        spmm(&fine.pattern, &fine.stiffness, x.as_ref(), lx.as_mut(), &mut scratch);
-        spmm(&fine.pattern, &fine.mass, x.as_ref(), mx.as_mut(), &mut scratch);
+        spmm(&fine.pattern, &fine.stiffness, x.as_ref(), lx.as_mut(), &mut scratch, 1);
+        spmm(&fine.pattern, &fine.mass, x.as_ref(), mx.as_mut(), &mut scratch, 1);
     };
     products(&x, &mut lx, &mut mx);
     let mut solved = 0;

@@ -296,7 +296,7 @@ fn check_block_solve(
             chol.solve_in_place_with(x.as_mut(), faer::Par::Seq, isa);
             let mut y = faer::Mat::<f64>::zeros(n, b);
             let mut scratch = Vec::new();
-            operators::sparse::spmm(&pair.pattern, k_values, x.as_ref(), y.as_mut(), &mut scratch);
+            operators::sparse::spmm(&pair.pattern, k_values, x.as_ref(), y.as_mut(), &mut scratch, 2);
             let mut single = vec![0.0; n];
             for c in 0..b {
                 let xc: Vec<f64> = (0..n).map(|i| x[(i, c)]).collect();
@@ -324,6 +324,7 @@ fn check_block_solve(
                 xv,
                 faer::MatMut::from_row_major_slice_mut(&mut yr, n, b),
                 &mut scratch,
+                1,
             );
             for i in 0..n {
                 for c in 0..b {

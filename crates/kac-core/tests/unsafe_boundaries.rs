@@ -296,15 +296,15 @@ fn spmm_panics_on_wrong_sizes() {
         for (yr, yc) in [(n - 1, b), (n + 1, b), (0, b), (n, b + 1), (n, b - 1)] {
             let mut ybuf = vec![0.0; yr * yc];
             let y = MatMut::from_row_major_slice_mut(&mut ybuf, yr, yc);
-            assert!(panics(|| sparse::spmm(p, &f.k, xr, y, &mut scratch)), "b={b} Y {yr}×{yc}");
+            assert!(panics(|| sparse::spmm(p, &f.k, xr, y, &mut scratch, 2)), "b={b} Y {yr}×{yc}");
             let mut y = Mat::<f64>::zeros(yr, yc);
-            assert!(panics(|| sparse::spmm(p, &f.k, x.as_ref(), y.as_mut(), &mut scratch)), "col-major Y {yr}×{yc}");
+            assert!(panics(|| sparse::spmm(p, &f.k, x.as_ref(), y.as_mut(), &mut scratch, 2)), "col-major Y {yr}×{yc}");
         }
         let short = block(n - 1, b, 5);
         let mut y = Mat::<f64>::zeros(n - 1, b);
-        assert!(panics(|| sparse::spmm(p, &f.k, short.as_ref(), y.as_mut(), &mut scratch)), "X of n − 1 rows");
+        assert!(panics(|| sparse::spmm(p, &f.k, short.as_ref(), y.as_mut(), &mut scratch, 2)), "X of n − 1 rows");
         let mut y = Mat::<f64>::zeros(n, b);
-        assert!(panics(|| sparse::spmm(p, &f.k[1..], x.as_ref(), y.as_mut(), &mut scratch)), "values too short");
+        assert!(panics(|| sparse::spmm(p, &f.k[1..], x.as_ref(), y.as_mut(), &mut scratch, 2)), "values too short");
     }
 }
 
@@ -331,7 +331,7 @@ fn spmm_takes_any_views() {
             for yl in LAYOUTS {
                 let mut ybuf = yl.buffer(n, b);
                 let xv = xl.view(&mut xbuf, n, b).into_const();
-                sparse::spmm(p, &f.k, xv, yl.view(&mut ybuf, n, b), &mut scratch);
+                sparse::spmm(p, &f.k, xv, yl.view(&mut ybuf, n, b), &mut scratch, 2);
                 let what = format!("spmm b={b} X {xl:?} Y {yl:?}");
                 let got = yl.read(&mut ybuf, n, b, &what);
                 assert_close(got.as_ref(), want.as_ref(), 1e-12, &what);

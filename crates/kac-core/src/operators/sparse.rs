@@ -294,7 +294,9 @@ fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], o
 }
 
 /// Y = A·X for a symmetric A on `p` and a block X (n × b, column-major): X is copied to row-major so each entry
-/// of A meets b contiguous values; rows of Y are computed in parallel. `scratch` holds both row-major copies; it grows once and is reused.
+/// of A meets b contiguous values; rows of Y are computed on `threads` threads, each on one contiguous range of
+/// rows (on one thread below 2,048 rows or for `threads` ≤ 1), so a solve given t threads of a shared pool keeps
+/// to t. `scratch` holds both row-major copies; it grows once and is reused.
 ///
 /// # Panics
 /// If X is not `p.n` rows, Y not the shape of X, or `values` not one value per stored entry of `p`. X and Y may be
@@ -305,6 +307,7 @@ pub fn spmm(
     x: faer::MatRef<'_, f64>,
     mut y: faer::MatMut<'_, f64>,
     scratch: &mut Vec<f64>,
+    threads: usize,
 ) {
     let (n, b) = (x.nrows(), x.ncols());
     assert_eq!(n, p.n, "spmm: X must have one row per row of A");
@@ -321,7 +324,7 @@ pub fn spmm(
         // SAFETY: as for X, Y being n × b by the `assert_eq!` on its shape above; `y` is borrowed mutably for this
         // call, so no other reference (`x` included) reaches its entries.
         let yr = unsafe { std::slice::from_raw_parts_mut(y.rb_mut().as_ptr_mut(), nb) };
-        spmm_row_major(p, values, xr, yr, b);
+        spmm_row_major(p, values, xr, yr, b, threads);
         return;
     }
     let both = nb.checked_mul(2).expect("spmm: n × b block too large");
@@ -340,7 +343,7 @@ pub fn spmm(
             }
         }
     }
-    spmm_row_major(p, values, xr, yr, b);
+    spmm_row_major(p, values, xr, yr, b, threads);
     for i0 in (0..n).step_by(64) {
         let i1 = n.min(i0 + 64);
         for c in 0..b {
@@ -352,26 +355,94 @@ pub fn spmm(
     }
 }
 
-/// Y = A·X for blocks stored row-major (row i of X at `xr[i·b..(i + 1)·b]`).
-fn spmm_row_major(p: &Pattern, values: &[f64], xr: &[f64], yr: &mut [f64], b: usize) {
-    yr.par_chunks_mut(b * 1024).enumerate().for_each(|(chunk, out)| {
-        let j0 = chunk * 1024;
-        match b {
-            8 => spmm_rows_dispatch::<8>(p, values, xr, out, j0),
-            16 => spmm_rows_dispatch::<16>(p, values, xr, out, j0),
-            _ => {
-                for (k, row) in out.chunks_mut(b).enumerate() {
-                    let j = j0 + k;
-                    row.fill(0.0);
-                    for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
-                        let a = values[pos];
-                        let xi = &xr[p.row_idx[pos] * b..p.row_idx[pos] * b + b];
-                        for (r, xv) in row.iter_mut().zip(xi) {
-                            *r += a * xv;
-                        }
+/// Y = A·X for blocks stored row-major (row i of X at `xr[i·b..(i + 1)·b]`), on `threads` threads by contiguous
+/// ranges of rows.
+fn spmm_row_major(p: &Pattern, values: &[f64], xr: &[f64], yr: &mut [f64], b: usize, threads: usize) {
+    let n = p.n;
+    let parts = threads.min(n / 1024).max(1);
+    if parts == 1 {
+        return spmm_rows(p, values, xr, yr, 0, b);
+    }
+    let mut pieces: Vec<(usize, &mut [f64])> = Vec::with_capacity(parts);
+    let mut rest = yr;
+    for i in 0..parts {
+        let (a, e) = (i * n / parts, (i + 1) * n / parts);
+        let (head, tail) = rest.split_at_mut((e - a) * b);
+        pieces.push((a, head));
+        rest = tail;
+    }
+    pieces.into_par_iter().with_max_len(1).for_each(|(j0, out)| spmm_rows(p, values, xr, out, j0, b));
+}
+
+/// Rows `j0..` of Y = A·X (as many as `out` holds) for blocks stored row-major.
+fn spmm_rows(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize, b: usize) {
+    #[cfg(test)]
+    tests::saw_rows(values);
+    match b {
+        8 => spmm_rows_dispatch::<8>(p, values, xr, out, j0),
+        16 => spmm_rows_dispatch::<16>(p, values, xr, out, j0),
+        _ => {
+            for (k, row) in out.chunks_mut(b).enumerate() {
+                let j = j0 + k;
+                row.fill(0.0);
+                for pos in p.col_ptr[j]..p.col_ptr[j + 1] {
+                    let a = values[pos];
+                    let xi = &xr[p.row_idx[pos] * b..p.row_idx[pos] * b + b];
+                    for (r, xv) in row.iter_mut().zip(xi) {
+                        *r += a * xv;
                     }
                 }
             }
         }
-    });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Mutex;
+
+    /// (address of the values, pool thread) of every range of rows a block product ran, for the test below.
+    static SEEN: Mutex<Vec<(usize, Option<usize>)>> = Mutex::new(Vec::new());
+
+    pub(super) fn saw_rows(values: &[f64]) {
+        SEEN.lock().unwrap().push((values.as_ptr() as usize, rayon::current_thread_index()));
+    }
+
+    /// A block product given two threads of a pool of four runs on at most two of them, every time, and gives the
+    /// product it gives on one thread. 400,000 rows: enough work that the pool's idle threads would take ranges of
+    /// rows if they were offered (the build before, with 390 ranges on the whole pool, used three of four).
+    #[test]
+    fn a_block_product_keeps_to_the_threads_given() {
+        let n: usize = 400_000;
+        // The path graph's Laplacian: 2 on the diagonal, −1 beside it.
+        let mut col_ptr = vec![0];
+        let (mut row_idx, mut values) = (Vec::new(), Vec::new());
+        for j in 0..n {
+            for i in j.saturating_sub(1)..(j + 2).min(n) {
+                row_idx.push(i);
+                values.push(if i == j { 2.0 } else { -1.0 });
+            }
+            col_ptr.push(row_idx.len());
+        }
+        let p = super::Pattern { n, col_ptr, row_idx };
+        let x = faer::Mat::from_fn(n, 8, |i, c| ((i * 7 + c * 13) % 17) as f64);
+        let mut one = faer::Mat::<f64>::zeros(n, 8);
+        super::spmm(&p, &values, x.as_ref(), one.as_mut(), &mut Vec::new(), 1);
+        let key = values.as_ptr() as usize;
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
+        for _ in 0..20 {
+            SEEN.lock().unwrap().retain(|&(v, _)| v != key);
+            let mut two = faer::Mat::<f64>::zeros(n, 8);
+            pool.install(|| super::spmm(&p, &values, x.as_ref(), two.as_mut(), &mut Vec::new(), 2));
+            assert_eq!(one, two);
+            let threads: std::collections::HashSet<_> =
+                SEEN.lock().unwrap().iter().filter(|&&(v, _)| v == key).map(|&(_, t)| t).collect();
+            assert!(threads.len() <= 2, "threads used: {threads:?}");
+        }
+        // The product itself: row 0 is 2x₀ − x₁, an inner row −x_{i−1} + 2xᵢ − x_{i+1}.
+        for c in 0..8 {
+            assert_eq!(one[(0, c)], 2.0 * x[(0, c)] - x[(1, c)]);
+            assert_eq!(one[(500, c)], -x[(499, c)] + 2.0 * x[(500, c)] - x[(501, c)]);
+        }
+    }
 }

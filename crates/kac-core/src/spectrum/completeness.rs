@@ -186,7 +186,7 @@ pub(crate) fn verify_and_repair(
         let missing = below - found;
         let p = s.values.len() - z;
         let found_vectors = s.vectors.as_ref().subcols(z, p).to_owned();
-        let m_found = mass_times(pair, found_vectors.as_ref());
+        let m_found = mass_times(pair, found_vectors.as_ref(), options.thread_count());
         let deflation = Deflation { sparse: &zeros.vectors, dense: Some((found_vectors.as_ref(), m_found.as_ref())) };
         let mut deflated_values = vec![0.0; z];
         deflated_values.extend_from_slice(&s.values[z..]);
@@ -227,11 +227,11 @@ pub(crate) fn verify_and_repair(
     Ok(())
 }
 
-/// M X for a dense block.
-pub(crate) fn mass_times(pair: &SparsePair, x: MatRef<'_, f64>) -> Mat<f64> {
+/// M X for a dense block, on `threads` threads.
+pub(crate) fn mass_times(pair: &SparsePair, x: MatRef<'_, f64>, threads: usize) -> Mat<f64> {
     let mut out = Mat::<f64>::zeros(x.nrows(), x.ncols());
     let mut scratch = Vec::new();
-    crate::operators::sparse::spmm(&pair.pattern, &pair.mass, x, out.as_mut(), &mut scratch);
+    crate::operators::sparse::spmm(&pair.pattern, &pair.mass, x, out.as_mut(), &mut scratch, threads);
     out
 }
 

@@ -161,7 +161,14 @@ impl Ctx<'_> {
                     }
                 }
             }
-            None => crate::operators::sparse::spmm(&self.pair.pattern, &self.pair.mass, x, out, &mut self.scratch),
+            None => crate::operators::sparse::spmm(
+                &self.pair.pattern,
+                &self.pair.mass,
+                x,
+                out,
+                &mut self.scratch,
+                self.threads,
+            ),
         }
     }
 

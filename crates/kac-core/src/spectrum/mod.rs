@@ -385,9 +385,10 @@ pub(crate) fn finish(
     let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);
     s.residuals = vec![0.0; k];
     // Eight columns at a time as one row-major block: the block products take it without transposing. The blocks
-    // are split into runs of consecutive blocks, one per thread up to four, side by side (164k vertices, k = 1000:
-    // 3.3 s on one thread, 1.6 s on two, when the signs took a pass of their own; with the signs found here, 0.68–0.76
-    // s on a pool of two threads, in one run or in two: the sparse products split their rows over the pool).
+    // are split into runs of consecutive blocks, one per thread up to four, side by side, and the threads beyond
+    // four share each run's sparse products (164k vertices, k = 1000: 3.3 s on one thread, 1.6 s on two, when the
+    // signs took a pass of their own; with the signs found here, 0.68–0.76 s on a pool of two threads, in one run or
+    // in two, when the sparse products split their rows over the whole pool).
     const B: usize = 8;
     let blocks: Vec<usize> = (0..k).step_by(B).collect();
     let vectors = s.vectors.as_ref();
@@ -395,7 +396,7 @@ pub(crate) fn finish(
     // Each pair: (column, Rayleigh quotient, residual, whether its largest-magnitude entry is negative). The sign is
     // found as the column is copied for the products (a serial pass over every vector before: 65 ms of 3.9 s at
     // 164k vertices, k = 200, two threads); the quotient and the residual do not depend on it.
-    let block_run = |run: &[usize]| -> Result<Vec<(usize, f64, f64, bool)>, EigenError> {
+    let block_run = |run: &[usize], product_threads: usize| -> Result<Vec<(usize, f64, f64, bool)>, EigenError> {
         let mut scratch = Vec::new();
         let (mut xr, mut lr, mut mr) = (vec![0.0; n * B], vec![0.0; n * B], vec![0.0; n * B]);
         let mut out = Vec::with_capacity(run.len() * B);
@@ -415,7 +416,7 @@ pub(crate) fn finish(
             let x = faer::MatRef::from_row_major_slice(&xr[..n * bw], n, bw);
             let product = |values: &[f64], out: &mut [f64], scratch: &mut Vec<f64>| {
                 let y = faer::MatMut::from_row_major_slice_mut(&mut out[..n * bw], n, bw);
-                crate::operators::sparse::spmm(&pair.pattern, values, x, y, scratch);
+                crate::operators::sparse::spmm(&pair.pattern, values, x, y, scratch, product_threads);
             };
             product(&pair.stiffness, &mut lr, &mut scratch);
             product(&pair.mass, &mut mr, &mut scratch);
@@ -452,14 +453,16 @@ pub(crate) fn finish(
         Ok(out)
     };
     // At most four runs: each holds three n × 8 buffers (192 MB at 10⁶ unknowns).
-    let threads = if threads == 0 { rayon::current_num_threads() } else { threads }.clamp(1, blocks.len().clamp(1, 4));
+    let given = if threads == 0 { rayon::current_num_threads() } else { threads }.max(1);
+    let threads = given.clamp(1, blocks.len().clamp(1, 4));
     let runs: Vec<&[usize]> = blocks.chunks(blocks.len().div_ceil(threads).max(1)).collect();
+    let product_threads = (given / runs.len().max(1)).max(1);
     type Rows = Vec<(usize, f64, f64, bool)>;
     let results: Vec<Result<Rows, EigenError>> = if runs.len() > 1 {
         use rayon::prelude::*;
-        runs.par_iter().with_max_len(1).map(|run| block_run(run)).collect()
+        runs.par_iter().with_max_len(1).map(|run| block_run(run, product_threads)).collect()
     } else {
-        runs.iter().map(|run| block_run(run)).collect()
+        runs.iter().map(|run| block_run(run, product_threads)).collect()
     };
     let mut flip = vec![false; k];
     for r in results {

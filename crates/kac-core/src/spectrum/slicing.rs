@@ -841,7 +841,7 @@ pub(crate) fn rayleigh_ritz(
             let xb = MatRef::from_row_major_slice(&xr[..n * w], n, w);
             for (values, out, projected) in [(&pair.mass, &mut mr, &mut g), (&pair.stiffness, &mut lr, &mut l)] {
                 let y = faer::MatMut::from_row_major_slice_mut(&mut out[..n * w], n, w);
-                crate::operators::sparse::spmm(&pair.pattern, values, xb, y, &mut scratch);
+                crate::operators::sparse::spmm(&pair.pattern, values, xb, y, &mut scratch, threads);
                 let part = super::basis_products::gram_par(x, &out[..n * w], w, threads);
                 projected.as_mut().subcols_mut(c0, w).copy_from(part.as_ref());
             }
