@@ -62,12 +62,13 @@ pub(crate) fn dense_with_zero_modes(
     zeros: &ZeroModes,
     blocks: Option<&Blocks>,
     k: usize,
+    threads: usize,
     control: Control<'_>,
 ) -> Result<Spectrum, EigenError> {
     control.phase("dense", 0, k)?;
     let mut s = match blocks {
-        Some(b) => dense_by_blocks(pair, b, k, control)?,
-        None => dense_stoppable(pair, k, &control)?,
+        Some(b) => dense_by_blocks(pair, b, k, threads, control)?,
+        None => dense_stoppable(pair, k, threads, &control)?,
     };
     control.check()?;
     let z = zeros.len().min(k);
@@ -87,14 +88,21 @@ pub(crate) fn dense_with_zero_modes(
 /// [`dense::eigs_dense`], which is one decomposition that cannot stop inside (96 s at 7,921 unknowns, 2.7 s at
 /// 2,562 on one core): with a stop flag it runs on a thread of its own while this one watches the flag every
 /// 50 ms, and a stop returns `Canceled` at once. The abandoned decomposition then finishes on its thread and
-/// its result is dropped (its core stays busy until then; the caller's worker is free).
-pub(crate) fn dense_stoppable(pair: &SparsePair, k: usize, control: &Control<'_>) -> Result<Spectrum, EigenError> {
+/// its result is dropped (its cores stay busy until then; the caller's worker is free). It runs on `threads` threads
+/// (those of the rayon pool it is called on, or of the global pool from that thread of its own).
+pub(crate) fn dense_stoppable(
+    pair: &SparsePair,
+    k: usize,
+    threads: usize,
+    control: &Control<'_>,
+) -> Result<Spectrum, EigenError> {
+    let par = if threads > 1 { faer::Par::rayon(threads) } else { faer::Par::Seq };
     if control.stop.is_none() || pair.n() <= 1500 {
         // No flag, or at most about half a second of work.
-        return dense::eigs_dense(pair, k);
+        return dense::eigs_dense(pair, k, par);
     }
     let owned = pair.clone();
-    control.abandonable("dense", move || dense::eigs_dense(&owned, k))?
+    control.abandonable("dense", move || dense::eigs_dense(&owned, k, par))?
 }
 
 /// Every eigenpair of each block, merged: the k smallest of the union, ascending.
@@ -102,6 +110,7 @@ pub(crate) fn dense_by_blocks(
     pair: &SparsePair,
     blocks: &Blocks,
     k: usize,
+    threads: usize,
     control: Control<'_>,
 ) -> Result<Spectrum, EigenError> {
     let t0 = Instant::now();
@@ -122,7 +131,7 @@ pub(crate) fn dense_by_blocks(
             kernel: crate::operators::sparse::Kernel::Unknown,
         };
         let m = rows.len();
-        parts.push((rows, dense_stoppable(&sub, m, &control)?));
+        parts.push((rows, dense_stoppable(&sub, m, threads, &control)?));
     }
     let mut order: Vec<(f64, usize, usize)> = parts
         .iter()

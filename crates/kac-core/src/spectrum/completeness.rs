@@ -209,7 +209,7 @@ pub(crate) fn verify_and_repair(
                 return Err(EigenError::Incomplete { shift: tau, below, found, repairs });
             }
             let stats = std::mem::take(&mut s.stats);
-            *s = dense_with_zero_modes(pair, zeros, blocks, k, control)?;
+            *s = dense_with_zero_modes(pair, zeros, blocks, k, options.thread_count(), control)?;
             s.stats = Stats { completeness: Some(Completeness { repairs, ..Completeness::by("dense") }), ..stats };
             finish(pair, s, z.min(k), options.threads, control)?;
             break;

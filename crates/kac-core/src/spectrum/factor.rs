@@ -304,9 +304,11 @@ impl Cholesky {
                         // this call and not used while `rows` lives.
                         let rows = unsafe { std::slice::from_raw_parts_mut(rhs.as_ptr_mut().cast::<[f64; $b]>(), n) };
                         if plan.is_some() {
-                            // On the plan's threads: both permutations as gathers, by chunks of rows, into the
-                            // factor's kept scratch (a fresh n × b block would be faulted in page by page each time).
+                            // On the plan's threads: both permutations as gathers, one range of rows per thread,
+                            // into the factor's kept scratch (a fresh n × b block would be faulted in page by page
+                            // each time).
                             use rayon::prelude::*;
+                            let per = n.div_ceil(par.degree().max(1)).max(PERMUTE_ROWS);
                             let mut kept = self.scratch.try_lock().ok();
                             let mut own = Vec::new();
                             let buf: &mut Vec<f64> = match kept.as_deref_mut() {
@@ -316,15 +318,15 @@ impl Cholesky {
                             buf.resize(n * $b, 0.0);
                             let x: &mut [[f64; $b]] = buf.as_chunks_mut::<$b>().0;
                             let inv = |j: usize| perm.map_or(j, |p| p.arrays().1[j]);
-                            x.par_chunks_mut(PERMUTE_ROWS).enumerate().for_each(|(c, chunk)| {
+                            x.par_chunks_mut(per).enumerate().for_each(|(c, chunk)| {
                                 for (i, row) in chunk.iter_mut().enumerate() {
-                                    *row = rows[fwd(c * PERMUTE_ROWS + i)];
+                                    *row = rows[fwd(c * per + i)];
                                 }
                             });
                             supernodal_solve_with::<$b>(&f, x, self.ldlt, isa, plan);
-                            rows.par_chunks_mut(PERMUTE_ROWS).enumerate().for_each(|(c, chunk)| {
+                            rows.par_chunks_mut(per).enumerate().for_each(|(c, chunk)| {
                                 for (j, row) in chunk.iter_mut().enumerate() {
-                                    *row = x[inv(c * PERMUTE_ROWS + j)];
+                                    *row = x[inv(c * per + j)];
                                 }
                             });
                             return;
@@ -449,7 +451,7 @@ fn assert_supernodes_fit(f: &SupernodalFactor<'_>, n: usize) {
     }
 }
 
-/// Rows per task of a parallel solve's permutations.
+/// The fewest rows per task of a parallel solve's permutations (one range per thread above that).
 const PERMUTE_ROWS: usize = 8192;
 
 /// How the block solve runs on several threads: the tree's [`Split`] for the factor's values, each subtree's

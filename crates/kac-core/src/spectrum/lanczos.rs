@@ -11,7 +11,7 @@ use super::{Control, EigenError, EigenOptions, Spectrum, Stats, Timings};
 use crate::operators::sparse::SparsePair;
 use faer::linalg::matmul::matmul;
 use faer::reborrow::{Reborrow, ReborrowMut};
-use faer::{Accum, Mat, MatMut, MatRef, Par, Side};
+use faer::{Accum, Mat, MatMut, MatRef, Par};
 use std::time::Instant;
 
 /// The default shift: σ = −mean_j(L_jj / M_jj) / n. The mean diagonal ratio scales like the top of the
@@ -220,8 +220,8 @@ impl Ctx<'_> {
         let (n, b) = (w.n, w.b);
         let g = basis_products::gram_par(w.as_ref(), &mw.data, b, self.threads);
         let g = Mat::from_fn(b, b, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
-        let evd = g.self_adjoint_eigen(Side::Lower).expect("symmetric eigen of a small Gram matrix");
-        let (s, u) = (evd.S(), evd.U());
+        let (s, u) =
+            super::dense::symmetric_eigen(g.as_ref(), Par::Seq).expect("symmetric eigen of a small Gram matrix");
         let ref_scale = scale.iter().cloned().fold(0.0, f64::max).max(f64::MIN_POSITIVE);
         // Largest directions first: Q = W U_kept R⁻¹, B = R U_keptᵀ.
         let kept_idx: Vec<usize> = (0..b).rev().filter(|&idx| s[idx] > 1e-24 * ref_scale).collect();
@@ -716,10 +716,10 @@ pub fn eigs_block_lanczos(
         let a0 = locked;
         let ma = m - a0;
         let hs = Mat::from_fn(ma, ma, |i, j| 0.5 * (h[(a0 + i, a0 + j)] + h[(a0 + j, a0 + i)]));
-        let evd = hs
-            .self_adjoint_eigen(Side::Lower)
+        // On the solve's threads (faer's `self_adjoint_eigen` would take the whole pool).
+        let (theta_a, s_a) = super::dense::symmetric_eigen(hs.as_ref(), par)
             .map_err(|err| EigenError::Factorization { message: format!("projected eigenproblem: {err:?}") })?;
-        let (theta_a, s_a) = (evd.S(), evd.U());
+        let s_a = s_a.as_ref();
         let mut es = Mat::<f64>::zeros(b, ma);
         matmul(es.as_mut(), Accum::Replace, e.as_ref().subcols(a0, ma), s_a, 1.0, Par::Seq);
         // Candidates: (θ, locked column or active Ritz index, residual ‖E s‖₂; zero for locked pairs).

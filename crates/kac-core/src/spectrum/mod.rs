@@ -108,7 +108,7 @@ pub fn eigs(
         // Every pair asked for is a known zero mode.
         zero_mode_spectrum(pair, &zeros, k)
     } else if dense {
-        dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, control)?
+        dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, threads, control)?
     } else {
         control.phase("symbolic", 0, k)?;
         let owned;
@@ -147,7 +147,7 @@ pub fn eigs(
         drop(head);
         let mut s = match single {
             Some(s) => s,
-            None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, control)?,
+            None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, threads, control)?,
         };
         control.check()?;
         s.stats.symbolic_reused = reused;

@@ -439,10 +439,16 @@ pub(crate) fn solve(
         // One thread per edge: the edges are counted side by side.
         completeness::inertia_in_gap(sym, pair, (e - reach, e + reach), &control, faer::Par::Seq)
     };
-    let edges: Vec<Result<(f64, usize), EigenError>> = if threads > 1 {
-        (1..slices.len()).into_par_iter().with_max_len(1).map(count_edge).collect()
+    // One run of consecutive edges per thread given (not one task per edge, which idle threads of a shared pool
+    // would take, each holding a factor).
+    let inner: Vec<usize> = (1..slices.len()).collect();
+    let runs: Vec<&[usize]> = inner.chunks(inner.len().div_ceil(threads.max(1)).max(1)).collect();
+    let edges: Vec<Result<(f64, usize), EigenError>> = if runs.len() > 1 {
+        let counted: Vec<Vec<_>> =
+            runs.into_par_iter().with_max_len(1).map(|run| run.iter().map(|&j| count_edge(j)).collect()).collect();
+        counted.into_iter().flatten().collect()
     } else {
-        (1..slices.len()).map(count_edge).collect()
+        inner.iter().map(|&j| count_edge(j)).collect()
     };
     let edges: Vec<(f64, usize)> = match edges.into_iter().collect() {
         Ok(e) => e,
@@ -848,21 +854,20 @@ pub(crate) fn rayleigh_ritz(
         }
     }
     let g = Mat::from_fn(p, p, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
-    let Ok(evd) = g.self_adjoint_eigen(faer::Side::Lower) else { return Ok(()) };
-    let top = (0..p).map(|i| evd.S()[i]).fold(0.0, f64::max);
-    let kept: Vec<usize> = (0..p).filter(|&i| evd.S()[i] > 1e-10 * top).collect();
-    let whiten = Mat::from_fn(p, kept.len(), |i, j| evd.U()[(i, kept[j])] / evd.S()[kept[j]].sqrt());
+    // The small eigenproblems on one thread (faer's `self_adjoint_eigen` would take the whole pool).
+    let Ok((gs, gu)) = super::dense::symmetric_eigen(g.as_ref(), faer::Par::Seq) else { return Ok(()) };
+    let top = gs.iter().copied().fold(0.0, f64::max);
+    let kept: Vec<usize> = (0..p).filter(|&i| gs[i] > 1e-10 * top).collect();
+    let whiten = Mat::from_fn(p, kept.len(), |i, j| gu[(i, kept[j])] / gs[kept[j]].sqrt());
     let lw = whiten.transpose() * &l * &whiten;
     let r = kept.len();
     let lw = Mat::from_fn(r, r, |i, j| 0.5 * (lw[(i, j)] + lw[(j, i)]));
-    let Ok(evd2) = lw.self_adjoint_eigen(faer::Side::Lower) else { return Ok(()) };
+    let Ok((ls, lu)) = super::dense::symmetric_eigen(lw.as_ref(), faer::Par::Seq) else { return Ok(()) };
     // X ← X (whiten U₂): the r new vectors in columns a..a + r.
-    let t = &whiten * evd2.U();
+    let t = &whiten * &lu;
     let par = if threads > 1 { faer::Par::rayon(threads) } else { faer::Par::Seq };
     lanczos::ritz_in_place(&mut s.vectors, a, p, t.as_ref(), par, control)?;
-    for i in 0..r {
-        s.values[a + i] = evd2.S()[i];
-    }
+    s.values[a..a + r].copy_from_slice(&ls[..r]);
     if r < p {
         // A direction held twice: the columns after the edge move down over the p − r dropped ones.
         let total = s.values.len() - (p - r);
