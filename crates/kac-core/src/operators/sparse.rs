@@ -112,7 +112,27 @@ impl SparsePair {
     }
 }
 
-/// y = A·x for a symmetric matrix stored in full on `p`.
+/// y = A·x on `threads` threads, one contiguous range of rows each (one thread below 8,192 rows; 0: the current
+/// pool's threads), for a solve that must keep to the threads it was given.
+pub fn matvec_on(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64], threads: usize) {
+    let threads = if threads == 0 { rayon::current_num_threads() } else { threads };
+    let n = y.len();
+    let parts = threads.min(n / 4096).max(1);
+    let rows = |j0: usize, out: &mut [f64]| {
+        for (k, yj) in out.iter_mut().enumerate() {
+            let j = j0 + k;
+            let (a, b) = (p.col_ptr[j], p.col_ptr[j + 1]);
+            *yj = p.row_idx[a..b].iter().zip(&values[a..b]).map(|(&i, v)| v * x[i]).sum();
+        }
+    };
+    if parts == 1 {
+        return rows(0, y);
+    }
+    let per = n.div_ceil(parts);
+    y.par_chunks_mut(per).enumerate().for_each(|(c, out)| rows(c * per, out));
+}
+
+/// y = A·x for a symmetric matrix stored in full on `p`, split over the current pool.
 pub fn matvec(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64]) {
     y.par_chunks_mut(4096).enumerate().for_each(|(c, out)| {
         for (k, yj) in out.iter_mut().enumerate() {
@@ -295,8 +315,8 @@ fn spmm_rows_dispatch<const B: usize>(p: &Pattern, values: &[f64], xr: &[f64], o
 
 /// Y = A·X for a symmetric A on `p` and a block X (n × b, column-major): X is copied to row-major so each entry
 /// of A meets b contiguous values; rows of Y are computed on `threads` threads, each on one contiguous range of
-/// rows (on one thread below 2,048 rows or for `threads` ≤ 1), so a solve given t threads of a shared pool keeps
-/// to t. `scratch` holds both row-major copies; it grows once and is reused.
+/// rows (on one thread below 2,048 rows; 0: the current pool's threads), so a solve given t threads of a shared
+/// pool keeps to t. `scratch` holds both row-major copies; it grows once and is reused.
 ///
 /// # Panics
 /// If X is not `p.n` rows, Y not the shape of X, or `values` not one value per stored entry of `p`. X and Y may be
@@ -359,6 +379,7 @@ pub fn spmm(
 /// ranges of rows.
 fn spmm_row_major(p: &Pattern, values: &[f64], xr: &[f64], yr: &mut [f64], b: usize, threads: usize) {
     let n = p.n;
+    let threads = if threads == 0 { rayon::current_num_threads() } else { threads };
     let parts = threads.min(n / 1024).max(1);
     if parts == 1 {
         return spmm_rows(p, values, xr, yr, 0, b);
@@ -398,19 +419,37 @@ fn spmm_rows(p: &Pattern, values: &[f64], xr: &[f64], out: &mut [f64], j0: usize
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
+    use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
 
-    /// (address of the values, pool thread) of every range of rows a block product ran, for the test below.
-    static SEEN: Mutex<Vec<(usize, Option<usize>)>> = Mutex::new(Vec::new());
+    /// The address of the values whose block products are recorded (0: none), and the pool thread of every range of
+    /// rows such a product ran; one test at a time watches (`ONE`).
+    static WATCHED: AtomicUsize = AtomicUsize::new(0);
+    static SEEN: Mutex<Vec<Option<usize>>> = Mutex::new(Vec::new());
+    static ONE: Mutex<()> = Mutex::new(());
 
     pub(super) fn saw_rows(values: &[f64]) {
-        SEEN.lock().unwrap().push((values.as_ptr() as usize, rayon::current_thread_index()));
+        if values.as_ptr() as usize == WATCHED.load(Ordering::SeqCst) {
+            SEEN.lock().unwrap().push(rayon::current_thread_index());
+        }
     }
 
-    /// A block product given two threads of a pool of four runs on at most two of them, every time, and gives the
-    /// product it gives on one thread. 400,000 rows: enough work that the pool's idle threads would take ranges of
-    /// rows if they were offered (the build before, with 390 ranges on the whole pool, used three of four).
+    /// Runs `f`, and gives with its result the pool thread of every range of rows of each block product with
+    /// `values` that `f` ran.
+    pub(crate) fn ranges_of<T>(values: &[f64], f: impl FnOnce() -> T) -> (T, Vec<Option<usize>>) {
+        let _one = ONE.lock().unwrap_or_else(|e| e.into_inner());
+        SEEN.lock().unwrap().clear();
+        WATCHED.store(values.as_ptr() as usize, Ordering::SeqCst);
+        let out = f();
+        WATCHED.store(0, Ordering::SeqCst);
+        (out, std::mem::take(&mut *SEEN.lock().unwrap()))
+    }
+
+    /// A block product given two threads of a pool of four makes exactly two ranges of rows, on at most two
+    /// threads, every time, and gives the product it gives on one thread. 400,000 rows: enough work that the pool's
+    /// idle threads would take ranges of rows if they were offered (the build before made 390 ranges on the whole
+    /// pool and used three of the four threads).
     #[test]
     fn a_block_product_keeps_to_the_threads_given() {
         let n: usize = 400_000;
@@ -428,15 +467,15 @@ mod tests {
         let x = faer::Mat::from_fn(n, 8, |i, c| ((i * 7 + c * 13) % 17) as f64);
         let mut one = faer::Mat::<f64>::zeros(n, 8);
         super::spmm(&p, &values, x.as_ref(), one.as_mut(), &mut Vec::new(), 1);
-        let key = values.as_ptr() as usize;
         let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
         for _ in 0..20 {
-            SEEN.lock().unwrap().retain(|&(v, _)| v != key);
             let mut two = faer::Mat::<f64>::zeros(n, 8);
-            pool.install(|| super::spmm(&p, &values, x.as_ref(), two.as_mut(), &mut Vec::new(), 2));
+            let ((), seen) = ranges_of(&values, || {
+                pool.install(|| super::spmm(&p, &values, x.as_ref(), two.as_mut(), &mut Vec::new(), 2))
+            });
             assert_eq!(one, two);
-            let threads: std::collections::HashSet<_> =
-                SEEN.lock().unwrap().iter().filter(|&&(v, _)| v == key).map(|&(_, t)| t).collect();
+            assert_eq!(seen.len(), 2, "ranges of rows: {seen:?}");
+            let threads: std::collections::HashSet<_> = seen.into_iter().collect();
             assert!(threads.len() <= 2, "threads used: {threads:?}");
         }
         // The product itself: row 0 is 2x₀ − x₁, an inner row −x_{i−1} + 2xᵢ − x_{i+1}.

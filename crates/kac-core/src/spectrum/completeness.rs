@@ -211,10 +211,10 @@ pub(crate) fn verify_and_repair(
             let stats = std::mem::take(&mut s.stats);
             *s = dense_with_zero_modes(pair, zeros, blocks, k, options.thread_count(), control)?;
             s.stats = Stats { completeness: Some(Completeness { repairs, ..Completeness::by("dense") }), ..stats };
-            finish(pair, s, z.min(k), options.threads, control)?;
+            finish(pair, s, z.min(k), options.thread_count(), usize::MAX, control)?;
             break;
         };
-        finish(pair, &mut extra, 0, options.threads, control)?;
+        finish(pair, &mut extra, 0, options.thread_count(), usize::MAX, control)?;
         repaired_pairs += extra.values.len().min(missing);
         merge(s, extra);
     }
@@ -350,7 +350,7 @@ mod tests {
         let mut s = lanczos::eigs_block_lanczos(&pair, &solve, Some(&sym), Control::default(), &run).unwrap().unwrap();
         let (count, _) = early_count(&sym, &pair, &s.values, o.k, &Control::default(), faer::Par::Seq);
         let before = s.values.clone();
-        finish(&pair, &mut s, z, 1, Control::default()).unwrap();
+        finish(&pair, &mut s, z, 1, usize::MAX, Control::default()).unwrap();
         assert_ne!(before, s.values, "finish replaced the values by Rayleigh quotients");
         let blocks = Blocks::of(&pair);
         let early = Some((count, 100.0));

@@ -511,7 +511,7 @@ pub(crate) fn solve_backward_error(pair: &SparsePair, values: &[f64], factor: &C
     let mut x = rhs.clone();
     factor.solve_in_place(MatMut::from_column_major_slice_mut(&mut x, n, 1), par);
     let mut kx = vec![0.0; n];
-    crate::operators::sparse::matvec(&pair.pattern, values, &x, &mut kx);
+    crate::operators::sparse::matvec_on(&pair.pattern, values, &x, &mut kx, par.degree());
     let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
     let r: Vec<f64> = kx.iter().zip(&rhs).map(|(a, b)| a - b).collect();
     let k_inf = (0..n)

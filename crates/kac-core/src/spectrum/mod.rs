@@ -159,15 +159,15 @@ pub fn eigs(
         // solve held, so that with the check's factor beside them the phase stays below the iteration's memory.
         let early = if verify && threads > 1 {
             let values = s.values.clone();
-            let runs = (threads - 1).min(s.stats.subspace / 24).max(1);
+            let runs = (s.stats.subspace / 24).max(1);
             let (done, early) = rayon::join(
-                || finish(pair, &mut s, z, runs, control),
+                || finish(pair, &mut s, z, threads - 1, runs, control),
                 || completeness::early_count(sym, pair, &values, k, &control, faer::Par::Seq),
             );
             done?;
             Some(early)
         } else {
-            finish(pair, &mut s, z, options.threads, control)?;
+            finish(pair, &mut s, z, threads, usize::MAX, control)?;
             None
         };
         if verify {
@@ -176,7 +176,7 @@ pub fn eigs(
         s
     };
     if s.stats.method != "block-lanczos" {
-        finish(pair, &mut s, z.min(k), options.threads, control)?;
+        finish(pair, &mut s, z.min(k), threads, usize::MAX, control)?;
         if options.verify {
             s.stats.completeness =
                 Some(Completeness::by(if s.stats.method == "dense" { "dense" } else { "null-space" }));
@@ -372,12 +372,13 @@ pub(crate) fn truncate(s: &mut Spectrum, k: usize) {
 /// The Rayleigh quotient's error is quadratic in the vector's, and it does not
 /// depend on the shift: a solver's λ = σ + 1/θ carries θ's rounding error magnified by (λ − σ)², which with σ
 /// inside the spectrum reached 10⁻¹¹ relative on the lowest eigenvalues of a 41k-vertex sphere (10⁻¹⁴ with the
-/// quotient).
+/// quotient). It runs on `threads` threads (0: the pool's) in at most `most_runs` runs of column blocks.
 pub(crate) fn finish(
     pair: &SparsePair,
     s: &mut Spectrum,
     exact: usize,
     threads: usize,
+    most_runs: usize,
     control: Control<'_>,
 ) -> Result<(), EigenError> {
     let n = pair.n();
@@ -385,10 +386,10 @@ pub(crate) fn finish(
     let sigma_floor = s.stats.sigma.abs().max(f64::MIN_POSITIVE);
     s.residuals = vec![0.0; k];
     // Eight columns at a time as one row-major block: the block products take it without transposing. The blocks
-    // are split into runs of consecutive blocks, one per thread up to four, side by side, and the threads beyond
-    // four share each run's sparse products (164k vertices, k = 1000: 3.3 s on one thread, 1.6 s on two, when the
-    // signs took a pass of their own; with the signs found here, 0.68–0.76 s on a pool of two threads, in one run or
-    // in two, when the sparse products split their rows over the whole pool).
+    // are split into runs of consecutive blocks, one per thread up to four (or `most_runs`), side by side, and the
+    // threads beyond the runs share the runs' sparse products (164k vertices, k = 1000: 3.3 s on one thread, 1.6 s
+    // on two, when the signs took a pass of their own; with the signs found here, 0.68–0.76 s on a pool of two
+    // threads, in one run or in two, when the sparse products split their rows over the whole pool).
     const B: usize = 8;
     let blocks: Vec<usize> = (0..k).step_by(B).collect();
     let vectors = s.vectors.as_ref();
@@ -454,15 +455,16 @@ pub(crate) fn finish(
     };
     // At most four runs: each holds three n × 8 buffers (192 MB at 10⁶ unknowns).
     let given = if threads == 0 { rayon::current_num_threads() } else { threads }.max(1);
-    let threads = given.clamp(1, blocks.len().clamp(1, 4));
+    let threads = given.clamp(1, blocks.len().clamp(1, 4).min(most_runs.max(1)));
     let runs: Vec<&[usize]> = blocks.chunks(blocks.len().div_ceil(threads).max(1)).collect();
-    let product_threads = (given / runs.len().max(1)).max(1);
+    // Run r's sparse products on its share of the threads: the first `given % runs` runs one more.
+    let share = |r: usize| (given / runs.len().max(1) + usize::from(r < given % runs.len().max(1))).max(1);
     type Rows = Vec<(usize, f64, f64, bool)>;
     let results: Vec<Result<Rows, EigenError>> = if runs.len() > 1 {
         use rayon::prelude::*;
-        runs.par_iter().with_max_len(1).map(|run| block_run(run, product_threads)).collect()
+        runs.par_iter().enumerate().with_max_len(1).map(|(r, run)| block_run(run, share(r))).collect()
     } else {
-        runs.iter().map(|run| block_run(run, product_threads)).collect()
+        runs.iter().map(|run| block_run(run, share(0))).collect()
     };
     let mut flip = vec![false; k];
     for r in results {
@@ -609,6 +611,29 @@ mod tests {
         let control = super::Control { stop: Some(&stop), ..super::Control::default() };
         let r = pool.install(|| super::zeros_checked(n, m, &control, 2));
         assert!(matches!(r, Err(super::EigenError::Canceled)));
+    }
+
+    /// `finish` shares the threads it is given among its runs of column blocks, the leftover ones to the first runs'
+    /// sparse products: each product with L makes as many ranges of rows as its run has threads. With one run (as
+    /// beside the completeness check with a small basis) that run's products take every thread given.
+    #[test]
+    fn finish_shares_its_threads_among_its_runs() {
+        use crate::geometry::{generate, Shape};
+        let shape = Shape::TriangleMesh(generate::icosphere(5));
+        let pair = crate::operators::build(&shape, &Default::default()).unwrap().pair;
+        let o = super::EigenOptions { k: 16, method: super::Method::Sparse, threads: 1, ..Default::default() };
+        let solved = super::eigs(&pair, &o, None, super::Control::default()).unwrap();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
+        // 16 pairs: two blocks of eight, so one product with L per block.
+        for (threads, most_runs, ranges) in [(3, 1, 6), (3, usize::MAX, 3), (4, usize::MAX, 4), (1, usize::MAX, 2)] {
+            let mut s = solved.clone();
+            let (done, seen) = crate::operators::sparse::tests::ranges_of(&pair.stiffness, || {
+                pool.install(|| super::finish(&pair, &mut s, 1, threads, most_runs, super::Control::default()))
+            });
+            done.unwrap();
+            assert_eq!(seen.len(), ranges, "{threads} threads, at most {most_runs} runs: {seen:?}");
+            assert_eq!(s.values, solved.values, "{threads} threads, at most {most_runs} runs");
+        }
     }
 
     /// Columns made on a pool of four threads for a solve given two are made by at most two of them (each group of

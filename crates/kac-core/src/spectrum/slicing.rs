@@ -436,7 +436,7 @@ pub(crate) fn solve(
         let below = if w0.lo.is_finite() { w0.lo } else { 0.0 };
         let above = if w1.hi.is_finite() { w1.hi } else { w1.sigma };
         let reach = 0.01 * (e - below).min(above - e);
-        // One thread per edge: the edges are counted side by side.
+        // Each edge on one thread; the runs of edges below are counted side by side.
         completeness::inertia_in_gap(sym, pair, (e - reach, e + reach), &control, faer::Par::Seq)
     };
     // One run of consecutive edges per thread given (not one task per edge, which idle threads of a shared pool
@@ -854,17 +854,23 @@ pub(crate) fn rayleigh_ritz(
         }
     }
     let g = Mat::from_fn(p, p, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
-    // The small eigenproblems on one thread (faer's `self_adjoint_eigen` would take the whole pool).
+    // The small eigenproblems and products on one thread (faer's `self_adjoint_eigen` and `*` would take the whole
+    // pool).
     let Ok((gs, gu)) = super::dense::symmetric_eigen(g.as_ref(), faer::Par::Seq) else { return Ok(()) };
     let top = gs.iter().copied().fold(0.0, f64::max);
     let kept: Vec<usize> = (0..p).filter(|&i| gs[i] > 1e-10 * top).collect();
     let whiten = Mat::from_fn(p, kept.len(), |i, j| gu[(i, kept[j])] / gs[kept[j]].sqrt());
-    let lw = whiten.transpose() * &l * &whiten;
+    let seq = |a: faer::MatRef<'_, f64>, b: faer::MatRef<'_, f64>| {
+        let mut c = Mat::<f64>::zeros(a.nrows(), b.ncols());
+        faer::linalg::matmul::matmul(c.as_mut(), faer::Accum::Replace, a, b, 1.0, faer::Par::Seq);
+        c
+    };
+    let lw = seq(seq(whiten.transpose(), l.as_ref()).as_ref(), whiten.as_ref());
     let r = kept.len();
     let lw = Mat::from_fn(r, r, |i, j| 0.5 * (lw[(i, j)] + lw[(j, i)]));
     let Ok((ls, lu)) = super::dense::symmetric_eigen(lw.as_ref(), faer::Par::Seq) else { return Ok(()) };
     // X ← X (whiten U₂): the r new vectors in columns a..a + r.
-    let t = &whiten * &lu;
+    let t = seq(whiten.as_ref(), lu.as_ref());
     let par = if threads > 1 { faer::Par::rayon(threads) } else { faer::Par::Seq };
     lanczos::ritz_in_place(&mut s.vectors, a, p, t.as_ref(), par, control)?;
     s.values[a..a + r].copy_from_slice(&ls[..r]);
@@ -912,7 +918,7 @@ mod tests {
             for j in 15..30 {
                 assert_eq!(s.vectors.col(j), solved.vectors.col(j), "{threads} threads: column {j} moved down");
             }
-            finish(&pair, &mut s, 1, threads, Control::default()).unwrap();
+            finish(&pair, &mut s, 1, threads, usize::MAX, Control::default()).unwrap();
             for (j, (x, y)) in s.values.iter().zip(&solved.values).enumerate() {
                 assert!((x - y).abs() <= 1e-10 * y.abs().max(1.0), "{threads} threads: λ_{j} {x} against {y}");
             }
