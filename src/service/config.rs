@@ -86,7 +86,8 @@ pub struct Config {
     /// Bytes of parsed shapes, and separately of results, kept in memory in front of the store.
     #[arg(long, env = "KAC_STORE_CACHE_BYTES", default_value_t = 512 * 1024 * 1024)]
     pub store_cache_bytes: usize,
-    /// Threads each eigensolve uses (jobs run side by side on the workers).
+    /// Threads each eigensolve uses, its dense decompositions and sparse products included (jobs run side by side on
+    /// the workers).
     #[arg(long, env = "KAC_SOLVER_THREADS", default_value_t = 1, value_parser = at_least_one)]
     pub solver_threads: usize,
     /// On SIGTERM, seconds to let running jobs finish before exiting (the rest are re-queued at the next start).
