@@ -132,15 +132,9 @@ pub fn matvec_on(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64], threads:
     y.par_chunks_mut(per).enumerate().for_each(|(c, out)| rows(c * per, out));
 }
 
-/// y = A·x for a symmetric matrix stored in full on `p`, split over the current pool.
+/// y = A·x for a symmetric matrix stored in full on `p`, on every thread of the current pool.
 pub fn matvec(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64]) {
-    y.par_chunks_mut(4096).enumerate().for_each(|(c, out)| {
-        for (k, yj) in out.iter_mut().enumerate() {
-            let j = c * 4096 + k;
-            let (a, b) = (p.col_ptr[j], p.col_ptr[j + 1]);
-            *yj = p.row_idx[a..b].iter().zip(&values[a..b]).map(|(&i, v)| v * x[i]).sum();
-        }
-    });
+    matvec_on(p, values, x, y, 0);
 }
 
 /// Assembles symmetric matrices from off-diagonal contributions.

@@ -584,7 +584,7 @@ pub fn eigs_block_lanczos(
     // is made on one of them beside the numeric factorization on the others, which gains little from a second
     // thread (164k vertices: 0.20 s on two threads against 0.23 s on one). If the factorization fails, the basis
     // was made for nothing: the solve ends with the factorization's error.
-    let (shifted, mut v) = if threads > 1 {
+    let (shifted, made) = if threads > 1 {
         let fpar = if threads > 2 { Par::rayon(threads - 1) } else { Par::Seq };
         let (shifted, v) = rayon::join(
             || factor_shift(pair, o, &sym, fpar, run, &control),
@@ -629,7 +629,7 @@ pub fn eigs_block_lanczos(
 
     // V: the basis (expanded columns, then the waiting block Q); MQ = M Q; H = Vᵀ M T V on the expanded part;
     // E: Q's coupling, T V_exp = V_exp H + Q E, nonzero from column `e_lo` on.
-    let mut v = match v.take() {
+    let mut v = match made {
         Some(v) => v,
         None => super::zeros_checked(n, msize, &control, ctx.threads)?,
     };
