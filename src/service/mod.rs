@@ -149,7 +149,7 @@ pub fn serve(config: Config) -> Result<(), String> {
             tokio::time::sleep(std::time::Duration::from_millis(50)).await;
         }
         // The next start reads the index from its snapshot instead of the whole store.
-        if let Err(e) = state.index.persist() {
+        if let Err(e) = state.index.persist(&*state.fingerprints) {
             tracing::warn!(error = %e, "the search index snapshot could not be written");
         }
         tracing::info!(running = state.jobs.running(), "stopped");

@@ -148,6 +148,9 @@ pub struct Job {
     pub owner: String,
     /// Set when the claim was lost (the job then stops and writes nothing).
     pub lost: AtomicBool,
+    /// Set as the job's outcome is being written: its claim ends with that write, so a beat that then finds no
+    /// claim has not lost it.
+    pub finishing: AtomicBool,
     /// When it started running here (the engine's clock).
     pub started: Duration,
 }

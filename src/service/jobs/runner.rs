@@ -21,6 +21,7 @@ pub(super) fn start(state: &AppState, view: JobView, owner: String) {
         stop: AtomicBool::new(false),
         timed_out: AtomicBool::new(false),
         lost: AtomicBool::new(false),
+        finishing: AtomicBool::new(false),
         name,
         owner,
         started: state.jobs.clock.elapsed(),
@@ -103,8 +104,9 @@ impl Jobs {
                     }
                     beats.insert(view.id.clone(), (now, view.progress.clone()));
                 }
-                // The job finished between the snapshot and the beat: its claim ended with its outcome.
-                Ok(Lease::Lost) if job.snapshot().status.terminal() => {}
+                // The job's outcome is being written, or was, between the snapshot and the beat: its claim ended
+                // with that write (which says so itself if the claim was lost before it).
+                Ok(Lease::Lost) if job.finishing.load(Ordering::SeqCst) || job.snapshot().status.terminal() => {}
                 Ok(Lease::Lost) => {
                     tracing::warn!(job = %view.id, "the job's claim was lost: stopping it without a result");
                     job.lost.store(true, Ordering::SeqCst);
@@ -129,7 +131,9 @@ fn finish(state: &AppState, job: &Job, status: Status, error: Option<Problem>, r
         view.progress.phase = "done".into();
     }
     // Shown here only once the queue holds it: a claim that was lost writes nothing, and its watchers here must
-    // not see an outcome the job does not have.
+    // not see an outcome the job does not have. The supervisor's beats stop taking a missing claim for a lost one
+    // from here on: the write below ends the claim.
+    job.finishing.store(true, Ordering::SeqCst);
     let deadline = std::time::Instant::now() + state.jobs.lease;
     loop {
         match state.jobs.queue.finish(&view.id, &job.owner, &view) {

@@ -142,6 +142,7 @@ fn start(jobs: &Jobs) -> Arc<Job> {
         stop: AtomicBool::new(false),
         timed_out: AtomicBool::new(false),
         lost: AtomicBool::new(false),
+        finishing: AtomicBool::new(false),
         name: "spectrum",
         owner,
         started: jobs.clock.elapsed(),

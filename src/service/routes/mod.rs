@@ -70,6 +70,7 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/compare", post(compare))
         .route("/v1/correspondence", post(correspondence))
         .route("/v1/search", post(search))
+        .route("/v1/search/audit", get(search_audit))
         .route("/problems/{code}", get(problem_doc))
         .route("/openapi.json", get(openapi_json))
         .merge(SwaggerUi::new("/docs").config(utoipa_swagger_ui::Config::from("/openapi.json")))

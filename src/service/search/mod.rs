@@ -11,8 +11,10 @@ use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::sync::RwLock;
 
+mod audit;
 pub mod ivf;
 mod snapshot;
+pub use audit::{AuditReport, FamilyAudit, TagAudit};
 use ivf::Ivf;
 
 /// The nearest stored shapes to a shape or a fingerprint, by shape-DNA.
@@ -677,11 +679,16 @@ impl Index {
                         writing: Default::default(),
                     };
                     index.copy_tags();
-                    index.sync(store)?;
-                    report.from = "snapshot";
-                    report.fingerprints = index.len();
-                    report.seconds = t.elapsed().as_secs_f64();
-                    return Ok((index, report));
+                    // The log's later changes applied, the snapshot must hold what the store holds.
+                    match index.check_counts(store)? {
+                        Ok(()) => {
+                            report.from = "snapshot";
+                            report.fingerprints = index.len();
+                            report.seconds = t.elapsed().as_secs_f64();
+                            return Ok((index, report));
+                        }
+                        Err(why) => report.snapshot_refused = Some(why),
+                    }
                 }
                 Ok(None) => {}
                 Err(e) => report.snapshot_refused = Some(e.to_string()),
@@ -728,7 +735,7 @@ impl Index {
         report.from = "store";
         report.fingerprints = index.len();
         if index.snapshot.is_some() && report.fingerprints > 0 {
-            index.write_snapshot()?;
+            index.write_snapshot(store)?;
         }
         report.seconds = t.elapsed().as_secs_f64();
         Ok((index, report))
@@ -778,17 +785,66 @@ impl Index {
         self.families.read().unwrap_or_else(|e| e.into_inner()).values().map(Family::len).sum()
     }
 
-    /// Writes the snapshot (when the index has a place for one): the log position it reflects, every family and
-    /// the tags; atomically (a temporary file renamed).
-    pub fn write_snapshot(&self) -> std::io::Result<()> {
+    /// Whether the index, after applying the log's changes, holds as many rows in each family and as many tags as
+    /// the store: `Err` with the first difference. The counts and the log's end are read between two reads of the
+    /// log's end that agree, so that a change made meanwhile (by another replica) is not taken for a difference;
+    /// a store that keeps changing through three tries is a doubt too.
+    fn check_counts(&self, store: &dyn FingerprintStore) -> std::io::Result<Result<(), String>> {
+        for _ in 0..3 {
+            let before = store.fingerprint_log_end()?;
+            self.apply_log(store)?;
+            let counts = store.fingerprint_counts()?;
+            let tag_count = store.tag_count()?;
+            let after = store.fingerprint_log_end()?;
+            let synced = self.synced.lock().unwrap_or_else(|e| e.into_inner()).0;
+            if before != after || synced != after {
+                continue;
+            }
+            let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
+            let held: HashMap<&str, usize> =
+                fams.iter().filter(|(_, f)| f.len() > 0).map(|(n, f)| (n.as_str(), f.len())).collect();
+            let stored: HashMap<&str, usize> =
+                counts.iter().filter(|(_, n)| *n > 0).map(|(f, n)| (f.as_str(), *n)).collect();
+            for (family, n) in &stored {
+                let h = held.get(family).copied().unwrap_or(0);
+                if h != *n {
+                    return Ok(Err(format!(
+                        "the search index snapshot holds {h} fingerprints of family {family} after the log's \
+                         changes, the store {n}: it diverged from this store"
+                    )));
+                }
+            }
+            if let Some((family, h)) = held.iter().find(|(f, _)| !stored.contains_key(*f)) {
+                return Ok(Err(format!(
+                    "the search index snapshot holds {h} fingerprints of family {family}, which the store does not \
+                     hold: it diverged from this store"
+                )));
+            }
+            let tags: usize = self.tags.read().unwrap_or_else(|e| e.into_inner()).by_shape.values().map(Vec::len).sum();
+            if tags != tag_count {
+                return Ok(Err(format!(
+                    "the search index snapshot holds {tags} tags after the log's changes, the store {tag_count}: it \
+                     diverged from this store"
+                )));
+            }
+            return Ok(Ok(()));
+        }
+        Ok(Err("the store changed while the search index snapshot was checked against it, three times".into()))
+    }
+
+    /// Writes the snapshot (when the index has a place for one): the log's changes applied first, so that the
+    /// position written covers every change the rows hold that the store had logged; then the position, every
+    /// family and the tags, atomically (a temporary file renamed).
+    pub fn write_snapshot(&self, store: &dyn FingerprintStore) -> std::io::Result<()> {
         let Some(path) = &self.snapshot else { return Ok(()) };
         // Another thread writing one already: this one's changes go into the next.
         let Ok(_writing) = self.writing.try_lock() else { return Ok(()) };
+        self.apply_log(store)?;
         // The position and the read locks under the sync lock, so that no change at or below the position is
         // missing from what is written; the sync lock is let go before the (long) write, so that searches, which
-        // read the log first, go on while it is written. A change the index holds beyond the position is applied
-        // again from the log at the next start, which is harmless (a put replaces, a removal forgets, tags are set
-        // whole).
+        // read the log first, go on while it is written. A change the index holds beyond the position (applied by
+        // this replica as it made it, before its log entry is read back) is applied again from the log at the next
+        // start, which is harmless (a put replaces, a removal forgets, tags are set whole).
         let synced = self.synced.lock().unwrap_or_else(|e| e.into_inner());
         let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
         let tags = self.tags.read().unwrap_or_else(|e| e.into_inner());
@@ -799,18 +855,18 @@ impl Index {
     }
 
     /// Writes the snapshot if anything changed since the last one.
-    pub fn persist(&self) -> std::io::Result<()> {
+    pub fn persist(&self, store: &dyn FingerprintStore) -> std::io::Result<()> {
         if self.changed.load(std::sync::atomic::Ordering::Relaxed) > 0 {
-            self.write_snapshot()?;
+            self.write_snapshot(store)?;
         }
         Ok(())
     }
 
     /// Writes a snapshot when a tenth of the index (at least 10,000 fingerprints) changed since the last one.
-    fn maybe_snapshot(&self) {
+    fn maybe_snapshot(&self, store: &dyn FingerprintStore) {
         let changed = self.changed.load(std::sync::atomic::Ordering::Relaxed);
         if self.snapshot.is_some() && changed >= 10_000 && changed >= self.len() / 10 {
-            if let Err(e) = self.write_snapshot() {
+            if let Err(e) = self.write_snapshot(store) {
                 tracing::warn!(error = %e, "the search index snapshot could not be written");
             }
         }
@@ -819,6 +875,13 @@ impl Index {
     /// Applies the changes the store logged since the last sync (fingerprints other replicas computed, shapes
     /// they removed, tags they set); one indexed query when there are none.
     pub fn sync(&self, store: &dyn FingerprintStore) -> std::io::Result<()> {
+        if self.apply_log(store)? > 0 {
+            self.maybe_snapshot(store);
+        }
+        Ok(())
+    }
+    /// [`Index::sync`] without a snapshot: the number of changes applied.
+    fn apply_log(&self, store: &dyn FingerprintStore) -> std::io::Result<usize> {
         let mut synced = self.synced.lock().unwrap_or_else(|e| e.into_inner());
         let (changes, end) = store.fingerprint_changes(synced.0)?;
         let last = changes.last().map(|c| c.shape_id().to_string());
@@ -835,11 +898,7 @@ impl Index {
         if let Some(last) = last {
             *synced = (end, last);
         }
-        drop(synced);
-        if n > 0 {
-            self.maybe_snapshot();
-        }
-        Ok(())
+        Ok(n)
     }
     fn insert(&self, f: &Fingerprint) {
         let Some(id) = ShapeId::parse(&f.shape_id) else { return };
@@ -862,7 +921,7 @@ impl Index {
     pub fn record(&self, store: &dyn FingerprintStore, f: &Fingerprint) -> std::io::Result<()> {
         if store.put_fingerprint(&f.family, &f.shape_id, &f.values)? {
             self.insert(f);
-            self.maybe_snapshot();
+            self.maybe_snapshot(store);
         }
         Ok(())
     }
@@ -1218,6 +1277,136 @@ mod tests {
         std::fs::write(&path, &bytes[..bytes.len() - 9]).unwrap();
         assert!(snapshot::read(&path, "store-a", 42, &log).is_err(), "a snapshot cut short is refused");
         assert!(snapshot::read(&dir.path().join("none"), "store-a", 42, &log).unwrap().is_none());
+    }
+
+    /// One bit flipped in any region of a snapshot (its header, ids, rows, rounding bounds, cells, tags, end or
+    /// checksum) is refused, never read as an index; a small family without cells (the shutdown snapshot of a
+    /// small store) reads back.
+    #[test]
+    fn a_snapshot_with_a_bit_flipped_anywhere_is_refused() {
+        let (k, n) = (6, ivf::MIN_ROWS + 100);
+        let index = Index::default();
+        for (i, v) in rows(n, k, 5).into_iter().enumerate() {
+            index.insert(&Fingerprint { family: "a".into(), shape_id: sid(i).hex(), values: v });
+        }
+        index.set_tags(&sid(5).hex(), &["x".into(), "yy".into()]);
+        index.set_tags(&sid(7).hex(), &["x".into()]);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("search-index.bin");
+        let at = (42, sid(9).hex());
+        let log = |seq: i64| Ok((seq == 42).then(|| sid(9).hex()));
+        let cells = {
+            let fams = index.families.read().unwrap();
+            snapshot::write(&path, "store-a", &at, &fams, &index.tags.read().unwrap()).unwrap();
+            fams["a"].ivf.as_ref().expect("a family this large has cells").cells()
+        };
+        assert!(snapshot::read(&path, "store-a", 42, &log).unwrap().is_some());
+        let bytes = std::fs::read(&path).unwrap();
+        // The layout, region by region.
+        let header = 8 + (4 + 7) + 8 + (4 + 64) + 4;
+        let ids = header + (4 + 1) + 4 + 8;
+        let vals = ids + 32 * n;
+        let bounds = vals + 4 * n * k;
+        let ivf_at = bounds + 4 * n + 4;
+        let centroids = ivf_at + 4 + 8 + 8;
+        let row_cell = centroids + 8 * cells * k;
+        let tags = row_cell + 4 * n;
+        let end = bytes.len() - 12;
+        assert_eq!(end - tags, 8 + (32 + 4 + 5 + 6) + (32 + 4 + 5), "the tags region as laid out");
+        let regions = [
+            ("magic", 0, 8),
+            ("store id", 8, 19),
+            ("log position", 19, header - 4),
+            ("family count", header - 4, header),
+            ("family name and sizes", header, ids),
+            ("ids", ids, vals),
+            ("rows", vals, bounds),
+            ("rounding bounds", bounds, ivf_at),
+            ("cells' sizes and slack", ivf_at, centroids),
+            ("centroids", centroids, row_cell),
+            ("rows' cells", row_cell, tags),
+            ("tags", tags, end),
+            ("end", end, end + 8),
+            ("checksum", end + 8, bytes.len()),
+        ];
+        let mut bit = 0;
+        for (name, from, to) in regions {
+            assert!(from < to && to <= bytes.len(), "{name}: {from}..{to}");
+            for at in [from, (from + to) / 2, to - 1] {
+                bit = (bit + 3) % 8;
+                let mut flipped = bytes.clone();
+                flipped[at] ^= 1 << bit;
+                std::fs::write(&path, &flipped).unwrap();
+                assert!(
+                    snapshot::read(&path, "store-a", 42, &log).is_err(),
+                    "a bit flipped in the {name} (byte {at}, bit {bit}) is refused"
+                );
+            }
+        }
+        // Bytes after the checksum too.
+        let mut longer = bytes.clone();
+        longer.push(0);
+        std::fs::write(&path, &longer).unwrap();
+        assert!(snapshot::read(&path, "store-a", 42, &log).is_err(), "bytes after the end are refused");
+        // A small family without cells and without tags: the file is barely larger than its rows.
+        let small = Index::default();
+        for (i, v) in rows(50, 10, 6).into_iter().enumerate() {
+            small.insert(&Fingerprint { family: "b".into(), shape_id: sid(i).hex(), values: v });
+        }
+        snapshot::write(&path, "store-a", &at, &small.families.read().unwrap(), &small.tags.read().unwrap()).unwrap();
+        let (families, _, _) = snapshot::read(&path, "store-a", 42, &log).unwrap().expect("the small snapshot loads");
+        assert_eq!(families["b"].len(), 50);
+    }
+
+    /// A fuzz pass over the snapshot reader: 2,000 snapshots mutated at random (bits flipped, bytes overwritten,
+    /// cut short, extended, stretches moved), each refused with an error, never a panic, never read as an index.
+    #[test]
+    fn mutated_snapshots_are_refused_without_panicking() {
+        let index = Index::default();
+        for (i, v) in rows(300, 5, 9).into_iter().enumerate() {
+            index.insert(&Fingerprint { family: format!("f{}", i % 3), shape_id: sid(i).hex(), values: v });
+        }
+        index.set_tags(&sid(1).hex(), &["t".into()]);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("search-index.bin");
+        let log = |seq: i64| Ok((seq == 7).then(|| sid(2).hex()));
+        snapshot::write(&path, "s", &(7, sid(2).hex()), &index.families.read().unwrap(), &index.tags.read().unwrap())
+            .unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut rnd = move |n: usize| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as usize % n.max(1)
+        };
+        for round in 0..2_000 {
+            let mut m = bytes.clone();
+            match round % 5 {
+                0 => {
+                    let at = rnd(m.len());
+                    m[at] ^= 1 << rnd(8);
+                }
+                1 => {
+                    for _ in 0..1 + rnd(8) {
+                        let at = rnd(m.len());
+                        m[at] = rnd(256) as u8;
+                    }
+                }
+                2 => m.truncate(rnd(m.len())),
+                3 => m.extend((0..1 + rnd(64)).map(|_| rnd(256) as u8)),
+                _ => {
+                    let (a, b) = (rnd(m.len()), rnd(m.len()));
+                    let len = rnd(64).min(m.len() - a.max(b));
+                    m.copy_within(a..a + len, b);
+                }
+            }
+            if m == bytes {
+                continue;
+            }
+            std::fs::write(&path, &m).unwrap();
+            assert!(snapshot::read(&path, "s", 7, &log).is_err(), "mutation {round} refused");
+        }
     }
 
     /// Cells trained again off the lock follow every change made while they were trained (rows added, replaced,

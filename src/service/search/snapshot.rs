@@ -1,11 +1,13 @@
 //! The search index on disk, so that a start reads one file instead of every fingerprint in the store and training
 //! the cells again: the log position it reflects, each family's ids, single-precision rows, rounding bounds and
-//! cells, and the shapes' tags. Little-endian; written to a temporary file, synced and renamed over the last one.
+//! cells, and the shapes' tags. Little-endian, ending in a CRC-32 of every byte before it; written to a temporary
+//! file, synced and renamed over the last one.
 //!
-//! A snapshot is used only when its position is not beyond the store's log and the log's entry there is the one it
-//! recorded (a snapshot of another store, or of a store rolled back, is refused and the index is built from the
-//! tables). A table edited by hand, outside the
-//! service and its log, is not seen by a snapshot: remove the file (`search-index.bin`) after such an edit.
+//! A snapshot proves itself before anything in it is used: its checksum matches (a flipped bit anywhere is
+//! refused), it is of this store, its position is not beyond the store's log and the log's entry there is the one
+//! it recorded (a snapshot of another store, or of a store rolled back, is refused). The index then checks, after
+//! applying the log's later changes, that every family holds as many rows as the store and that the tags agree in
+//! number ([`super::Index::load`]); on any doubt it is built from the tables again, and the reason logged.
 
 use super::ivf::Ivf;
 use super::{Family, Tag, Tags};
@@ -14,12 +16,14 @@ use std::collections::HashMap;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"KACIDX03";
+const MAGIC: &[u8; 8] = b"KACIDX04";
 const END: &[u8; 8] = b"KACIDXOK";
 
-struct W<T: Write>(T);
+/// A writer that keeps the CRC-32 of every byte written.
+struct W<T: Write>(T, crc32fast::Hasher);
 impl<T: Write> W<T> {
     fn bytes(&mut self, b: &[u8]) -> std::io::Result<()> {
+        self.1.update(b);
         self.0.write_all(b)
     }
     fn u32(&mut self, v: u32) -> std::io::Result<()> {
@@ -69,7 +73,7 @@ pub(crate) fn write(
         std::fs::create_dir_all(dir)?;
     }
     let file = std::fs::File::create(&tmp)?;
-    let mut w = W(BufWriter::with_capacity(1 << 20, file));
+    let mut w = W(BufWriter::with_capacity(1 << 20, file), crc32fast::Hasher::new());
     w.bytes(MAGIC)?;
     w.text(store)?;
     w.u64(at.0 as u64)?;
@@ -105,6 +109,8 @@ pub(crate) fn write(
         }
     }
     w.bytes(END)?;
+    let crc = w.1.clone().finalize();
+    w.0.write_all(&crc.to_le_bytes())?;
     let file = w.0.into_inner().map_err(|e| e.into_error())?;
     file.sync_all()?;
     std::fs::rename(&tmp, path)?;
@@ -114,11 +120,17 @@ pub(crate) fn write(
     Ok(())
 }
 
-struct R<T: Read>(T);
+/// A reader that keeps the CRC-32 of every byte read.
+struct R<T: Read>(T, crc32fast::Hasher);
 impl<T: Read> R<T> {
+    fn read_exact(&mut self, b: &mut [u8]) -> std::io::Result<()> {
+        self.0.read_exact(b)?;
+        self.1.update(b);
+        Ok(())
+    }
     fn array<const N: usize>(&mut self) -> std::io::Result<[u8; N]> {
         let mut b = [0u8; N];
-        self.0.read_exact(&mut b)?;
+        self.read_exact(&mut b)?;
         Ok(b)
     }
     fn u32(&mut self) -> std::io::Result<u32> {
@@ -134,7 +146,7 @@ impl<T: Read> R<T> {
         let mut left = n;
         while left > 0 {
             let m = left.min(16384);
-            self.0.read_exact(&mut buf[..m * W])?;
+            self.read_exact(&mut buf[..m * W])?;
             out.extend(buf[..m * W].chunks_exact(W).map(|c| f(c.try_into().unwrap_or([0; W]))));
             left -= m;
         }
@@ -146,7 +158,7 @@ impl<T: Read> R<T> {
             return Err(bad("a name longer than any the service writes"));
         }
         let mut b = vec![0u8; n];
-        self.0.read_exact(&mut b)?;
+        self.read_exact(&mut b)?;
         String::from_utf8(b).map_err(|_| bad("a name that is not UTF-8"))
     }
 }
@@ -157,8 +169,9 @@ fn bad(what: &str) -> std::io::Error {
 
 type Loaded = (HashMap<String, Family>, Tags, (i64, String));
 
-/// The snapshot at `path` (None when there is none), refused when it is damaged, beyond the log's end `log_end`, or
-/// of another log (`entry`: the shape id of the store's log entry at a position).
+/// The snapshot at `path` (None when there is none), refused when it is damaged (its checksum, its sizes, its
+/// end), beyond the log's end `log_end`, or of another log (`entry`: the shape id of the store's log entry at a
+/// position). Nothing read is returned before the checksum over the whole file has been checked.
 pub(crate) fn read(
     path: &Path,
     store: &str,
@@ -171,7 +184,7 @@ pub(crate) fn read(
         Err(e) => return Err(e),
     };
     let size = file.metadata()?.len();
-    let mut r = R(BufReader::with_capacity(1 << 20, file));
+    let mut r = R(BufReader::with_capacity(1 << 20, file), crc32fast::Hasher::new());
     if &r.array::<8>()? != MAGIC {
         return Err(bad("not a kac search index (or of another version)"));
     }
@@ -204,8 +217,9 @@ pub(crate) fn read(
         let name = r.text(256)?;
         let k = r.u32()? as usize;
         let n = r.u64()? as usize;
-        // Sizes checked against the file before anything that large is allocated.
-        if k == 0 || (n as u64).saturating_mul(32 + 4 * k as u64 + 8) > size {
+        // Sizes checked against the file before anything that large is allocated: a row is its id (32 bytes), its
+        // values (4 k) and its rounding bound (4); its cell (4 more) comes only with cells.
+        if k == 0 || (n as u64).saturating_mul(36 + 4 * k as u64) > size {
             return Err(bad("a family larger than the file"));
         }
         let ids: Vec<ShapeId> = r.many::<32, _>(n, ShapeId)?;
@@ -260,6 +274,15 @@ pub(crate) fn read(
     }
     if &r.array::<8>()? != END {
         return Err(bad("its end is missing"));
+    }
+    let crc = r.1.clone().finalize();
+    let mut stored = [0u8; 4];
+    r.0.read_exact(&mut stored).map_err(|_| bad("its checksum is missing"))?;
+    if u32::from_le_bytes(stored) != crc {
+        return Err(bad("its checksum does not match its contents"));
+    }
+    if r.0.read(&mut [0u8; 1])? != 0 {
+        return Err(bad("bytes after its end"));
     }
     Ok(Some((families, tags, (at, at_id))))
 }

@@ -164,6 +164,8 @@ pub trait FingerprintStore: Send + Sync {
     fn tags_of(&self, shape_id: &str) -> std::io::Result<Vec<String>>;
     /// Every (shape id, tag), one at a time.
     fn for_each_tag(&self, f: &mut dyn FnMut(&str, &str)) -> std::io::Result<()>;
+    /// How many (shape id, tag) pairs are stored.
+    fn tag_count(&self) -> std::io::Result<usize>;
     /// This store's identity: drawn at random when it was created, so that a search index snapshot of another store
     /// (or of a store created again) is never read as its own.
     fn store_identity(&self) -> std::io::Result<String>;

@@ -575,6 +575,13 @@ impl FingerprintStore for Postgres {
             Ok(c.query_one("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", &[]).await.map_err(pg)?.get(0))
         })
     }
+    fn tag_count(&self) -> std::io::Result<usize> {
+        self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let n: i64 = c.query_one("SELECT COUNT(*) FROM shape_tags", &[]).await.map_err(pg)?.get(0);
+            Ok(n as usize)
+        })
+    }
     fn store_identity(&self) -> std::io::Result<String> {
         self.run(|pool| async move {
             let c = pool.get().await.map_err(pg)?;

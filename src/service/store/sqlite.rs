@@ -32,13 +32,14 @@ pub struct Database {
 /// Locks the data directory for this process: it belongs to one process (its recovery requeues every job another
 /// held), so a second `kac serve` on it is refused while the first runs (the lock goes with the process, kill -9
 /// included). Stores of one process share the lock (a test may open a directory twice).
-fn lock_dir(data_dir: &Path) -> std::io::Result<Arc<std::fs::File>> {
+/// The second value: whether this call took the lock (false: a store of this process already held it).
+fn lock_dir(data_dir: &Path) -> std::io::Result<(Arc<std::fs::File>, bool)> {
     static HELD: Mutex<Vec<(PathBuf, std::sync::Weak<std::fs::File>)>> = Mutex::new(Vec::new());
     let path = data_dir.canonicalize()?.join("kac.lock");
     let mut held = HELD.lock().unwrap_or_else(|e| e.into_inner());
     held.retain(|(_, f)| f.strong_count() > 0);
     if let Some(f) = held.iter().find(|(p, _)| *p == path).and_then(|(_, f)| f.upgrade()) {
-        return Ok(f);
+        return Ok((f, false));
     }
     let file = std::fs::File::create(&path)?;
     match file.try_lock() {
@@ -53,7 +54,74 @@ fn lock_dir(data_dir: &Path) -> std::io::Result<Arc<std::fs::File>> {
     }
     let file = Arc::new(file);
     held.push((path, Arc::downgrade(&file)));
-    Ok(file)
+    Ok((file, true))
+}
+
+/// What a process killed mid-write left in a data directory it held, removed as the next process takes the lock
+/// (so no writer of it is alive), each removal logged: temporary files of atomic writes (`*.tmp.*`, `*.new.*`,
+/// the index snapshot's `search-index.*.tmp`), uploads without a shape record (written before their record, never
+/// acknowledged), and results' numbers that no result names (written before their result's record).
+fn sweep_leftovers(data_dir: &Path, shape_dir: &Path, conn: &rusqlite::Connection) -> std::io::Result<usize> {
+    let temporary = |name: &str| name.contains(".tmp.") || name.contains(".new.") || name.ends_with(".tmp");
+    let mut removed = 0;
+    let mut remove = |path: &Path, why: &str| match std::fs::remove_file(path) {
+        Ok(()) => {
+            tracing::warn!(file = %path.display(), why, "removed a leftover of an interrupted write");
+            removed += 1;
+        }
+        Err(e) => tracing::warn!(file = %path.display(), error = %e, "cannot remove a leftover"),
+    };
+    let names = |dir: &Path| -> std::io::Result<Vec<String>> {
+        let mut out = vec![];
+        for entry in std::fs::read_dir(dir)? {
+            let entry = entry?;
+            if entry.file_type()?.is_file() {
+                if let Ok(name) = entry.file_name().into_string() {
+                    out.push(name);
+                }
+            }
+        }
+        Ok(out)
+    };
+    for name in names(data_dir)? {
+        if name.starts_with("search-index.") && name.ends_with(".tmp") {
+            remove(&data_dir.join(&name), "a search index snapshot's temporary file");
+        }
+    }
+    let mut st = conn.prepare("SELECT 1 FROM shapes WHERE id = ?1").map_err(db_err)?;
+    for name in names(shape_dir)? {
+        if temporary(&name) {
+            remove(&shape_dir.join(&name), "an upload's temporary file");
+        } else if ShapeId::parse(&name).is_some() && !st.exists([&name]).map_err(db_err)? {
+            remove(&shape_dir.join(&name), "an upload without its shape record (never acknowledged)");
+        }
+    }
+    let results = data_dir.join("results");
+    if results.is_dir() {
+        let all = names(&results)?;
+        for name in &all {
+            if temporary(name) {
+                remove(&results.join(name), "a result's temporary file");
+                continue;
+            }
+            // `{id}.{pid}.{seq}.f64`: kept while its result's record names it.
+            let Some(stem) = name.strip_suffix(".f64") else { continue };
+            let Some((id, _)) = stem.split_once('.') else { continue };
+            let meta = results.join(format!("{id}.result.json"));
+            let named = match std::fs::read(&meta) {
+                Ok(bytes) => serde_json::from_slice::<serde_json::Value>(&bytes)
+                    .ok()
+                    .is_none_or(|m| m["values_file"].as_str().is_none_or(|v| v == name)),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
+                // Unreadable now: kept.
+                Err(_) => true,
+            };
+            if !named {
+                remove(&results.join(name), "a result's numbers that no result names");
+            }
+        }
+    }
+    Ok(removed)
 }
 
 /// The queue's columns on a jobs table of an older version (id and view only): added, and filled from the views.
@@ -97,7 +165,7 @@ impl Database {
     ) -> std::io::Result<Self> {
         let shape_dir = data_dir.join("shapes");
         std::fs::create_dir_all(&shape_dir)?;
-        let lock = lock_dir(data_dir)?;
+        let (lock, took_lock) = lock_dir(data_dir)?;
         let conn = rusqlite::Connection::open(data_dir.join("kac.sqlite3")).map_err(db_err)?;
         conn.execute_batch(
             "PRAGMA journal_mode = WAL;
@@ -121,6 +189,12 @@ impl Database {
         )
         .map_err(db_err)?;
         migrate_jobs(&conn)?;
+        if took_lock {
+            let removed = sweep_leftovers(data_dir, &shape_dir, &conn)?;
+            if removed > 0 {
+                tracing::warn!(removed, "leftovers of interrupted writes removed from the data directory");
+            }
+        }
         Ok(Database {
             clock,
             _lock: lock,
@@ -366,6 +440,10 @@ impl FingerprintStore for Database {
     }
     fn fingerprint_log_end(&self) -> std::io::Result<i64> {
         self.conn().query_row("SELECT COALESCE(MAX(seq), 0) FROM fingerprint_log", [], |r| r.get(0)).map_err(db_err)
+    }
+    fn tag_count(&self) -> std::io::Result<usize> {
+        let n: i64 = self.conn().query_row("SELECT COUNT(*) FROM shape_tags", [], |r| r.get(0)).map_err(db_err)?;
+        Ok(n as usize)
     }
     fn store_identity(&self) -> std::io::Result<String> {
         self.conn().query_row("SELECT value FROM meta WHERE key = 'store_id'", [], |r| r.get(0)).map_err(db_err)
