@@ -257,6 +257,28 @@ fn a_job_whose_claim_was_lost_is_stopped_without_a_result() {
     assert!(jobs.queue.finish(&v.id, "other:1", &done).unwrap());
 }
 
+/// A beat between the queue's write of a job's outcome (which ends its claim) and the job's own view of it finds no
+/// claim: the job is finishing, not lost, and nothing is stopped or logged as lost.
+#[test]
+fn a_beat_during_the_outcome_s_write_does_not_take_the_claim_for_lost() {
+    let (jobs, clock) = engine();
+    let v = submit(&jobs, 1);
+    let job = start(&jobs);
+    let mut beats = Beats::new();
+    // The runner marks the job finishing, then the queue holds its outcome; the live view has not changed yet.
+    job.finishing.store(true, Ordering::SeqCst);
+    let mut done = job.snapshot();
+    done.status = Status::Succeeded;
+    assert!(jobs.queue.finish(&v.id, &job.owner, &done).unwrap());
+    clock.advance(LEASE);
+    jobs.supervise_once(&mut beats, &HashSet::from([v.id.clone()]));
+    assert!(!job.lost.load(Ordering::SeqCst) && !job.stop.load(Ordering::SeqCst));
+    // Without the mark, the same beat takes the claim for lost (the fault this guards against).
+    job.finishing.store(false, Ordering::SeqCst);
+    jobs.supervise_once(&mut beats, &HashSet::from([v.id.clone()]));
+    assert!(job.lost.load(Ordering::SeqCst));
+}
+
 #[test]
 fn a_full_queue_refuses_and_a_repeated_request_is_the_same_job() {
     let (jobs, _) = engine();
