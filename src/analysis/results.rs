@@ -137,6 +137,11 @@ pub struct SolverReport {
     /// `solver.slices` of the request).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub slices: Vec<kac_core::spectrum::slicing::SliceReport>,
+    /// The path the solve took where it is not the one planned (slices given up for one run, the Krylov method for
+    /// the dense solver) and why; absent when it took the path planned. Such a result also carries the warning
+    /// `solver-fallback`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plan: Option<kac_core::spectrum::PlanChange>,
 }
 
 /// Where a spectrum's seconds went.

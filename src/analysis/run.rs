@@ -112,6 +112,7 @@ pub(crate) fn spectrum_output(
             tol: solver.tol,
             threads: if threads == 0 { rayon::current_num_threads() } else { threads },
             slices: st.slices.clone(),
+            plan: st.plan.clone(),
         },
         timings: SpectrumTimings {
             read_s: None,
@@ -238,10 +239,27 @@ pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outpu
 fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
     // Whether the eigenpairs came from the cache (no eigensolve for this analysis).
     let reused = std::cell::Cell::new(false);
-    let part = compute(v, analysis, hooks, &reused)?;
+    // Every eigensolve that took another path than the one it planned, told as a warning.
+    let changed = std::sync::Mutex::new(Vec::<kac_core::spectrum::PlanChange>::new());
+    let outer = hooks.on_solve;
+    let watch = |s: &kac_core::spectrum::Stats| {
+        if let Some(p) = &s.plan {
+            changed.lock().unwrap_or_else(|e| e.into_inner()).push(p.clone());
+        }
+        if let Some(f) = outer {
+            f(s);
+        }
+    };
+    let part = compute(v, analysis, Hooks { on_solve: Some(&watch), ..hooks }, &reused)?;
     // Every result has `warnings` (the one place it says a number is outside its domain of validity), with what
     // the operator's parameters tell (a point cloud's dimension and noise) after the analysis' own.
     let mut warnings = part.warnings;
+    for p in changed.into_inner().unwrap_or_else(|e| e.into_inner()) {
+        warnings.push(Warning::new(
+            "solver-fallback",
+            format!("the eigensolver planned {} but solved by {}: {}", p.planned, p.taken, p.reason),
+        ));
+    }
     if let Some(parameters) = parameters_of(&part.body) {
         warnings.extend(operator_warnings(parameters));
     }

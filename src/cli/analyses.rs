@@ -59,11 +59,6 @@ pub(super) fn emit(mut out: Output, args: &OutArgs) -> Result<(), Failure> {
             obj.insert("arrays".into(), Value::Object(inline));
         }
     }
-    // Warnings (`warnings: [{code, message}]`, the one place a result says its numbers are outside their domain of
-    // validity) are in the JSON and also told on stderr, where a person at a terminal sees them.
-    for w in out.summary["warnings"].as_array().into_iter().flatten() {
-        eprintln!("kac: warning {}: {}", w["code"].as_str().unwrap_or("?"), w["message"].as_str().unwrap_or(""));
-    }
     print_json(&out.summary)
 }
 

@@ -142,8 +142,27 @@ impl ShapeArgs {
     }
 }
 
+/// Prints a subcommand's answer on stdout, and each of its warnings (`warnings: [{code, message}]`, the one place a
+/// result says that a number is outside its domain of validity) on stderr, where a person at a terminal sees them:
+/// every subcommand answers through here, so none can leave its warnings unsaid.
 pub fn print_json(value: &impl serde::Serialize) -> Result<(), Failure> {
     let s = serde_json::to_string_pretty(value).map_err(|e| Failure { code: 1, message: e.to_string() })?;
+    #[derive(serde::Deserialize)]
+    struct Warning {
+        code: String,
+        message: String,
+    }
+    #[derive(serde::Deserialize)]
+    struct Warned {
+        #[serde(default)]
+        warnings: Vec<Warning>,
+    }
+    // The answer as printed, read back for its warnings only (its field order kept in what is printed).
+    if let Ok(Warned { warnings }) = serde_json::from_str::<Warned>(&s) {
+        for w in warnings {
+            eprintln!("kac: warning {}: {}", w.code, w.message);
+        }
+    }
     println!("{s}");
     Ok(())
 }

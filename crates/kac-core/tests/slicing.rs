@@ -126,6 +126,78 @@ fn thin_strip_keeps_the_windows_its_spectrum_fills() {
     }
 }
 
+/// A strip thinner still: its first edge by Weyl's law already holds every pair asked for, so the plan is given up
+/// for one run, and the result says so (`plan`: planned slices, taken one run, why) instead of switching silently.
+#[test]
+fn a_plan_given_up_is_reported() {
+    let pair = pair_of(&Shape::TriangleMesh(generate::grid(1200, 2, 300.0, 0.5)), Boundary::Neumann);
+    let k = 80;
+    let sliced = solve(&pair, k, 4, 1);
+    let plan = sliced.stats.plan.as_ref().expect("the change of path is reported");
+    assert_eq!((plan.planned, plan.taken), ("slices", "one-run"), "{plan:?}");
+    assert!(plan.reason.contains("first slice"), "{plan:?}");
+    assert!(sliced.stats.slices.is_empty());
+    let whole = solve(&pair, k, 1, 1);
+    assert_eq!(whole.stats.plan, None, "one run asked for is the plan");
+    assert_same_values(&sliced, &whole);
+}
+
+/// The same mesh in another vertex and face order (a random permutation, as another program would write it) is cut
+/// into the same slices, holding the same pairs, and gives the same eigenvalues, on one thread and on two: the plan
+/// and its edges depend on the spectrum, not on the numbering.
+#[test]
+fn a_permuted_mesh_gives_the_same_slices_and_eigenvalues() {
+    let mesh = generate::icosphere(4);
+    let n = mesh.vertices.len();
+    let mut x = 0x853C_49E6_748F_EA9Bu64;
+    let mut rnd = move |m: usize| {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x >> 11) as usize % m
+    };
+    // Fisher–Yates: new index of each old vertex, then the faces in another order and rotated.
+    let mut perm: Vec<usize> = (0..n).collect();
+    for i in (1..n).rev() {
+        perm.swap(i, rnd(i + 1));
+    }
+    let mut vertices = vec![[0.0; 3]; n];
+    for (old, &new) in perm.iter().enumerate() {
+        vertices[new] = mesh.vertices[old];
+    }
+    let mut faces: Vec<[u32; 3]> = mesh
+        .faces
+        .iter()
+        .map(|f| [perm[f[0] as usize] as u32, perm[f[1] as usize] as u32, perm[f[2] as usize] as u32])
+        .collect();
+    for i in (1..faces.len()).rev() {
+        let j = rnd(i + 1);
+        faces.swap(i, j);
+        faces[i].rotate_left(rnd(3));
+    }
+    let permuted = kac_core::geometry::TriangleMesh { vertices, faces };
+    let (a, b) = (
+        pair_of(&Shape::TriangleMesh(mesh), Boundary::Neumann),
+        pair_of(&Shape::TriangleMesh(permuted), Boundary::Neumann),
+    );
+    let k = 150;
+    for threads in [1, 2] {
+        let (sa, sb) = (solve(&a, k, 4, threads), solve(&b, k, 4, threads));
+        assert_eq!((sa.stats.plan.as_ref(), sb.stats.plan.as_ref()), (None, None));
+        let pairs = |s: &Spectrum| s.stats.slices.iter().map(|r| r.pairs).collect::<Vec<_>>();
+        assert_eq!(sa.stats.slices.len(), 4);
+        assert_eq!(pairs(&sa), pairs(&sb), "the same slices hold the same pairs");
+        for (x, y) in sa.stats.slices.iter().zip(&sb.stats.slices) {
+            for (p, q) in [(x.lo, y.lo), (x.hi, y.hi)] {
+                if let (Some(p), Some(q)) = (p, q) {
+                    assert!((p - q).abs() <= 1e-9 * p.abs(), "edges {p} and {q}");
+                }
+            }
+        }
+        assert_same_values(&sb, &sa);
+    }
+}
+
 /// A stop set while the slices iterate ends the solve with `Canceled`, not a result.
 #[test]
 fn a_stop_inside_a_slice_cancels() {

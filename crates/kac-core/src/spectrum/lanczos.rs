@@ -290,6 +290,10 @@ const INTERIOR_MIN_K: usize = 8;
 /// this the factor grew and the default shift below the spectrum (Cholesky) is used instead.
 const LDLT_BACKWARD_ERROR: f64 = 1e-12;
 
+/// Where else in a slice's window [lo, hi] σ is tried, as fractions of the window, when the factor at its planned
+/// shift is not backward stable.
+const WINDOW_SHIFTS: [f64; 4] = [0.4, 0.6, 0.3, 0.7];
+
 /// The shift inside the spectrum from Weyl's law, σ = 0.7·λ̂_k with λ̂_k = (2π)² (k / (ω_d |Ω|))^{2/d} and |Ω| = 1ᵀM1
 /// (see [`WEYL_FRACTION`]); `None` for operators without a dimension (graphs) or small k.
 pub fn weyl_shift(pair: &SparsePair, k: usize) -> Option<f64> {
@@ -442,16 +446,27 @@ fn factor_shift(
     };
     let stop = control.stop;
     if let Some(w) = &run.window {
-        let values = pair.shifted(w.sigma);
-        let (factor, below) =
-            Cholesky::factor_ldlt_stoppable(sym, &values, par, stop).map_err(|e| failed(w.sigma, e))?;
-        let e = solve_backward_error(pair, &values, &factor, par);
-        if e > LDLT_BACKWARD_ERROR {
-            return Err(EigenError::Factorization {
-                message: format!("σ = {:e}: the LDLᵀ factor is not backward stable ({e:.1e})", w.sigma),
-            });
+        // σ at the window's planned shift, else elsewhere inside the window: whether an LDLᵀ factor is backward
+        // stable depends on σ and on the elimination order (one vertex numbering of a mesh is stable where another
+        // is not), and any σ inside the window serves the slice.
+        let a = if w.lo.is_finite() { w.lo } else { 0.0 };
+        let b = if w.hi.is_finite() { w.hi } else { 2.0 * w.sigma - a };
+        let tries = std::iter::once(w.sigma).chain(WINDOW_SHIFTS.iter().map(|f| a + f * (b - a)));
+        let mut last = None;
+        for sigma in tries.filter(|s| s.is_finite() && *s > a && *s < b) {
+            control.check()?;
+            let values = pair.shifted(sigma);
+            let (factor, below) =
+                Cholesky::factor_ldlt_stoppable(sym, &values, par, stop).map_err(|e| failed(sigma, e))?;
+            let e = solve_backward_error(pair, &values, &factor, par);
+            if e <= LDLT_BACKWARD_ERROR {
+                return Ok(Shifted { sigma, factor, below_sigma: Some(below) });
+            }
+            last = Some(format!("σ = {sigma:e}: the LDLᵀ factor is not backward stable ({e:.1e})"));
         }
-        return Ok(Shifted { sigma: w.sigma, factor, below_sigma: Some(below) });
+        return Err(EigenError::Factorization {
+            message: last.unwrap_or_else(|| format!("σ = {:e} lies outside its window", w.sigma)),
+        });
     }
     if let Some(sigma) = o.sigma {
         if sigma < 0.0 {

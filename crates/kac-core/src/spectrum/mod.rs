@@ -139,16 +139,27 @@ pub fn eigs(
             head: head.as_ref(),
         };
         let o = EigenOptions { k: k - z, ..options.clone() };
-        let sliced = slicing::solve(pair, &o, sym, control, &deflation, &zero_values, head.as_ref())?;
-        let single = match sliced {
-            Some(s) => Some(s),
-            None => lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?,
+        let (single, mut plan) = match slicing::solve(pair, &o, sym, control, &deflation, &zero_values, head.as_ref())? {
+            slicing::Sliced::Solved(s) => (Some(s), None),
+            slicing::Sliced::NotPlanned => (lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?, None),
+            slicing::Sliced::GivenUp(reason) => (
+                lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?,
+                Some(PlanChange { planned: "slices", taken: "one-run", reason }),
+            ),
         };
         drop(head);
         let mut s = match single {
             Some(s) => s,
-            None => dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, threads, control)?,
+            None => {
+                let reason = "too few unknowns beyond the known zero modes for the Krylov basis".to_string();
+                plan = Some(match plan {
+                    Some(p) => PlanChange { taken: "dense", reason: format!("{}; then {reason}", p.reason), ..p },
+                    None => PlanChange { planned: "block-lanczos", taken: "dense", reason },
+                });
+                dense_with_zero_modes(pair, &zeros, blocks.as_ref(), k, threads, control)?
+            }
         };
+        s.stats.plan = plan;
         control.check()?;
         s.stats.symbolic_reused = reused;
         s.stats.timings.symbolic_s = symbolic_s;

@@ -55,8 +55,23 @@ pub struct Stats {
     /// Spectrum slicing ([`super::slicing`]): what each slice did; empty for a solve in one run.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub slices: Vec<super::slicing::SliceReport>,
+    /// The path the solve took where it is not the one it planned (spectrum slicing given up for one run, the
+    /// Krylov method for the dense solver), with why; `None` when it took the path planned.
+    pub plan: Option<PlanChange>,
     /// The completeness check; `None` when it was turned off.
     pub completeness: Option<Completeness>,
+}
+
+/// A solve that took another path than the one it planned: nothing switches paths silently.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct PlanChange {
+    /// `slices` or `block-lanczos`.
+    pub planned: &'static str,
+    /// `one-run` (block Lanczos in one run) or `dense`.
+    pub taken: &'static str,
+    /// Why the planned path was given up.
+    pub reason: String,
 }
 
 /// Whether the returned eigenvalues are the k smallest, with nothing missed.

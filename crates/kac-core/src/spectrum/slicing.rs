@@ -411,8 +411,15 @@ pub(crate) fn plan(pair: &SparsePair, deflated: usize, wanted: usize, o: &EigenO
     Some(out)
 }
 
-/// The `o.k` smallest pairs of the deflated problem by slicing, with the guard pairs above them; `Ok(None)` when
-/// slicing does not apply or its plan did not fit (the caller then solves in one run).
+/// What [`solve`] did: slicing does not apply (one run is the plan), the slices' pairs, or the plan given up (the
+/// caller then solves in one run and reports why).
+pub(crate) enum Sliced {
+    NotPlanned,
+    Solved(Spectrum),
+    GivenUp(String),
+}
+
+/// The `o.k` smallest pairs of the deflated problem by slicing, with the guard pairs above them (see [`Sliced`]).
 pub(crate) fn solve(
     pair: &SparsePair,
     o: &EigenOptions,
@@ -421,9 +428,9 @@ pub(crate) fn solve(
     deflation: &null_space::Deflation<'_>,
     deflated_values: &[f64],
     head: Option<&Spectrum>,
-) -> Result<Option<Spectrum>, EigenError> {
+) -> Result<Sliced, EigenError> {
     let t0 = Instant::now();
-    let Some(slices) = plan(pair, deflation.len(), o.k, o) else { return Ok(None) };
+    let Some(slices) = plan(pair, deflation.len(), o.k, o) else { return Ok(Sliced::NotPlanned) };
     let threads = o.thread_count();
     control.phase("factorization", 0, o.k)?;
     // Sylvester's inertia at every edge between two slices: each window's count exactly, so its subspace is
@@ -453,7 +460,7 @@ pub(crate) fn solve(
     let edges: Vec<(f64, usize)> = match edges.into_iter().collect() {
         Ok(e) => e,
         Err(EigenError::Canceled) => return Err(EigenError::Canceled),
-        Err(_) => return Ok(None),
+        Err(e) => return Ok(Sliced::GivenUp(format!("the inertia count at a slice edge failed: {e}"))),
     };
     let deflated = deflation.len();
     let total = slices.last().and_then(|s| s.total).unwrap_or(deflated + o.k);
@@ -493,7 +500,9 @@ pub(crate) fn solve(
     }
     let slices = planned;
     if slices.len() < 2 {
-        return Ok(None);
+        return Ok(Sliced::GivenUp(format!(
+            "the counts at the slice edges put all {total} pairs in the first slice (Weyl's law misjudged this spectrum)"
+        )));
     }
     // Threads left to each slice's factorization and solves once every slice has one.
     let inner = (threads / slices.len()).max(1);
@@ -695,7 +704,8 @@ pub(crate) fn solve(
     };
     let mut parts = Vec::with_capacity(slices.len());
     let mut seconds = Vec::with_capacity(slices.len());
-    for (r, s, worker, by) in results {
+    let which = |i: usize| format!("slice {} of {} ({} pairs)", i + 1, slices.len(), slices[i].1);
+    for (i, (r, s, worker, by)) in results.into_iter().enumerate() {
         match r {
             Ok(Some(spectrum)) => parts.push(spectrum),
             Err(EigenError::Canceled) => return Err(EigenError::Canceled),
@@ -703,15 +713,20 @@ pub(crate) fn solve(
             // plan gave nearly every pair, with its extra columns, can be wider than one run), else the slice's error.
             Err(e @ EigenError::TooLarge { .. }) => {
                 let one_run = lanczos::plan(pair.n(), deflation.len(), o).map(|(_, _, m)| pair.n().saturating_mul(m));
-                return if one_run.is_some_and(|v| v <= o.max_values) { Ok(None) } else { Err(e) };
+                return if one_run.is_some_and(|v| v <= o.max_values) {
+                    Ok(Sliced::GivenUp(format!("{}: {e}", which(i))))
+                } else {
+                    Err(e)
+                };
             }
             // The plan did not fit this problem (or too few unknowns): one run instead.
-            Ok(None) | Err(_) => return Ok(None),
+            Ok(None) => return Ok(Sliced::GivenUp(format!("{}: too few unknowns for its Krylov basis", which(i)))),
+            Err(e) => return Ok(Sliced::GivenUp(format!("{}: {e}", which(i)))),
         }
         seconds.push((s, worker, by));
     }
     if parts.len() < slices.len() {
-        return Ok(None);
+        return Ok(Sliced::GivenUp(format!("{} of {} slices were solved", parts.len(), slices.len())));
     }
     control.check()?;
     let reports: Vec<SliceReport> = parts
@@ -721,7 +736,9 @@ pub(crate) fn solve(
         .map(|((p, (w, _)), (s, worker, by))| SliceReport {
             lo: w.lo.is_finite().then_some(w.lo),
             hi: w.hi.is_finite().then_some(w.hi),
-            sigma: w.sigma,
+            // The shift the slice was solved at (another than planned where the planned one's factor was not
+            // backward stable).
+            sigma: p.stats.sigma,
             below_sigma: p.stats.below_sigma,
             pairs: p.values.len(),
             block_steps: p.stats.block_steps,
@@ -734,11 +751,11 @@ pub(crate) fn solve(
         .collect();
     let mut s = stitch(pair, parts, head, &slices, &control, threads)?;
     if s.values.len() < k + head.map_or(0, |h| h.values.len()) {
-        return Ok(None);
+        return Ok(Sliced::GivenUp(format!("the slices held {} pairs together, fewer than the {k} asked", s.values.len())));
     }
     s.stats.slices = reports;
     s.stats.timings.iteration_s = t0.elapsed().as_secs_f64();
-    Ok(Some(s))
+    Ok(Sliced::Solved(s))
 }
 
 /// The slices' pairs in one ascending spectrum after `head`'s (the known zero modes), with each edge's neighbourhood
