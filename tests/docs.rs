@@ -210,3 +210,39 @@ fn names_matches_whole_tokens_only() {
     assert_eq!(slug("The pair (L, M)"), "the-pair-l-m");
     assert_eq!(slug(" `kac spectrum`"), "kac-spectrum");
 }
+
+/// Every warning code the code can raise (`Warning::new("code", …)` anywhere under src/ and crates/) has its row in
+/// the README's warnings table, and the table names no code the code never raises.
+#[test]
+fn every_warning_code_is_in_the_readme_table() {
+    fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                sources(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
+    }
+    let root = Path::new(ROOT);
+    let mut files = vec![];
+    sources(&root.join("src"), &mut files);
+    sources(&root.join("crates"), &mut files);
+    let mut raised = std::collections::BTreeSet::new();
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (i, _) in text.match_indices("Warning::new(") {
+            let rest = text[i + "Warning::new(".len()..].trim_start();
+            if let Some(code) = rest.strip_prefix('"').and_then(|r| r.split('"').next()) {
+                raised.insert(code.to_string());
+            }
+        }
+    }
+    assert!(raised.len() >= 10, "the scan finds the codes: {raised:?}");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let table = readme.split("## Warnings").nth(1).and_then(|s| s.split("\n## ").next()).expect("a Warnings section");
+    let listed: std::collections::BTreeSet<String> =
+        table.lines().filter_map(|l| l.strip_prefix("| `")?.split('`').next().map(str::to_string)).collect();
+    assert_eq!(raised, listed, "codes raised (left) against the README's warnings table (right)");
+}

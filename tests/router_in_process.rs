@@ -1237,3 +1237,124 @@ async fn a_correspondence_job_maps_a_shuffled_copy_by_its_permutation() {
 
 #[path = "support/pairs.rs"]
 mod pairs;
+
+/// Uploads a shape given as OFF and returns its id.
+async fn upload_off(app: &axum::Router, off: String) -> String {
+    let (status, shape) = call(app, Request::post("/v1/shapes?format=off").body(Body::from(off)).unwrap()).await;
+    assert!(status.is_success(), "{shape}");
+    shape["id"].as_str().unwrap().to_string()
+}
+
+/// Per-vertex inputs are checked at submission, before anything is queued: `g = [1e308] * n` used to "succeed"
+/// with every value of the solution null (M g overflowed). Each refusal is 422 `invalid-parameter` naming the
+/// parameter and its first offending element: values beyond ±1e100 (JSON has no NaN; an `.npy` part does), wrong
+/// lengths, vertices that are not there, one vertex given two values.
+#[tokio::test]
+async fn per_vertex_inputs_out_of_bounds_are_refused_naming_the_parameter() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let sphere = kac_core::geometry::generate::icosphere(1);
+    let n = sphere.vertices.len();
+    let id = upload_off(&app, kac_core::io::write::off(&sphere)).await;
+    let mut wrong_sign = vec![0.5; n];
+    wrong_sign[5] = -1e308;
+    let cases = [
+        (json!({ "analysis": "poisson", "g": vec![1e308; n] }), "g: value 0 is 1e308;"),
+        (json!({ "analysis": "poisson", "g": wrong_sign }), "g: value 5 is -1e308;"),
+        (json!({ "analysis": "poisson", "g": vec![1.0; n - 1] }), "g: 41 values for 42 input vertices"),
+        (
+            json!({ "analysis": "poisson", "g": vec![0.0; n], "dirichlet_values": [[0, 1.0], [3, 1e300]] }),
+            "dirichlet_values: pair 1 (vertex 3) is 1e300;",
+        ),
+        (
+            json!({ "analysis": "interpolate", "values": [[0, 1.0], [0, 2.0]] }),
+            "values: pairs 0 and 1 give vertex 0 the values 1 and 2",
+        ),
+        (json!({ "analysis": "interpolate", "values": [[42, 1.0]] }), "values: vertex 42 does not exist"),
+        (json!({ "analysis": "diffuse", "times": [0.1], "initial": vec![-1e200; n] }), "initial: value 0 is -1e200;"),
+        (
+            json!({ "analysis": "wave", "times": [0.1], "initial": vec![0.0; n], "velocity": vec![2e100; n] }),
+            "velocity: value 0 is 2e100;",
+        ),
+        (json!({ "analysis": "dirichlet-energy", "function": vec![1e308; n] }), "function: value 0"),
+        (json!({ "analysis": "gradient", "function": vec![1.0; n + 1] }), "function: 43 values for 42"),
+        (json!({ "analysis": "divergence", "field": vec![[0.0, 0.0, 1e150]; 80] }), "field: element 0[2] is 1e150;"),
+        (json!({ "analysis": "heat", "sources": [0, 42] }), "sources: vertex 42 does not exist"),
+    ];
+    for (mut request, says) in cases {
+        request["shape_id"] = json!(id);
+        let (status, p) = call(&app, post_json("/v1/jobs", request.clone())).await;
+        assert_eq!((status, p["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid-parameter")), "{p}");
+        assert!(p["detail"].as_str().unwrap().starts_with(says), "{request}: {p}");
+    }
+    // A NaN in an `.npy` part, which JSON cannot carry.
+    let mut u0 = vec![0.0; n];
+    u0[9] = f64::NAN;
+    let request = json!({ "shape_id": id, "analysis": "wave", "k": 10, "times": [0.5] });
+    let parts = [
+        ("request", None, request.to_string().into_bytes()),
+        ("initial", Some("u0.npy"), kac_core::io::npy::encode_f64(n, 1, &u0)),
+    ];
+    let (status, p) = call(&app, multipart("/v1/jobs", &parts)).await;
+    assert!(status.is_client_error(), "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("initial"), "{p}");
+    // Within the bounds, the same analysis runs.
+    let request = json!({ "analysis": "poisson", "g": vec![1e100; n] });
+    let uri = format!("/v1/analyze?format=off&wait=60&analysis={}", urlencode(&request.to_string()));
+    let off = kac_core::io::write::off(&sphere);
+    let (status, p) = call(&app, Request::post(uri).body(Body::from(off)).unwrap()).await;
+    assert_eq!(status, StatusCode::OK, "{p}");
+    assert!(p["arrays"]["solution"]["values"].as_array().unwrap().iter().all(|r| r[0].is_f64()), "{p}");
+}
+
+/// Correspondence refusals name the parameter at fault, at submission: a transferred array of 1e308 (which used
+/// to "succeed" with every transferred value null) or of the wrong length, a step of 0 (`descriptor_step` was
+/// taken as 1, `refine_step` named `descriptors`), a vertex paired twice, `fit_k` above --max-k (named `refine_k`),
+/// a weight of 1e308 (refused as "give more descriptors"), and a solid against a surface (accepted, with an
+/// orthogonality defect of 355).
+#[tokio::test]
+async fn correspondence_refusals_name_the_parameter() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let sphere = kac_core::geometry::generate::icosphere(2);
+    let n = sphere.vertices.len();
+    let id = upload_off(&app, kac_core::io::write::off(&sphere)).await;
+    let cube = kac_core::geometry::generate::unit_cube_tets(3);
+    let mesh = serde_json::to_vec(&json!({ "vertices": cube.vertices, "tets": cube.tets })).unwrap();
+    let (status, solid) = call(&app, Request::post("/v1/shapes?format=json").body(Body::from(mesh)).unwrap()).await;
+    assert_eq!(status, StatusCode::CREATED, "{solid}");
+    let unprocessable = StatusCode::UNPROCESSABLE_ENTITY;
+    let cases = [
+        (json!({ "transfer": { "values": vec![1e308; n] } }), unprocessable, "invalid-parameter", "transfer.values"),
+        (json!({ "transfer": { "values": vec![1.0; 3] } }), unprocessable, "invalid-parameter", "transfer.values"),
+        (json!({ "descriptor_step": 0 }), unprocessable, "invalid-parameter", "descriptor_step"),
+        (json!({ "refine_step": 0 }), unprocessable, "invalid-parameter", "refine_step"),
+        (json!({ "landmarks": [[0, 0], [0, 1]] }), unprocessable, "invalid-parameter", "landmarks"),
+        (json!({ "landmarks": [[0, 5], [1, 5]] }), unprocessable, "invalid-parameter", "landmarks"),
+        (json!({ "landmarks": [[0, 100000]] }), unprocessable, "invalid-parameter", "landmarks (target)"),
+        (json!({ "fit_k": 1000000000u64 }), StatusCode::PAYLOAD_TOO_LARGE, "k-too-large", "fit_k = 1000000000"),
+        (json!({ "descriptor_weight": 1e308 }), unprocessable, "invalid-parameter", "descriptor_weight"),
+        (json!({ "laplacian_weight": -1.0 }), unprocessable, "invalid-parameter", "laplacian_weight"),
+    ];
+    for (mut body, status_wanted, code, says) in cases {
+        body["source_id"] = json!(id);
+        body["target_id"] = json!(id);
+        let (status, p) = call(&app, post_json("/v1/correspondence", body.clone())).await;
+        assert_eq!((status, p["code"].as_str()), (status_wanted, Some(code)), "{body}: {p}");
+        assert!(p["detail"].as_str().unwrap().contains(says), "{body}: {p}");
+    }
+    let (status, p) = call(
+        &app,
+        post_json("/v1/correspondence", json!({ "descriptor_weight": 1e308, "source_id": id, "target_id": id })),
+    )
+    .await;
+    assert!(status.is_client_error() && p["detail"].as_str().unwrap().contains("[0, 1e6]"), "{p}");
+    // A solid against a surface, either way round: shapes of different kinds, each kind named.
+    let solid = solid["id"].as_str().unwrap();
+    for (s, t) in [(id.as_str(), solid), (solid, id.as_str())] {
+        let (status, p) = call(&app, post_json("/v1/correspondence", json!({ "source_id": s, "target_id": t }))).await;
+        assert_eq!((status, p["code"].as_str()), (unprocessable, Some("not-applicable")), "{p}");
+        let detail = p["detail"].as_str().unwrap();
+        assert!(detail.contains("triangle_mesh") && detail.contains("tet_mesh"), "{p}");
+    }
+}

@@ -59,7 +59,7 @@ pub fn comparison(
                 .collect(),
         })
         .collect();
-    Ok(CompareSummary {
+    let summary = CompareSummary {
         descriptor: "shape-dna",
         options: options.clone(),
         metric: metric.name(),
@@ -71,5 +71,10 @@ pub fn comparison(
         failures,
         algorithm_version: ALGORITHM_VERSION,
         warnings: vec![],
-    })
+    };
+    // Every number checked before the comparison is returned (by the CLI and the service alike).
+    match super::first_non_finite(&summary) {
+        Some((place, value)) => Err(AnalysisError::NonFinite { place, value }),
+        None => Ok(summary),
+    }
 }

@@ -79,20 +79,12 @@ pub fn correspondence(
     transfer: Option<&Transfer>,
     hooks: Hooks<'_>,
 ) -> Result<Output, AnalysisError> {
+    // The options, the operator, the shapes' kinds, the landmarks and the array to transfer, before any solve.
+    check_correspondence(source, target, options, operator, transfer)?;
     let carried = match transfer {
-        Some(t) => {
-            if let Some(i) = t.values.iter().position(|x| !x.is_finite()) {
-                return Err(AnalysisError::invalid_parameter(format!("transfer: value {i} is not a finite number")));
-            }
-            Some(from_input_rows(source, &t.values, "transfer")?)
-        }
+        Some(t) => Some(from_input_rows(source, &t.values, "transfer.values")?),
         None => None,
     };
-    if operator.order != 1 || operator.boundary != BoundarySpec::Neumann || operator.dirichlet_vertices.is_some() {
-        return Err(AnalysisError::invalid_parameter(
-            "correspondence maps vertices to vertices: give a Neumann operator of order 1",
-        ));
-    }
     // Landmarks in the uploads' numbering, to the validated one.
     let (ls, lt): (Vec<u32>, Vec<u32>) = options.landmarks.iter().copied().unzip();
     let ls = map_vertices(source, &ls, "landmarks (source)")?;
@@ -234,7 +226,14 @@ pub fn correspondence(
         eigenpairs_reused: reused,
         warnings,
     };
-    let summary = serde_json::to_value(Typed { head, body: Summary::Correspondence(Box::new(summary)) })
-        .map_err(|e| AnalysisError::invalid_parameter(format!("the result could not be written as JSON: {e}")))?;
-    Ok(Output { summary, arrays, fingerprints: vec![] })
+    // Every number checked before the result is returned; each array's rows are one of the two shapes' vertices.
+    let typed = Typed { head, body: Summary::Correspondence(Box::new(summary)) };
+    // (An operator that leaves points out was refused above: every row has a value.)
+    super::finite::checked_output(
+        &typed,
+        arrays,
+        vec![],
+        |a| Some(if a.name.starts_with("source_") { source } else { target }),
+        0,
+    )
 }

@@ -17,6 +17,13 @@ pub enum AnalysisError {
     Unsupported(String),
     /// The request would make the solver hold more than a limit allows (`output-too-large`).
     TooLarge(String),
+    /// A number of the result is NaN or infinite where the analysis documents no such marker
+    /// (`non-finite-result`): `place` is its path in the result (`poisson.removed_mean[0]`,
+    /// `arrays.solution[3][0]`). Checked before any result is returned or stored (see [`super::finite`]).
+    NonFinite {
+        place: String,
+        value: f64,
+    },
     Operator(operators::OperatorError),
     Eigen(spectrum::EigenError),
     Descriptor(DescriptorError),
@@ -40,6 +47,7 @@ impl AnalysisError {
             AnalysisError::NotApplicable(_) => "not-applicable",
             AnalysisError::Unsupported(_) => "unsupported",
             AnalysisError::TooLarge(_) => "output-too-large",
+            AnalysisError::NonFinite { .. } => "non-finite-result",
             AnalysisError::Operator(e) => e.code(),
             AnalysisError::Eigen(e) => e.code(),
             AnalysisError::Descriptor(e) => e.code(),
@@ -53,6 +61,8 @@ impl AnalysisError {
             | AnalysisError::NotApplicable(_)
             | AnalysisError::Unsupported(_)
             | AnalysisError::TooLarge(_) => true,
+            // The inputs are bounded at the boundary (see [`super::inputs`]): what is left is the computation's.
+            AnalysisError::NonFinite { .. } => false,
             AnalysisError::Operator(e) => e.caller_fault(),
             AnalysisError::Eigen(e) => e.caller_fault(),
             AnalysisError::Descriptor(e) => e.caller_fault(),
@@ -72,6 +82,11 @@ impl std::fmt::Display for AnalysisError {
             | AnalysisError::NotApplicable(m)
             | AnalysisError::Unsupported(m)
             | AnalysisError::TooLarge(m) => f.write_str(m),
+            AnalysisError::NonFinite { place, value } => write!(
+                f,
+                "the result's {place} is {value}: the computation did not give a finite number, and no result is \
+                 given rather than one holding it"
+            ),
             AnalysisError::Operator(e) => e.fmt(f),
             AnalysisError::Eigen(e) => e.fmt(f),
             AnalysisError::Descriptor(e) => e.fmt(f),

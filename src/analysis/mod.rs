@@ -27,6 +27,8 @@ pub mod correspond;
 mod eigen;
 mod error;
 mod extrapolate;
+mod finite;
+mod inputs;
 mod operator;
 mod output;
 pub mod registry;
@@ -38,6 +40,8 @@ mod tools;
 
 pub use eigen::*;
 pub use error::*;
+pub use finite::{finite_json, first_non_finite};
+pub use inputs::*;
 pub use operator::{is_per_vertex, unknown_vertices, MATRIX_ARRAYS};
 pub use output::*;
 pub use request::*;

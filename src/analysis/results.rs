@@ -394,9 +394,18 @@ pub struct HeatSummary {
     /// The heat trace Σ e^{−λt} (spectral).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub heat_trace: Option<Vec<f64>>,
-    /// A bound on what the k pairs miss of the heat trace (spectral).
+    /// A bound on what the k pairs miss of the discrete heat trace (spectral): truncation only, the same values as
+    /// `heat_trace_truncation_bound` (kept under this name for earlier clients).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub heat_trace_tail_bound: Option<Vec<f64>>,
+    /// A bound, per time, on what the k pairs miss of the discrete heat trace Σ e^{−λt} over every eigenvalue of the
+    /// mesh's operator (spectral). It bounds truncation only: the mesh's eigenvalues differ from the surface's by
+    /// the discretization error (O(h²) for P1), which it does not cover (see `heat_trace_error`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heat_trace_truncation_bound: Option<Vec<f64>>,
+    /// What the heat trace's bound covers, in words (spectral).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heat_trace_error: Option<&'static str>,
     /// The heat content Q(t) = ∫ u(t) from u₀ = 1 (spectral, Dirichlet conditions).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub heat_content: Option<HeatContent>,

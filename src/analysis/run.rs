@@ -217,6 +217,8 @@ pub const WATCHED_FROM_VERTICES: usize = 50_000;
 /// Runs an analysis on a validated shape.
 pub fn run(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Output, AnalysisError> {
     analysis.supported(&v.shape)?;
+    // Every per-vertex input bounded and every index in range before anything is computed.
+    analysis.check_inputs(v)?;
     // The analyses that solve no eigenproblem (Poisson, implicit heat and diffusion, geodesics, smoothing,
     // interpolation, the operator, curvature, gradient, ...) factor and assemble in calls a stop flag cannot reach
     // inside: on a large shape they run on a thread the caller can leave at once (`Control::abandonable`); the
@@ -269,10 +271,19 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
         eigenpairs_reused: reused.get(),
         warnings,
     };
-    let summary = serde_json::to_value(Typed { head, body: part.body })
-        .map_err(|e| AnalysisError::invalid_parameter(format!("the result could not be written as JSON: {e}")))?;
-    Ok(Output { fingerprints: part.fingerprints, summary, arrays: part.arrays })
+    // Every number checked before the result is returned (and so before the service stores it); per-vertex rows
+    // without a value are those validation dropped and the points the operator left out (a cloud's outliers).
+    let left_out =
+        parameters_of(&part.body).and_then(|p| p.get("outliers")?.get("dropped")?.as_u64()).map_or(0, |n| n as usize);
+    let typed = Typed { head, body: part.body };
+    finite::checked_output(&typed, part.arrays, part.fingerprints, |a| is_per_vertex(a.name).then_some(v), left_out)
 }
+
+/// What a spectral heat trace's bound covers.
+const HEAT_TRACE_ERROR: &str = "truncation only: `heat_trace_truncation_bound` bounds what the k pairs miss of the \
+    discrete trace; the discretization error (the mesh's eigenvalues against the surface's, O(h²) for P1 elements: on \
+    the unit sphere of 2,562 vertices the trace at t = 0.1 is 0.8 % low) is not included: `spectrum` with \
+    `extrapolate` estimates each eigenvalue's";
 
 /// The parameters of the operator a result used, where it names one.
 fn parameters_of(body: &Summary) -> Option<&serde_json::Map<String, Value>> {
@@ -435,7 +446,9 @@ fn compute(
                         k: Some(*k),
                         steps: None,
                         heat_trace: Some(trace),
-                        heat_trace_tail_bound: Some(tail),
+                        heat_trace_tail_bound: Some(tail.clone()),
+                        heat_trace_truncation_bound: Some(tail),
+                        heat_trace_error: Some(HEAT_TRACE_ERROR),
                         heat_content: content,
                         operator: OperatorUsed::of(&e.operator),
                     };
@@ -469,6 +482,8 @@ fn compute(
                         steps: Some(*steps),
                         heat_trace: None,
                         heat_trace_tail_bound: None,
+                        heat_trace_truncation_bound: None,
+                        heat_trace_error: None,
                         heat_content: None,
                         operator: OperatorUsed::of(&op),
                     };

@@ -395,6 +395,11 @@ pub const CODES: &[(&str, &str)] = &[
          order and extrapolation (GET /v1/analyses lists what is supported).",
     ),
     ("solve-failed", "A linear system could not be solved."),
+    (
+        "non-finite-result",
+        "The computation gave a NaN or an infinity where the result must hold a number; the detail names the field \
+         or array and its first such element. No result is stored rather than one holding it.",
+    ),
     ("operator-not-applicable", "The operator does not apply to this kind of shape."),
     ("mass-not-applicable", "The mass matrix does not apply to this operator."),
     ("degenerate-element", "An element is degenerate for this operator."),
@@ -434,6 +439,7 @@ mod tests {
             AnalysisError::not_applicable("m"),
             AnalysisError::Unsupported("m".into()),
             AnalysisError::TooLarge("m".into()),
+            AnalysisError::NonFinite { place: "p".into(), value: f64::NAN },
             AnalysisError::Operator(OperatorError::NotApplicable { operator: "cotan", kind: "graph" }),
             AnalysisError::Operator(OperatorError::MassNotApplicable { operator: "graph", mass: "lumped" }),
             AnalysisError::Operator(OperatorError::DegenerateElement {

@@ -84,6 +84,8 @@ pub fn unknowns(a: &Analysis, shape: &kac_core::Shape) -> usize {
 /// analysis of `shape` will hold (eigenvectors included) against `--max-output-values`, before anything is allocated.
 pub fn check_work(config: &Config, a: &Analysis, validated: &kac_core::Validated) -> Result<(), JobError> {
     use kac_core::geometry::validate::Facts;
+    // Every per-vertex input of the right length, finite and bounded, every vertex index in range.
+    a.check_inputs(validated).map_err(JobError::Analysis)?;
     let shape = &validated.shape;
     let vertices = unknowns(a, shape);
     use kac_core::operators::OperatorKind;
@@ -192,4 +194,27 @@ pub fn check_work(config: &Config, a: &Analysis, validated: &kac_core::Validated
         ))));
     }
     Ok(())
+}
+
+/// A correspondence within the limits, checked at submission: its options, operator, shapes, landmarks and array to
+/// transfer as the builder checks them (`analysis::check_correspondence`), and the eigenpairs per shape against
+/// --max-k, naming the option that asks for them (`fit_k` or `refine_k`; twice as many on the source of a partial
+/// match).
+pub fn check_correspondence(
+    config: &Config,
+    request: &super::correspondence::CorrespondenceRequest,
+    source: &kac_core::Validated,
+    target: &kac_core::Validated,
+) -> Result<(), JobError> {
+    let o = &request.options;
+    let (what, k) = if o.fit_k > o.refine_k { ("fit_k", o.fit_k) } else { ("refine_k", o.refine_k) };
+    if k.saturating_mul(if o.partial { 2 } else { 1 }) > config.max_k {
+        let partial = if o.partial { ", and twice that on the source of a partial match," } else { "" };
+        return Err(JobError::Limit(Limit::Pairs(format!(
+            "{what} = {k}{partial} is above the limit of {} eigenpairs per shape (--max-k)",
+            config.max_k
+        ))));
+    }
+    crate::analysis::check_correspondence(source, target, o, &request.operator, request.transfer.as_ref())
+        .map_err(JobError::Analysis)
 }

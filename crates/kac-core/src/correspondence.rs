@@ -161,6 +161,90 @@ pub const MAX_LANDMARKS: usize = 100;
 /// The largest fit with descriptor commutativity: its dense system has (fit_k · k_S)² entries (a partial source
 /// about twice fit_k): 100 gives 2 × 10⁸ values, 1.6 GB at most.
 pub const MAX_COUPLED_FIT_K: usize = 100;
+/// The largest weight of a term of E(C). Only the weights' ratios change the minimiser (E scaled by s has the same
+/// C), so a bound costs nothing: 10⁶ against the default descriptor weight 1 is a term a million times stronger. It
+/// keeps the fit's systems finite: their entries are a weight times sums of squared coefficients of unit M-norm
+/// probes (each at most 1, at most `MAX_DESCRIPTORS` · (1 + `MAX_LANDMARKS`) of them), far below f64's 1.8e308 at
+/// 10⁶, where a weight of 1e308 overflowed them (a fit refused as singular).
+pub const MAX_WEIGHT: f64 = 1e6;
+
+impl CorrespondenceOptions {
+    /// The checks that need no shape: every count and step in range, every weight finite within
+    /// [0, [`MAX_WEIGHT`]], and landmarks that map each vertex once on each side. Each refusal names its option;
+    /// [`correspond`] makes them again, with those that need the spectra.
+    pub fn check(&self) -> Result<(), DescriptorError> {
+        if self.fit_k < 2 {
+            return Err(DescriptorError::param("fit_k", format!("{}: give at least 2", self.fit_k)));
+        }
+        if self.descriptors == 0 || self.descriptors > MAX_DESCRIPTORS {
+            return Err(DescriptorError::param(
+                "descriptors",
+                format!("{}: give 1 to {MAX_DESCRIPTORS} descriptors", self.descriptors),
+            ));
+        }
+        for (name, step) in [("descriptor_step", self.descriptor_step), ("refine_step", self.refine_step)] {
+            if step == 0 {
+                return Err(DescriptorError::param(name, "0: give a step of at least 1"));
+            }
+        }
+        for (name, w) in [
+            ("descriptor_weight", self.descriptor_weight),
+            ("laplacian_weight", self.laplacian_weight),
+            ("commutativity_weight", self.commutativity_weight),
+            ("orientation_weight", self.orientation_weight),
+        ] {
+            if !(0.0..=MAX_WEIGHT).contains(&w) {
+                let shown = if w.is_finite() && w.abs() >= 1e16 { format!("{w:e}") } else { format!("{w}") };
+                return Err(DescriptorError::param(
+                    name,
+                    format!(
+                        "{shown} is out of range: give a finite weight in [0, {MAX_WEIGHT:e}] (only the weights' \
+                         ratios matter)"
+                    ),
+                ));
+            }
+        }
+        if self.bijective && self.partial {
+            return Err(DescriptorError::param(
+                "bijective",
+                "a part has no map back onto the whole: give bijective or partial, not both",
+            ));
+        }
+        if self.landmarks.len() > MAX_LANDMARKS {
+            return Err(DescriptorError::param(
+                "landmarks",
+                format!("{} pairs: at most {MAX_LANDMARKS}", self.landmarks.len()),
+            ));
+        }
+        conflicting_landmarks(&self.landmarks)
+    }
+}
+
+/// Landmarks that pair one vertex with two different vertices of the other shape (either side) are refused, naming
+/// both pairs; a pair given twice is the same pair.
+fn conflicting_landmarks(landmarks: &[(u32, u32)]) -> Result<(), DescriptorError> {
+    let mut source = std::collections::HashMap::new();
+    let mut target = std::collections::HashMap::new();
+    for (i, &(a, b)) in landmarks.iter().enumerate() {
+        for (side, seen, vertex, other) in [("source", &mut source, a, b), ("target", &mut target, b, a)] {
+            if let Some(&(j, before)) = seen.get(&vertex) {
+                if before != other {
+                    return Err(DescriptorError::param(
+                        "landmarks",
+                        format!(
+                            "pairs {j} {:?} and {i} {:?} map {side} vertex {vertex} to two vertices: each vertex is \
+                             one landmark",
+                            landmarks[j],
+                            (a, b)
+                        ),
+                    ));
+                }
+            }
+            seen.entry(vertex).or_insert((i, other));
+        }
+    }
+    Ok(())
+}
 
 /// A correspondence: the functional map and the vertex maps both ways, with the cost of each match.
 #[derive(Debug, Clone)]
@@ -662,36 +746,12 @@ pub fn correspond(
     o: &CorrespondenceOptions,
     control: &Control<'_>,
 ) -> Result<Correspondence, CorrespondenceError> {
+    o.check()?;
     let available = s.basis.k().min(t.basis.k());
-    if o.fit_k < 2 || o.fit_k > available {
+    if o.fit_k > available {
         Err(DescriptorError::param(
             "fit_k",
             format!("{} is out of range: 2 ≤ fit_k ≤ the eigenpairs computed ({available})", o.fit_k),
-        ))?;
-    }
-    if o.descriptors == 0 || o.refine_step == 0 {
-        Err(DescriptorError::param("descriptors", "give at least one descriptor and a refinement step"))?;
-    }
-    if o.descriptors > MAX_DESCRIPTORS || o.landmarks.len() > MAX_LANDMARKS {
-        Err(DescriptorError::param(
-            "descriptors",
-            format!("at most {MAX_DESCRIPTORS} descriptors and {MAX_LANDMARKS} landmarks"),
-        ))?;
-    }
-    for (name, w) in [
-        ("descriptor_weight", o.descriptor_weight),
-        ("laplacian_weight", o.laplacian_weight),
-        ("commutativity_weight", o.commutativity_weight),
-        ("orientation_weight", o.orientation_weight),
-    ] {
-        if !(w >= 0.0 && w.is_finite()) {
-            Err(DescriptorError::param(name, format!("{w}: give a finite weight ≥ 0")))?;
-        }
-    }
-    if o.bijective && o.partial {
-        Err(DescriptorError::param(
-            "bijective",
-            "a part has no map back onto the whole: give bijective or partial, not both",
         ))?;
     }
     let orientation = oriented(s, t, o);
@@ -1413,5 +1473,37 @@ mod tests {
         ] {
             assert!(matches!(correspond(&s, &s, &o, &go), Err(CorrespondenceError::Descriptor(_))), "{o:?}");
         }
+    }
+
+    /// Options that no pair of shapes could honour are refused by `check`, before any spectrum, each naming the
+    /// option it is about (a step of 0 was taken as 1 or named `descriptors`; a weight of 1e308 overflowed the fit's
+    /// system, refused as "singular: give more descriptors"; two pairs sharing a vertex were each taken).
+    #[test]
+    fn options_no_shapes_could_honour_are_refused_naming_the_option() {
+        let named = |o: CorrespondenceOptions| match o.check() {
+            Err(DescriptorError::InvalidParameter { name, message }) => (name, message),
+            other => panic!("{o:?}: {other:?}"),
+        };
+        let d = CorrespondenceOptions::default;
+        assert_eq!(named(CorrespondenceOptions { descriptor_step: 0, ..d() }).0, "descriptor_step");
+        assert_eq!(named(CorrespondenceOptions { refine_step: 0, ..d() }).0, "refine_step");
+        assert_eq!(named(CorrespondenceOptions { descriptors: 0, ..d() }).0, "descriptors");
+        assert_eq!(named(CorrespondenceOptions { fit_k: 1, ..d() }).0, "fit_k");
+        let (name, message) = named(CorrespondenceOptions { descriptor_weight: 1e308, ..d() });
+        assert_eq!(name, "descriptor_weight");
+        assert!(message.contains("[0, 1e6]"), "{message}");
+        for w in [-1.0, f64::NAN, f64::INFINITY, MAX_WEIGHT * 2.0] {
+            assert_eq!(named(CorrespondenceOptions { orientation_weight: w, ..d() }).0, "orientation_weight");
+        }
+        assert!(CorrespondenceOptions { descriptor_weight: MAX_WEIGHT, laplacian_weight: 0.0, ..d() }.check().is_ok());
+        // A vertex paired twice, on either side; the same pair twice is one landmark.
+        for landmarks in [vec![(0, 0), (0, 1)], vec![(0, 0), (1, 0)], vec![(3, 4), (5, 6), (5, 7)]] {
+            let (name, message) = named(CorrespondenceOptions { landmarks: landmarks.clone(), ..d() });
+            assert_eq!(name, "landmarks", "{landmarks:?}");
+            assert!(message.contains("two vertices"), "{message}");
+        }
+        assert!(CorrespondenceOptions { landmarks: vec![(0, 0), (0, 0), (1, 1)], ..d() }.check().is_ok());
+        let too_many = (0..=MAX_LANDMARKS as u32).map(|i| (i, i)).collect();
+        assert_eq!(named(CorrespondenceOptions { landmarks: too_many, ..d() }).0, "landmarks");
     }
 }

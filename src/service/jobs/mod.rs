@@ -476,11 +476,9 @@ pub fn submit_correspondence(
     source: &StoredShape,
     target: &StoredShape,
 ) -> Result<(JobView, bool), JobError> {
+    super::limits::check_correspondence(config, &request, &source.validated, &target.validated)?;
     let o = &request.options;
     let k = o.refine_k.max(o.fit_k) * if o.partial { 2 } else { 1 };
-    if k > config.max_k {
-        return Err(JobError::Limit(Limit::Pairs(format!("refine_k = {k} is above --max-k {}", config.max_k))));
-    }
     // The eigenvectors of both shapes and the embeddings the nearest neighbours are searched in.
     let n = source.validated.shape.vertex_count().max(target.validated.shape.vertex_count());
     let held = n.saturating_mul(3 * k);
