@@ -145,7 +145,7 @@ impl Analysis {
                 function.as_ref().map_or(Ok(()), |f| check_per_vertex(v, "function", f))
             }
             Analysis::Gradient { function } => check_per_vertex(v, "function", function),
-            Analysis::Divergence { field } => {
+            Analysis::Divergence { field, .. } => {
                 if let Some(n) = elements(&v.shape) {
                     if field.len() != n {
                         return Err(AnalysisError::invalid_parameter(format!(
@@ -309,8 +309,8 @@ mod tests {
         assert!(refused(bump(-1.0).check_inputs(&v)).starts_with("width = -1"));
         assert!(bump(0.1).check_inputs(&v).is_ok());
         let field = vec![[0.0, 1e200, 0.0]; 80];
-        assert!(refused(Analysis::Divergence { field }.check_inputs(&v)).starts_with("field: element 0[1]"));
-        let short = Analysis::Divergence { field: vec![[0.0; 3]; 79] };
+        assert!(refused(Analysis::Divergence { field, mass: None }.check_inputs(&v)).starts_with("field: element 0[1]"));
+        let short = Analysis::Divergence { field: vec![[0.0; 3]; 79], mass: None };
         assert!(refused(short.check_inputs(&v)).starts_with("field: 79 vectors for 80 elements"));
     }
 

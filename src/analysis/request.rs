@@ -110,7 +110,7 @@ fn parse_operator(s: &str) -> Result<OperatorKind, String> {
         .ok_or_else(|| format!("unknown operator '{s}'; one of: {}", OperatorKind::ALL.map(|k| k.name()).join(", ")))
 }
 
-fn parse_mass(s: &str) -> Result<Mass, String> {
+pub(crate) fn parse_mass(s: &str) -> Result<Mass, String> {
     match Mass::from_name(s) {
         Some(m @ (Mass::Consistent | Mass::Lumped | Mass::Voronoi)) => Ok(m),
         _ => Err(format!("unknown mass '{s}'; one of: consistent, lumped, voronoi")),
@@ -522,10 +522,16 @@ pub enum Analysis {
         function: Vec<f64>,
     },
     /// The divergence of a per-element vector field (Def. 9.1) per vertex: integrated, (div X)_i = −Σ_f |f|
-    /// X_f·∇φ_i (so that div ∇u = −L u), and pointwise (divided by the lumped mass).
+    /// X_f·∇φ_i (so that div ∇u = −L u), and pointwise: the integrated divergence divided by the vertex's mass
+    /// (`mass`: its share of the area or volume).
     Divergence {
         /// One vector [x, y, z] per element of the validated mesh, in its order (as `gradient` returns them).
         field: Vec<[f64; 3]>,
+        /// The mass the pointwise divergence is taken over: lumped (default; a third of each incident triangle, a
+        /// quarter of each incident tetrahedron) or voronoi (triangle meshes: the mixed Voronoi areas, the cells the
+        /// cotan Laplacian integrates over, exact for div ∇x² on uniform grids where lumped is not).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        mass: Option<Mass>,
     },
     /// Laplacian eigenmap / GPS coordinates, with the Fiedler vector and bisection.
     Embed {

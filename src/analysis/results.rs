@@ -466,6 +466,10 @@ pub struct DivergenceSummary {
     /// `integrated`, `pointwise`.
     pub columns: Vec<&'static str>,
     pub definition: &'static str,
+    /// The mass the pointwise column is taken over: `lumped` (the default) or `voronoi`.
+    pub mass: &'static str,
+    /// What the pointwise value is, for this mass.
+    pub meaning: &'static str,
 }
 
 /// `trees`: the number of spanning trees (Kirchhoff's matrix-tree theorem).

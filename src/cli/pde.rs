@@ -126,6 +126,9 @@ pub struct DivergenceCmd {
     /// The field (.npy, one row [x, y, z] per element of the validated mesh, as `gradient` writes them).
     #[arg(long)]
     pub field: PathBuf,
+    /// The mass the pointwise divergence is taken over: lumped (default) or voronoi (triangle meshes).
+    #[arg(long, value_parser = crate::analysis::parse_mass)]
+    pub mass: Option<kac_core::operators::Mass>,
     #[command(flatten)]
     pub out: OutArgs,
 }
@@ -144,5 +147,5 @@ pub fn divergence(a: DivergenceCmd) -> Result<(), Failure> {
         });
     }
     let field = (0..rows).map(|r| [data[3 * r], data[3 * r + 1], data[3 * r + 2]]).collect();
-    emit(run(&v, &Analysis::Divergence { field }, &a.out)?, &a.out)
+    emit(run(&v, &Analysis::Divergence { field, mass: a.mass }, &a.out)?, &a.out)
 }

@@ -139,7 +139,7 @@ pub fn check_work(config: &Config, a: &Analysis, validated: &kac_core::Validated
         Analysis::Trees {} => (vec![], 1),
         // Per-element arrays: as many rows as elements, about 2 (triangles) to 6 (tets) per vertex.
         Analysis::Gradient { function } => (vec![("function", function.len())], 3 * 6),
-        Analysis::Divergence { field } => (vec![("field", field.len())], 2),
+        Analysis::Divergence { field, .. } => (vec![("field", field.len())], 2),
         Analysis::MeanCurvature {} => (vec![], 3),
         Analysis::Poisson { g, dirichlet_values, .. } => {
             (vec![("g", g.len()), ("dirichlet_values", dirichlet_values.as_ref().map_or(0, Vec::len))], 1)
