@@ -140,7 +140,7 @@ pub fn eigs(
         };
         let o = EigenOptions { k: k - z, ..options.clone() };
         let (single, mut plan) = match slicing::solve(pair, &o, sym, control, &deflation, &zero_values, head.as_ref())? {
-            slicing::Sliced::Solved(s) => (Some(s), None),
+            slicing::Sliced::Solved(s) => (Some(*s), None),
             slicing::Sliced::NotPlanned => (lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?, None),
             slicing::Sliced::GivenUp(reason) => (
                 lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?,

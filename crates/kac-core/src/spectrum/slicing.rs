@@ -415,7 +415,7 @@ pub(crate) fn plan(pair: &SparsePair, deflated: usize, wanted: usize, o: &EigenO
 /// caller then solves in one run and reports why).
 pub(crate) enum Sliced {
     NotPlanned,
-    Solved(Spectrum),
+    Solved(Box<Spectrum>),
     GivenUp(String),
 }
 
@@ -755,7 +755,7 @@ pub(crate) fn solve(
     }
     s.stats.slices = reports;
     s.stats.timings.iteration_s = t0.elapsed().as_secs_f64();
-    Ok(Sliced::Solved(s))
+    Ok(Sliced::Solved(Box::new(s)))
 }
 
 /// The slices' pairs in one ascending spectrum after `head`'s (the known zero modes), with each edge's neighbourhood
