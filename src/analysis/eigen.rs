@@ -2,11 +2,43 @@
 
 use super::*;
 
-/// The cache key of a spectrum: operator and solver parameters (the shape id is the caller's).
+/// The cache key of a spectrum: the operator and what of the solver changes the pairs returned (the shape id is the
+/// caller's). Of the solver, the tolerance bounds every pair's residual and `verify` whether completeness is
+/// proven (an unverified spectrum must not serve a request that asks for the check); the method, shift, block,
+/// subspace, slices and threads change how the same pairs are found, not which, so they share one entry.
 pub fn spectrum_key(op: &OperatorSpec, solver: &SolverSpec) -> String {
-    // An unverified spectrum must not serve a request that asks for the check.
-    serde_json::to_string(&json!({ "operator": op, "solver": solver, "version": ALGORITHM_VERSION }))
-        .unwrap_or_default()
+    serde_json::to_string(&json!({
+        "operator": op,
+        "solver": { "tol": solver.tol, "verify": solver.verify },
+        "version": ALGORITHM_VERSION
+    }))
+    .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two requests that differ only in how the pairs are found (block, subspace, slices, method, shift) share a
+    /// cache entry; a tolerance or the completeness check apart, they do not.
+    #[test]
+    fn the_cache_key_holds_only_what_changes_the_pairs() {
+        let op = OperatorSpec::default();
+        let base = SolverSpec::default();
+        let key = spectrum_key(&op, &base);
+        let how: Vec<SolverSpec> = vec![
+            SolverSpec { block: Some(16), ..base.clone() },
+            SolverSpec { subspace: Some(300), ..base.clone() },
+            SolverSpec { slices: Some(4), ..base.clone() },
+            SolverSpec { method: SolverMethod::Dense, ..base.clone() },
+            SolverSpec { sigma: Some(-0.5), ..base.clone() },
+        ];
+        for s in how {
+            assert_eq!(spectrum_key(&op, &s), key, "{s:?}");
+        }
+        assert_ne!(spectrum_key(&op, &SolverSpec { tol: base.tol * 10.0, ..base.clone() }), key);
+        assert_ne!(spectrum_key(&op, &SolverSpec { verify: !base.verify, ..base.clone() }), key);
+    }
 }
 
 /// Computed eigenpairs with the operator they belong to.
