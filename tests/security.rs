@@ -692,3 +692,383 @@ fn a_read_body_no_longer_holds_the_budget() {
     assert!(second.status == 200 || second.status == 201, "{} {}", second.status, second.body);
     assert_eq!(waiting.join().unwrap(), 200);
 }
+
+// Issue 47: archives inside the memory budget, and every input of the HTTP boundary bounded.
+
+/// A multipart/form-data body of (part name, file name, bytes): (content type, body).
+fn multipart(parts: &[(&str, Option<&str>, &[u8])]) -> (String, Vec<u8>) {
+    let boundary = "kac-security-boundary-5d1e";
+    let mut body = vec![];
+    for (name, file, bytes) in parts {
+        body.extend(format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").bytes());
+        if let Some(f) = file {
+            body.extend(format!("; filename=\"{f}\"").bytes());
+        }
+        body.extend(b"\r\n\r\n");
+        body.extend(*bytes);
+        body.extend(b"\r\n");
+    }
+    body.extend(format!("--{boundary}--\r\n").bytes());
+    (format!("multipart/form-data; boundary={boundary}"), body)
+}
+
+fn bulk(s: &Server, parts: &[(&str, Option<&str>, &[u8])]) -> server::Reply {
+    let (ct, body) = multipart(parts);
+    reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct).send_bytes(&body))
+}
+
+/// A deflated zip archive of (name, bytes).
+fn zipped(entries: &[(&str, &[u8])]) -> Vec<u8> {
+    let mut out = std::io::Cursor::new(vec![]);
+    let mut z = zip::ZipWriter::new(&mut out);
+    let o = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+    for (name, bytes) in entries {
+        z.start_file(*name, o).unwrap();
+        z.write_all(bytes).unwrap();
+    }
+    z.finish().unwrap();
+    out.into_inner()
+}
+
+/// A problem's `detail`.
+fn detail(r: &server::Reply) -> String {
+    r.body["detail"].as_str().unwrap_or("").to_string()
+}
+
+/// The peak resident memory of a process so far (VmHWM), in bytes.
+fn peak_rss(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    let kib = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok());
+    kib.unwrap_or(0) * 1024
+}
+
+/// With `--max-body-bytes 4194304 --max-body-memory-bytes 8388608`, a 64 KB zip holding a 61 MiB entry is refused
+/// (the archives of a request expand to at most the body limit, not 64 MiB), naming the entry. Sixteen such
+/// requests and sixteen of archives that do expand (sixteen entries of 1 MiB each, refused after four) at once:
+/// every one answered 400 or 503 `memory-busy` with Retry-After, the server's peak memory a few budgets above its
+/// start (not 16 × 61 MiB), `/livez` answering throughout, and the budget whole again afterwards.
+#[test]
+fn archives_expand_within_the_body_limit_and_the_memory_budget() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(
+        &root.path().join("data"),
+        &["--max-body-bytes", "4194304", "--max-body-memory-bytes", "8388608"],
+    );
+    let zeros = vec![0u8; 61 << 20];
+    let bomb = zipped(&[("big.off", &zeros)]);
+    assert!(bomb.len() < 100_000, "{} bytes", bomb.len());
+    let mib = vec![b'0'; 1 << 20];
+    let names: Vec<String> = (0..16).map(|i| format!("part{i}.off")).collect();
+    let many = zipped(&names.iter().map(|n| (n.as_str(), &mib[..])).collect::<Vec<_>>());
+    drop(zeros);
+
+    let r = bulk(&s, &[("file", Some("bomb.zip"), &bomb)]);
+    assert_problem(&r, 400, "invalid-request");
+    assert!(detail(&r).contains("bomb.zip/big.off") && detail(&r).contains("--max-body-bytes (4194304"), "{}", r.body);
+    let r = bulk(&s, &[("file", Some("many.zip"), &many)]);
+    assert_problem(&r, 400, "invalid-request");
+    assert!(detail(&r).contains("many.zip/part4.off"), "the fifth MiB is beyond the limit: {}", r.body);
+
+    let before = peak_rss(s.child.id());
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let livez = std::thread::spawn({
+        let (url, done) = (s.url("/livez"), done.clone());
+        move || {
+            let mut slowest = Duration::ZERO;
+            while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                let t = Instant::now();
+                assert_eq!(reply(agent().get(&url).call()).status, 200);
+                slowest = slowest.max(t.elapsed());
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            slowest
+        }
+    });
+    let senders: Vec<_> = (0..32)
+        .map(|i| {
+            let (url, body) = (s.url("/v1/shapes/bulk"), if i % 2 == 0 { bomb.clone() } else { many.clone() });
+            std::thread::spawn(move || {
+                let (ct, body) = multipart(&[("file", Some("a.zip"), &body)]);
+                reply(agent().post(&url).set("content-type", &ct).send_bytes(&body))
+            })
+        })
+        .collect();
+    let answers: Vec<server::Reply> = senders.into_iter().map(|t| t.join().unwrap()).collect();
+    done.store(true, std::sync::atomic::Ordering::Relaxed);
+    let slowest = livez.join().unwrap();
+    let peak = peak_rss(s.child.id());
+    let mut busy = 0;
+    for r in &answers {
+        match r.status {
+            400 => assert_problem(r, 400, "invalid-request"),
+            503 => {
+                assert_problem(r, 503, "memory-busy");
+                assert!(r.retry_after.is_some(), "{}", r.body);
+                busy += 1;
+            }
+            _ => panic!("{} {}", r.status, r.body),
+        }
+    }
+    eprintln!(
+        "32 archives at once: {busy} answered memory-busy; peak RSS {} MiB (before {} MiB); slowest /livez {:?}",
+        peak >> 20,
+        before >> 20,
+        slowest
+    );
+    // Each request holds at most 4 MiB of expanded bytes and all of them at most the 8 MiB budget; the rest is
+    // the bodies, decompressors and the allocator's slack.
+    assert!(peak <= before + (64 << 20), "peak RSS {} MiB, {} MiB before", peak >> 20, before >> 20);
+    assert!(slowest < Duration::from_secs(2), "/livez took {slowest:?}");
+    // Every reservation was given back: an archive that fits is stored.
+    let ok = zipped(&[("one.off", &off(1))]);
+    let r = bulk(&s, &[("file", Some("ok.zip"), &ok)]);
+    assert_eq!((r.status, r.body["created"].as_u64()), (200, Some(1)), "{}", r.body);
+}
+
+/// An archive inside an archive is refused naming it, whether it says so by its name or only by its first bytes;
+/// never parsed as a shape (it was read as an STL claiming 522,833,747 triangles).
+#[test]
+fn an_archive_inside_an_archive_is_refused_by_name() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(&root.path().join("data"), &[]);
+    let inner = zipped(&[("a.off", &off(1))]);
+    for (name, bytes) in [("inner.zip", &inner[..]), ("inner.stl", &inner[..]), ("Inner.ZIP", b"not even a zip")] {
+        let outer = zipped(&[("fine.off", &off(1)), (name, bytes)]);
+        let r = bulk(&s, &[("file", Some("outer.zip"), &outer)]);
+        assert_problem(&r, 400, "invalid-request");
+        assert!(
+            detail(&r).contains(&format!("outer.zip/{name}")) && detail(&r).contains("archive inside an archive"),
+            "{}",
+            r.body
+        );
+    }
+    assert_eq!(
+        reply(agent().get(&s.url("/v1/shapes")).call()).body["total"],
+        0,
+        "nothing of a refused archive is stored"
+    );
+}
+
+/// A zip whose central directory names `a.off` twice: the zip library keeps one entry per name, so one file would
+/// be dropped while the answer said `created: 1, failed: 0`. The archive is refused naming the entry.
+#[test]
+fn an_archive_naming_an_entry_twice_is_refused_naming_it() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(&root.path().join("data"), &[]);
+    let mut z = zipped(&[("a.off", &off(1)), ("b.off", &off(2))]);
+    // The second central directory header's name, changed to the first's.
+    let headers: Vec<usize> = z.windows(4).enumerate().filter(|(_, w)| *w == b"PK\x01\x02").map(|(i, _)| i).collect();
+    assert_eq!(headers.len(), 2);
+    assert_eq!(&z[headers[1] + 46..headers[1] + 51], b"b.off");
+    z[headers[1] + 46] = b'a';
+    let r = bulk(&s, &[("file", Some("twice.zip"), &z)]);
+    assert_problem(&r, 400, "invalid-request");
+    assert!(detail(&r).contains("'a.off' is listed more than once") && detail(&r).contains("twice.zip"), "{}", r.body);
+    assert_eq!(reply(agent().get(&s.url("/v1/shapes")).call()).body["total"], 0);
+}
+
+/// The parts of a bulk upload: a second `options` part (the last won silently) and a part whose file name is
+/// empty (taken as a shape) are refused with 400 naming the part; a file stored whose tags are refused (it would
+/// carry 33) is counted `failed` with its problem, not `existing`.
+#[test]
+fn bulk_parts_are_each_accounted_for() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(&root.path().join("data"), &[]);
+    let a = off(1);
+    let r = bulk(
+        &s,
+        &[
+            ("options", None, br#"{"tags": ["x"]}"#),
+            ("options", None, br#"{"tags": ["y"]}"#),
+            ("file", Some("a.off"), &a),
+        ],
+    );
+    assert_problem(&r, 400, "invalid-request");
+    assert_eq!(r.body["parameter"], "options", "{}", r.body);
+    let r = bulk(&s, &[("shape", Some(""), &a)]);
+    assert_problem(&r, 400, "invalid-request");
+    assert_eq!(r.body["parameter"], "shape", "{}", r.body);
+    assert!(detail(&r).contains("empty file name"), "{}", r.body);
+    assert_eq!(reply(agent().get(&s.url("/v1/shapes")).call()).body["total"], 0);
+
+    // A stored shape with 32 tags, then the same file in bulk with one more tag.
+    let id = upload(&s, &a, "?format=off").body["id"].as_str().unwrap().to_string();
+    let tags: Vec<String> = (0..32).map(|i| format!("t{i}")).collect();
+    let put = reply(agent().put(&s.url(&format!("/v1/shapes/{id}/tags"))).send_json(json!({ "tags": tags })));
+    assert_eq!(put.status, 200, "{}", put.body);
+    let r =
+        bulk(&s, &[("options", None, br#"{"tags": ["one-more"], "fingerprint": null}"#), ("file", Some("a.off"), &a)]);
+    assert_eq!(r.status, 200, "{}", r.body);
+    let counts = ["created", "existing", "failed", "unstarted"].map(|c| r.body[c].as_u64().unwrap());
+    assert_eq!(counts, [0, 0, 1, 0], "{}", r.body);
+    let file = &r.body["files"][0];
+    assert_eq!(
+        (file["status"].as_u64(), file["problem"]["code"].as_str()),
+        (Some(400), Some("invalid-request")),
+        "{file}"
+    );
+    assert!(file["problem"]["detail"].as_str().unwrap().contains("33 tags"), "{file}");
+    assert_eq!(file["shape"]["id"], id.as_str(), "{file}");
+}
+
+/// A key named twice in one JSON object (the last silently won) is 400 `invalid-json` naming the key and where it
+/// is, in every JSON the service reads: request bodies of every route, nested objects, the options part of a bulk
+/// upload, the JSON part of a multipart job and the synchronous form's `analysis`.
+#[test]
+fn a_json_key_given_twice_is_refused_naming_it() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(&root.path().join("data"), &[]);
+    let id = upload(&s, &off(1), "?format=off").body["id"].as_str().unwrap().to_string();
+    let raw = |method: &str, path: &str, body: String| {
+        reply(agent().request(method, &s.url(path)).set("content-type", "application/json").send_string(&body))
+    };
+    let check = |r: &server::Reply, pointer: &str, key: &str| {
+        assert_problem(r, 400, "invalid-json");
+        assert_eq!((r.body["pointer"].as_str(), r.body["field"].as_str()), (Some(pointer), Some(key)), "{}", r.body);
+        assert!(detail(r).contains(&format!("`{key}`")), "{}", r.body);
+    };
+    let cases = [
+        ("POST", "/v1/jobs", format!(r#"{{"shape_id": "{id}", "analysis": "spectrum", "k": 4, "k": 5}}"#), "/k", "k"),
+        (
+            "POST",
+            "/v1/jobs",
+            format!(
+                r#"{{"shape_id": "{id}", "analysis": "hks", "operator": {{"boundary": "neumann", "boundary": "dirichlet"}}}}"#
+            ),
+            "/operator/boundary",
+            "boundary",
+        ),
+        (
+            "POST",
+            "/v1/jobs",
+            format!(r#"{{"shape_id": "{id}", "shape_id": "{id}", "analysis": "spectrum"}}"#),
+            "/shape_id",
+            "shape_id",
+        ),
+        ("POST", "/v1/search?wait=0", format!(r#"{{"shape_id": "{id}", "k": 8, "k": 9}}"#), "/k", "k"),
+        (
+            "POST",
+            "/v1/compare?wait=0",
+            format!(r#"{{"shape_ids": ["{id}"], "neighbours": 1, "neighbours": 2}}"#),
+            "/neighbours",
+            "neighbours",
+        ),
+        (
+            "POST",
+            "/v1/correspondence?wait=0",
+            format!(r#"{{"source_id": "{id}", "target_id": "{id}", "transfer": {{"labels": true, "labels": false}}}}"#),
+            "/transfer/labels",
+            "labels",
+        ),
+    ];
+    let tags_path = format!("/v1/shapes/{id}/tags");
+    let cases: Vec<(&str, &str, String, &str, &str)> = cases
+        .into_iter()
+        .chain([("PUT", tags_path.as_str(), r#"{"tags": ["a"], "tags": ["b"]}"#.to_string(), "/tags", "tags")])
+        .collect();
+    for (method, path, body, pointer, key) in &cases {
+        check(&raw(method, path, body.clone()), pointer, key);
+    }
+    // Nested objects whose keys are each given once pass.
+    let ok = raw(
+        "POST",
+        "/v1/jobs",
+        format!(
+            r#"{{"shape_id": "{id}", "analysis": "spectrum", "k": 4, "solver": {{"tol": 1e-9, "verify": false}}}}"#
+        ),
+    );
+    assert!(ok.status == 200 || ok.status == 202, "{}", ok.body);
+
+    let r = bulk(&s, &[("options", None, br#"{"tags": ["a"], "tags": ["b"]}"#), ("file", Some("a.off"), &off(1))]);
+    check(&r, "/tags", "tags");
+    assert!(detail(&r).starts_with("the options part"), "{}", r.body);
+    let request = format!(r#"{{"shape_id": "{id}", "analysis": "spectrum", "k": 3, "k": 4}}"#);
+    let (ct, body) = multipart(&[("request", None, request.as_bytes())]);
+    check(&reply(agent().post(&s.url("/v1/jobs")).set("content-type", &ct).send_bytes(&body)), "/k", "k");
+    let analysis = r#"{"analysis": "spectrum", "k": 3, "k": 4}"#;
+    let (ct, body) = multipart(&[("file", Some("a.off"), &off(1)), ("analysis", None, analysis.as_bytes())]);
+    check(&reply(agent().post(&s.url("/v1/analyze?wait=0")).set("content-type", &ct).send_bytes(&body)), "/k", "k");
+    let q: String = form_urlencoded::byte_serialize(analysis.as_bytes()).collect();
+    let r = reply(agent().post(&s.url(&format!("/v1/analyze?format=off&wait=0&analysis={q}"))).send_bytes(&off(1)));
+    check(&r, "/k", "k");
+}
+
+/// Query parameters are parsed into what they name: a negative `wait` (it answered 200), a job status, analysis
+/// or shape id that names nothing (they answered 200 with an empty page) and a parameter given twice are 400
+/// `invalid-request` with the `parameter`; the values that do name something still filter.
+#[test]
+fn query_values_that_name_nothing_are_refused_naming_the_parameter() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(&root.path().join("data"), &[]);
+    let (shape, job) = shape_and_result(&s);
+    let refused = |r: server::Reply, parameter: &str| {
+        assert_problem(&r, 400, "invalid-request");
+        assert_eq!(r.body["parameter"], parameter, "{}", r.body);
+        assert!(detail(&r).contains(parameter), "{}", r.body);
+    };
+    let analysis: String = form_urlencoded::byte_serialize(br#"{"analysis":"spectrum","k":3}"#).collect();
+    for wait in ["-1", "-0.5", "NaN", "inf", "-inf", "soon"] {
+        let r = reply(
+            agent()
+                .post(&s.url(&format!("/v1/analyze?format=off&wait={wait}&analysis={analysis}")))
+                .send_bytes(&off(1)),
+        );
+        refused(r, "wait");
+        let r =
+            reply(agent().post(&s.url(&format!("/v1/compare?wait={wait}"))).send_json(json!({ "shape_ids": [shape] })));
+        refused(r, "wait");
+        let r = reply(agent().post(&s.url(&format!("/v1/search?wait={wait}"))).send_json(json!({ "shape_id": shape })));
+        refused(r, "wait");
+        let r = reply(
+            agent()
+                .post(&s.url(&format!("/v1/correspondence?wait={wait}")))
+                .send_json(json!({ "source_id": shape, "target_id": shape })),
+        );
+        refused(r, "wait");
+    }
+    let list = |q: &str| reply(agent().get(&s.url(&format!("/v1/jobs?{q}"))).call());
+    refused(list("status=bogus"), "status");
+    refused(list("analysis=bogus"), "analysis");
+    refused(list("shape_id=zzz"), "shape_id");
+    refused(list(&format!("shape_id={}", shape.to_uppercase())), "shape_id");
+    refused(list("status=succeeded&status=failed"), "status");
+    refused(list("limit=many"), "limit");
+    for q in ["status=succeeded".to_string(), "analysis=spectrum".into(), format!("shape_id={shape}")] {
+        let r = list(&q);
+        assert_eq!((r.status, r.body["items"][0]["id"].as_str()), (200, Some(job.as_str())), "{q}: {}", r.body);
+    }
+    for q in ["status=failed", "analysis=compare", "analysis=hks"] {
+        assert_eq!(list(q).body["total"], 0, "{q}");
+    }
+}
+
+/// A multipart part read once, sent twice (the first or the last was silently dropped), is 400 `invalid-request`
+/// naming it: a second file of a single upload, the `analysis` of `/v1/analyze`, the `request` of a job.
+#[test]
+fn a_part_sent_twice_is_refused_naming_it() {
+    let root = tempfile::tempdir().unwrap();
+    let s = Server::start(&root.path().join("data"), &[]);
+    let (a, b) = (off(1), off(2));
+    let post = |path: &str, parts: &[(&str, Option<&str>, &[u8])]| {
+        let (ct, body) = multipart(parts);
+        reply(agent().post(&s.url(path)).set("content-type", &ct).send_bytes(&body))
+    };
+    let refused = |r: server::Reply, parameter: &str| {
+        assert_problem(&r, 400, "invalid-request");
+        assert_eq!(r.body["parameter"], parameter, "{}", r.body);
+    };
+    refused(post("/v1/shapes", &[("file", Some("a.off"), &a), ("file", Some("b.off"), &b)]), "file");
+    let spectrum = br#"{"analysis": "spectrum", "k": 3}"#;
+    let parts: [(&str, Option<&str>, &[u8]); 3] =
+        [("file", Some("a.off"), &a), ("analysis", None, spectrum), ("analysis", None, br#"{"analysis": "hks"}"#)];
+    refused(post("/v1/analyze?wait=0", &parts), "analysis");
+    let request = json!({ "shape_id": "0".repeat(64), "analysis": "spectrum" }).to_string();
+    refused(
+        post("/v1/jobs", &[("request", None, request.as_bytes()), ("request", None, request.as_bytes())]),
+        "request",
+    );
+    assert_eq!(reply(agent().get(&s.url("/v1/shapes")).call()).body["total"], 0);
+}

@@ -4,6 +4,9 @@
 //! flight may hold together (`--max-body-memory-bytes`: beyond it 503 `memory-busy` with Retry-After), and a floor
 //! on the rate a body arrives at (`--min-body-rate-bytes-per-s` after `--body-read-timeout-s` of grace), so that
 //! clients trickling a byte now and then cannot hold connections for ever. No handler sees a body otherwise.
+//!
+//! A handler that expands a body into more memory (a bulk upload's `.zip` archives) reserves what it allocates
+//! against the same budget as it allocates it ([`Reservation`]), and holds it while it holds those bytes.
 
 use super::error::ApiError;
 use super::AppState;
@@ -15,7 +18,7 @@ use axum::response::Response;
 use futures_util::StreamExt;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio::sync::Semaphore;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
 /// The bytes of request bodies in flight, counted in KiB (a semaphore's permits).
 pub struct BodyBudget {
@@ -27,6 +30,47 @@ impl BodyBudget {
     pub fn new(bytes: usize) -> Self {
         let kib = bytes.div_ceil(1024).clamp(1, Semaphore::MAX_PERMITS.min(u32::MAX as usize));
         BodyBudget { permits: Arc::new(Semaphore::new(kib)), bytes }
+    }
+
+    /// An empty reservation of this budget, to grow as memory is allocated.
+    pub fn reservation(&self) -> Reservation {
+        Reservation { permits: self.permits.clone(), held: None, kib: 0, budget: self.bytes }
+    }
+}
+
+/// Memory a handler holds against the body budget beyond the body itself (bytes expanded from an archive):
+/// grown before each allocation, never waiting (503 `memory-busy` when the budget has no room), released when
+/// dropped.
+pub struct Reservation {
+    permits: Arc<Semaphore>,
+    held: Option<OwnedSemaphorePermit>,
+    /// KiB held.
+    kib: usize,
+    budget: usize,
+}
+
+impl Reservation {
+    /// Grows the reservation to cover `bytes` in all (it never shrinks): 503 `memory-busy` when the budget has not
+    /// that much room left now.
+    pub fn cover(&mut self, bytes: usize) -> Result<(), ApiError> {
+        let want = bytes.div_ceil(1024);
+        if want <= self.kib {
+            return Ok(());
+        }
+        let busy = || ApiError::MemoryBusy { budget: self.budget, retry_after_s: 2 };
+        let more = u32::try_from(want - self.kib).map_err(|_| busy())?;
+        let permit = self.permits.clone().try_acquire_many_owned(more).map_err(|_| busy())?;
+        match &mut self.held {
+            Some(held) => held.merge(permit),
+            None => self.held = Some(permit),
+        }
+        self.kib = want;
+        Ok(())
+    }
+
+    /// The bytes reserved (whole KiB).
+    pub fn bytes(&self) -> usize {
+        self.kib * 1024
     }
 }
 
@@ -112,7 +156,7 @@ pub async fn guard(State(st): State<AppState>, req: Request, next: Next) -> Resu
 /// The body as a stream that holds the memory reservation `permit` until it ends, and (with a `floor` above 0)
 /// fails with [`TooSlow`] when, `grace` after it began, fewer than `floor` bytes per second of the time since have
 /// arrived.
-fn guarded(body: Body, floor: f64, grace: Duration, permit: tokio::sync::OwnedSemaphorePermit) -> Body {
+fn guarded(body: Body, floor: f64, grace: Duration, permit: OwnedSemaphorePermit) -> Body {
     let start = tokio::time::Instant::now();
     let stream = body.into_data_stream();
     let state = (stream, 0u64, Some(permit));
@@ -141,4 +185,28 @@ fn guarded(body: Body, floor: f64, grace: Duration, permit: tokio::sync::OwnedSe
         }
     });
     Body::from_stream(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_reservation_grows_within_the_budget_and_is_released_when_dropped() {
+        let budget = BodyBudget::new(10 * 1024);
+        let mut a = budget.reservation();
+        a.cover(3000).unwrap();
+        a.cover(1000).unwrap();
+        assert_eq!(a.bytes(), 3 * 1024);
+        a.cover(6 * 1024).unwrap();
+        let mut b = budget.reservation();
+        assert!(matches!(b.cover(5 * 1024), Err(ApiError::MemoryBusy { budget: 10240, .. })));
+        b.cover(4 * 1024).unwrap();
+        assert!(b.cover(4 * 1024 + 1).is_err(), "one byte more is a KiB more");
+        drop(a);
+        b.cover(10 * 1024).unwrap();
+        assert_eq!(budget.permits.available_permits(), 0);
+        drop(b);
+        assert_eq!(budget.permits.available_permits(), 10);
+    }
 }

@@ -34,6 +34,18 @@ pub enum ApiError {
     },
     /// A field or query parameter the OpenAPI document does not declare where it was sent (422).
     UnknownField(Box<super::strict::Unknown>),
+    /// A query parameter or multipart part whose value is refused, or that was sent twice (400 `invalid-request`,
+    /// with the `parameter`).
+    InvalidParameter {
+        parameter: String,
+        detail: String,
+    },
+    /// A JSON object that names a key twice, in the request body or a JSON part (`within`), 400 `invalid-json`
+    /// with its `pointer` and `field`.
+    DuplicateKey {
+        within: String,
+        key: Box<super::strict::DuplicateKey>,
+    },
     UnsupportedMediaType {
         detail: String,
     },
@@ -85,7 +97,8 @@ pub enum ApiError {
     BodyTooSlow {
         detail: String,
     },
-    /// Request bodies in flight hold --max-body-memory-bytes (503 `memory-busy`, Retry-After).
+    /// Request bodies in flight, and the bytes expanded from archives, hold --max-body-memory-bytes (503
+    /// `memory-busy`, Retry-After).
     MemoryBusy {
         budget: usize,
         retry_after_s: u64,
@@ -159,6 +172,15 @@ impl ApiError {
             ApiError::InvalidJson { detail } => {
                 (StatusCode::BAD_REQUEST, "invalid-json", "Bad request", detail.clone())
             }
+            ApiError::InvalidParameter { parameter, detail } => {
+                extra.insert("parameter".into(), parameter.clone().into());
+                (StatusCode::BAD_REQUEST, "invalid-request", "Bad request", detail.clone())
+            }
+            ApiError::DuplicateKey { within, key } => {
+                extra.insert("pointer".into(), key.pointer.clone().into());
+                extra.insert("field".into(), key.key.clone().into());
+                (StatusCode::BAD_REQUEST, "invalid-json", "Bad request", format!("{within}: {}", key.detail()))
+            }
             ApiError::UnknownField(u) => {
                 extra.insert("pointer".into(), u.pointer.clone().into());
                 extra.insert("field".into(), u.name.clone().into());
@@ -192,8 +214,8 @@ impl ApiError {
                     "memory-busy",
                     "Request bodies in flight hold their memory budget",
                     format!(
-                        "request bodies being received hold the budget of {budget} bytes (--max-body-memory-bytes); \
-                         retry after Retry-After seconds"
+                        "request bodies being received and archives being expanded hold the budget of {budget} bytes \
+                         (--max-body-memory-bytes); retry after Retry-After seconds"
                     ),
                 )
             }
@@ -341,7 +363,11 @@ pub const CODES: &[(&str, &str)] = &[
     ("route-not-found", "No such route."),
     ("method-not-allowed", "The method is not allowed on this resource."),
     ("body-too-large", "The request body exceeds --max-body-bytes."),
-    ("invalid-json", "The request body is not valid JSON for this endpoint."),
+    (
+        "invalid-json",
+        "The request body (or a JSON part or parameter) is not valid JSON for this endpoint, or names a key twice in \
+         one object (with `pointer` and `field`).",
+    ),
     (
         "invalid-request",
         "A parameter is missing or malformed (400), or a field or query parameter is not one this request takes \
@@ -351,7 +377,8 @@ pub const CODES: &[(&str, &str)] = &[
     ("queue-full", "The job queue is at capacity; retry after Retry-After seconds."),
     (
         "memory-busy",
-        "Request bodies being received hold --max-body-memory-bytes together; retry after Retry-After seconds.",
+        "Request bodies being received and archives being expanded hold --max-body-memory-bytes together; retry \
+         after Retry-After seconds.",
     ),
     ("k-too-large", "k exceeds the configured limit (--max-k)."),
     ("body-timeout", "The request body paused for longer than --body-read-timeout-s."),
@@ -479,6 +506,11 @@ mod tests {
             ApiError::invalid_request("m"),
             ApiError::invalid_json("m"),
             ApiError::UnknownField(Box::new(unknown)),
+            ApiError::InvalidParameter { parameter: "wait".into(), detail: "m".into() },
+            ApiError::DuplicateKey {
+                within: "the request body".into(),
+                key: Box::new(crate::service::strict::DuplicateKey { pointer: "/k".into(), key: "k".into() }),
+            },
             ApiError::UnsupportedMediaType { detail: "m".into() },
             ApiError::QueueFull { capacity: 1, retry_after_s: 1 },
             ApiError::MemoryBusy { budget: 1, retry_after_s: 1 },
@@ -508,6 +540,8 @@ mod tests {
                 | ApiError::InvalidRequest { .. }
                 | ApiError::InvalidJson { .. }
                 | ApiError::UnknownField(_)
+                | ApiError::InvalidParameter { .. }
+                | ApiError::DuplicateKey { .. }
                 | ApiError::UnsupportedMediaType { .. }
                 | ApiError::QueueFull { .. }
                 | ApiError::KTooLarge { .. }

@@ -8,10 +8,17 @@
 //! whose branches are objects tagged by a one-value `enum` property (an internally tagged enum such as
 //! `Analysis`), the branch named by the value's tag is taken; a `oneOf` that wraps one object schema (`Option<T>`,
 //! a documented default) is that schema. An object schema without declared properties (free-form JSON, maps) is
-//! not checked. Depends on the OpenAPI document only; no HTTP types.
+//! not checked.
+//!
+//! No object may name a key twice ([`duplicate_key`]): a JSON parser keeps one of them (serde_json's `Value` the
+//! last) and the other would be dropped without a word, so every JSON the service reads (bodies, multipart parts,
+//! `?analysis=`) is walked for repeats before it is parsed. Depends on the OpenAPI document and serde only; no
+//! HTTP types.
 
+use serde::de::{DeserializeSeed, Deserializer, Error as _, MapAccess, SeqAccess, Visitor};
 use serde_json::{Map, Value};
-use std::collections::BTreeSet;
+use std::cell::RefCell;
+use std::collections::{BTreeSet, HashSet};
 use std::sync::OnceLock;
 
 /// A field or parameter the document does not declare where it was sent.
@@ -55,6 +62,105 @@ impl Unknown {
         }
         d
     }
+}
+
+/// A key that appears twice in one JSON object.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DuplicateKey {
+    /// JSON pointer (RFC 6901) of the repeated member: its object's pointer and the key.
+    pub pointer: String,
+    pub key: String,
+}
+
+impl DuplicateKey {
+    pub fn detail(&self) -> String {
+        format!("the key `{}` appears more than once at {}: give each key once in an object", self.key, self.pointer)
+    }
+}
+
+/// Where the walker is: a path of object keys and array indices, rendered as a JSON pointer only when a repeat is
+/// found (a fingerprint of a million numbers builds no million strings).
+enum Step<'p> {
+    Root,
+    Key(&'p Step<'p>, &'p str),
+    Index(&'p Step<'p>, usize),
+}
+
+impl Step<'_> {
+    fn pointer(&self) -> String {
+        match self {
+            Step::Root => String::new(),
+            Step::Key(up, k) => format!("{}/{}", up.pointer(), escape(k)),
+            Step::Index(up, i) => format!("{}/{i}", up.pointer()),
+        }
+    }
+}
+
+/// Walks one JSON value, remembering the first repeated key it meets (and stopping there).
+struct NoRepeats<'p> {
+    at: &'p Step<'p>,
+    found: &'p RefCell<Option<DuplicateKey>>,
+}
+
+impl<'de> DeserializeSeed<'de> for NoRepeats<'_> {
+    type Value = ();
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> Visitor<'de> for NoRepeats<'_> {
+    type Value = ();
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("any JSON value")
+    }
+    fn visit_bool<E>(self, _: bool) -> Result<(), E> {
+        Ok(())
+    }
+    fn visit_i64<E>(self, _: i64) -> Result<(), E> {
+        Ok(())
+    }
+    fn visit_u64<E>(self, _: u64) -> Result<(), E> {
+        Ok(())
+    }
+    fn visit_f64<E>(self, _: f64) -> Result<(), E> {
+        Ok(())
+    }
+    fn visit_str<E>(self, _: &str) -> Result<(), E> {
+        Ok(())
+    }
+    fn visit_unit<E>(self) -> Result<(), E> {
+        Ok(())
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        let mut i = 0;
+        while seq.next_element_seed(NoRepeats { at: &Step::Index(self.at, i), found: self.found })?.is_some() {
+            i += 1;
+        }
+        Ok(())
+    }
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        let mut seen: HashSet<String> = HashSet::new();
+        while let Some(key) = map.next_key::<String>()? {
+            if seen.contains(&key) {
+                let pointer = Step::Key(self.at, &key).pointer();
+                *self.found.borrow_mut() = Some(DuplicateKey { pointer, key });
+                return Err(A::Error::custom("a repeated key"));
+            }
+            map.next_value_seed(NoRepeats { at: &Step::Key(self.at, &key), found: self.found })?;
+            seen.insert(key);
+        }
+        Ok(())
+    }
+}
+
+/// The first key repeated within one object of the JSON text, if any. Text that is not JSON has none (the parser
+/// that reads it next names its error); nesting is bounded by serde_json's recursion limit.
+pub fn duplicate_key(json: &[u8]) -> Option<DuplicateKey> {
+    let found = RefCell::new(None);
+    let mut de = serde_json::Deserializer::from_slice(json);
+    let _ = NoRepeats { at: &Step::Root, found: &found }.deserialize(&mut de);
+    found.into_inner()
 }
 
 /// The served OpenAPI document as JSON (built once).
@@ -379,6 +485,19 @@ mod tests {
         let bad = json!({ "shape_id": "x", "analysis": "wave", "times": [0.1], "sourse": 3 });
         let e = check_body(&bad, "JobRequest").unwrap_err();
         assert_eq!(e.suggestion.as_deref(), Some("source"));
+    }
+
+    #[test]
+    fn repeated_keys_are_found_at_any_depth() {
+        assert_eq!(duplicate_key(br#"{"a": 1, "b": [1, {"c": 2}], "d": {"e": {}}}"#), None);
+        assert_eq!(duplicate_key(br#"{"k": 1, "k": 2}"#).map(|d| d.pointer), Some("/k".into()));
+        let d = duplicate_key(br#"{"options": [0, {"x/y": 1, "n": 2, "x/y": 3}]}"#).unwrap();
+        assert_eq!((d.pointer.as_str(), d.key.as_str()), ("/options/1/x~1y", "x/y"));
+        // The same key in sibling objects is no repeat; text that is not JSON is left to its parser.
+        assert_eq!(duplicate_key(br#"[{"a": 1}, {"a": 2}]"#), None);
+        assert_eq!(duplicate_key(br#"{"a": "#), None);
+        // Keys are compared decoded: "\u0061" is "a".
+        assert_eq!(duplicate_key(br#"{"a": 1, "\u0061": 2}"#).map(|d| d.key), Some("a".into()));
     }
 
     #[test]

@@ -124,8 +124,7 @@ pub(crate) async fn create_job(State(st): State<AppState>, request: Request) -> 
         .is_some_and(|ct| ct.to_ascii_lowercase().starts_with("multipart/form-data"));
     let req: JobRequest = if multipart {
         let (text, arrays) = job_form(&st, request).await?;
-        let mut value: Value =
-            serde_json::from_str(&text).map_err(|e| ApiError::invalid_json(format!("request: {e}")))?;
+        let mut value = json_value(&text, "the `request` part")?;
         merge_arrays(&mut value, &arrays)?;
         strict_body(&st, Ok(Json(value)), "JobRequest")?
     } else {
@@ -136,8 +135,8 @@ pub(crate) async fn create_job(State(st): State<AppState>, request: Request) -> 
     Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job))
 }
 
-/// The parts of a multipart job request: the `request` JSON and the `.npy` parts.
-async fn job_form(st: &AppState, request: Request) -> Result<(String, Vec<(String, Bytes)>), ApiError> {
+/// The parts of a multipart job request: the `request` JSON and the `.npy` parts (each part once).
+async fn job_form(st: &AppState, request: Request) -> Result<(Bytes, Vec<(String, Bytes)>), ApiError> {
     let mut mp = Multipart::from_request(request, st)
         .await
         .map_err(|e| ApiError::invalid_request(format!("multipart: {}", e.body_text())))?;
@@ -159,8 +158,14 @@ async fn job_form(st: &AppState, request: Request) -> Result<(String, Vec<(Strin
                 ApiError::invalid_request(format!("multipart: {}", e.body_text()))
             }
         })?;
+        if (name == "request" && text.is_some()) || arrays.iter().any(|(n, _)| *n == name) {
+            return Err(ApiError::InvalidParameter {
+                detail: format!("the multipart part `{name}` is sent more than once: send it once"),
+                parameter: name,
+            });
+        }
         match name.as_str() {
-            "request" => text = Some(String::from_utf8_lossy(&data).into_owned()),
+            "request" => text = Some(data),
             n if ARRAY_FIELDS.contains(&n) => arrays.push((name, data)),
             other => {
                 return Err(ApiError::invalid_request(format!(
@@ -174,19 +179,44 @@ async fn job_form(st: &AppState, request: Request) -> Result<(String, Vec<(Strin
     Ok((text, arrays))
 }
 
+/// The filters of a job listing, each parsed into what it names: a value that names nothing (`status=bogus`, an
+/// unknown analysis, text that is not a shape id) is refused (400 naming the parameter), never an empty page.
 #[derive(Deserialize, utoipa::IntoParams)]
 pub struct JobFilter {
     /// enqueued, processing, succeeded, failed, canceled.
-    pub status: Option<String>,
-    pub shape_id: Option<String>,
-    /// Analysis name (spectrum, hks, …).
+    pub status: Option<Status>,
+    /// A shape id (64 lowercase hex digits).
+    #[serde(default, deserialize_with = "shape_id_param")]
+    #[param(value_type = Option<String>)]
+    pub shape_id: Option<crate::service::ids::ShapeId>,
+    /// An analysis name (`GET /v1/analyses`: spectrum, hks, …), `compare` or `correspondence`.
+    #[serde(default, deserialize_with = "job_analysis_param")]
     pub analysis: Option<String>,
     pub limit: Option<usize>,
     pub offset: Option<usize>,
 }
 
+fn shape_id_param<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<crate::service::ids::ShapeId>, D::Error> {
+    let text = String::deserialize(d)?;
+    crate::service::ids::ShapeId::parse(&text).map(Some).ok_or_else(|| {
+        serde::de::Error::custom(format!("{text:?} is not a shape id (64 lowercase hexadecimal digits)"))
+    })
+}
+
+/// The name a job of an analysis is listed under: an analysis of the registry, or a comparison or correspondence.
+fn job_analysis_param<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<String>, D::Error> {
+    let text = String::deserialize(d)?;
+    let named = analysis::registry::REGISTRY.iter().map(|e| e.name).chain(["compare", "correspondence"]);
+    let mut names = named.clone();
+    names.any(|n| n == text).then_some(Some(text.clone())).ok_or_else(|| {
+        serde::de::Error::custom(format!("{text:?} is no analysis: one of {}", named.collect::<Vec<_>>().join(", ")))
+    })
+}
+
 /// List jobs, oldest first, with filters.
-#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobFilter), responses((status = 200, description = "a page of jobs", body = JobPage)))]
+#[utoipa::path(get, path = "/v1/jobs", tag = "jobs", params(JobFilter),
+    responses((status = 200, description = "a page of jobs", body = JobPage),
+              (status = 400, description = "malformed parameters (invalid-request, with `parameter`): a filter that names nothing (an unknown status or analysis, text that is not a shape id), or a parameter given twice", body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn list_jobs(
     State(st): State<AppState>,
     Query(f): Query<JobFilter>,
@@ -195,8 +225,8 @@ pub(crate) async fn list_jobs(
         .jobs
         .list()?
         .into_iter()
-        .filter(|j| f.status.as_deref().is_none_or(|s| j.status.name() == s))
-        .filter(|j| f.shape_id.as_deref().is_none_or(|s| j.shape_id == s))
+        .filter(|j| f.status.is_none_or(|s| j.status == s))
+        .filter(|j| f.shape_id.as_ref().is_none_or(|s| j.shape_id == s.hex()))
         .filter(|j| f.analysis.as_deref().is_none_or(|a| j.analysis == a))
         .collect();
     let limit = f.limit.unwrap_or(100).min(1000);
@@ -273,7 +303,8 @@ pub(crate) async fn job_events(State(st): State<AppState>, JobPath(id): JobPath)
 
 #[derive(Deserialize, utoipa::IntoParams)]
 pub struct AnalyzeQuery {
-    /// Seconds to wait for the result (default 10, at most --max-wait-s).
+    /// Seconds to wait for the result (default 10, at most --max-wait-s); a finite number, at least 0.
+    #[param(minimum = 0)]
     pub wait: Option<f64>,
     /// Format of the shape (as for uploads).
     #[param(value_type = Option<kac_core::io::Format>)]
@@ -299,10 +330,8 @@ pub(crate) async fn analyze(
     Query(q): Query<AnalyzeQuery>,
     req: Request,
 ) -> Result<Response, ApiError> {
-    if let Some(w) = q.wait.filter(|w| !w.is_finite()) {
-        // Before the upload is read or a job submitted (a NaN wait panicked the timer after the job was queued).
-        return Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds")));
-    }
+    // `wait` was checked by `Query` (finite, at least 0) before the upload is read or a job submitted (a NaN wait
+    // panicked the timer after the job was queued).
     let headers = req.headers().clone();
     let mut up = read_upload(&st, q.format.clone(), req).await?;
     let text = q
@@ -310,7 +339,7 @@ pub(crate) async fn analyze(
         .clone()
         .or_else(|| up.fields.iter().find(|(n, _)| n == "analysis").map(|(_, v)| v.clone()))
         .ok_or_else(|| ApiError::invalid_request("give the analysis as a multipart part or ?analysis=JSON"))?;
-    let mut value: Value = serde_json::from_str(&text).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
+    let mut value = json_value(text.as_bytes(), "analysis")?;
     merge_arrays(&mut value, &up.arrays)?;
     crate::service::strict::check_body(&value, "Analysis").map_err(|u| ApiError::UnknownField(Box::new(u)))?;
     let analysis: Analysis =

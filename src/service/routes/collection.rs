@@ -1,6 +1,7 @@
 //! Collections: a shape's tags (`/v1/shapes/{id}/tags`), which a search may be limited to, and bulk ingest
 //! (`/v1/shapes/bulk`): many shapes in one request, each answered on its own, with their fingerprint jobs started.
 
+use super::archive::{unzip, Expansion};
 use super::shapes::{ingest, shape_resource, ShapeResource, Upload};
 use super::*;
 use crate::service::search::MAX_TAGS;
@@ -113,6 +114,7 @@ pub struct BulkFile {
     pub name: String,
     /// 201 stored, 200 already stored, or the status of its problem.
     pub status: u16,
+    /// The shape stored (also for a file failed for its tags: stored, but without them).
     pub shape: Option<ShapeResource>,
     /// The fingerprint job started (or found: the same job again) for it.
     pub job: Option<JobResource>,
@@ -125,7 +127,7 @@ pub struct BulkFile {
 pub struct BulkResult {
     pub created: usize,
     pub existing: usize,
-    /// Files not stored (each with its `problem`).
+    /// Files not stored, or stored without the tags asked for (each with its `problem`).
     pub failed: usize,
     /// Files stored whose fingerprint job could not start (the queue full, say; each with its `problem`): send them
     /// again (a stored shape answers 200 and gets its job then).
@@ -137,17 +139,25 @@ pub struct BulkResult {
 pub const MAX_BULK_FILES: usize = 10_000;
 
 /// Upload many shapes at once: a multipart body with a part per file (any part with a file name; a `.zip` part
-/// is opened and each of its files taken), and optionally a part named `options` (JSON, [`BulkOptions`]). Each
+/// is opened and each of its files taken), and optionally one part named `options` (JSON, [`BulkOptions`]). Each
 /// file is parsed, validated and stored on its own, its tags added and its fingerprint job started; the answer
-/// lists every file with its shape, job, or problem. A bad file does not stop the others; the request's limits
-/// (body size, read time) apply to the whole body.
+/// lists every file with its shape, job, or problem. A bad file does not stop the others (a file stored whose
+/// tags are refused is counted `failed`, with its problem); the request's limits (body size, read time) apply to
+/// the whole body.
+///
+/// Archives: the files of a request's archives expand to at most `--max-body-bytes` together (what they could
+/// take sent unpacked), and the memory holding them is reserved against `--max-body-memory-bytes` as it is
+/// allocated, held until the request's files are stored (503 `memory-busy` with Retry-After when the budget has no
+/// room). They are expanded on the blocking pool. An archive whose central directory names an entry twice, or
+/// that holds an archive (by name or content), is refused naming the entry.
 #[utoipa::path(post, path = "/v1/shapes/bulk", tag = "shapes",
-    request_body(content = Vec<u8>, description = "multipart/form-data: file parts (shape files or .zip archives) and an optional 'options' part (JSON BulkOptions)", content_type = "multipart/form-data"),
+    request_body(content = Vec<u8>, description = "multipart/form-data: file parts (shape files or .zip archives; each with a non-empty file name) and at most one 'options' part (JSON BulkOptions). The files of the request's archives expand to at most --max-body-bytes together, their memory reserved against --max-body-memory-bytes", content_type = "multipart/form-data"),
     responses(
         (status = 200, description = "every file's outcome", body = BulkResult),
-        (status = 400, description = "not multipart, no file part, bad options, or too many files", body = crate::service::error::Problem, content_type = "application/problem+json"),
+        (status = 400, description = "not multipart, no file part, a part with an empty file name, two options parts, bad options (a key twice included), too many files, or an archive that cannot be read, names an entry twice, holds an archive or expands beyond --max-body-bytes", body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "too large", body = crate::service::error::Problem, content_type = "application/problem+json"),
-        (status = 422, description = "an unknown field in the options", body = crate::service::error::Problem, content_type = "application/problem+json")))]
+        (status = 422, description = "an unknown field in the options", body = crate::service::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "too many connections (too-many-connections), or request bodies in flight and the files of archives being expanded hold --max-body-memory-bytes (memory-busy), with Retry-After", body = crate::service::error::Problem, content_type = "application/problem+json", headers(("Retry-After" = u64)))))]
 pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Result<Json<BulkResult>, ApiError> {
     let ct = req.headers().get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
     if !ct.to_ascii_lowercase().starts_with("multipart/form-data") {
@@ -157,23 +167,52 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         .await
         .map_err(|e| ApiError::invalid_request(format!("multipart: {}", e.body_text())))?;
     let mut files: Vec<(String, Bytes)> = vec![];
-    let mut options = BulkOptions { fingerprint: default_fingerprint(), ..Default::default() };
-    // What the request's archives may expand to, together: the body limit (or 64 MiB) once.
-    let mut budget = st.config.max_body_bytes.max(64 << 20);
+    let mut options: Option<BulkOptions> = None;
+    // Held until the request's files are stored (dropped with this handler's frame).
+    let mut expansion = Some(Expansion::new(st.config.max_body_bytes, st.bodies.reservation()));
     while let Some(field) = mp.next_field().await.map_err(|e| multipart_error(&st, &e))? {
         let name = field.name().unwrap_or("").to_string();
         let filename = field.file_name().map(str::to_string);
+        // Refused before the part is read.
+        if filename.as_deref() == Some("") {
+            return Err(ApiError::InvalidParameter {
+                detail: format!(
+                    "the part '{name}' has an empty file name: give each file part its file's name (its extension \
+                     tells the format)"
+                ),
+                parameter: name,
+            });
+        }
+        if filename.is_none() && name == "options" && options.is_some() {
+            return Err(ApiError::InvalidParameter {
+                parameter: name,
+                detail: "the part 'options' is sent more than once: send one (the options of the whole upload)".into(),
+            });
+        }
         let data = field.bytes().await.map_err(|e| multipart_error(&st, &e))?;
         match filename {
             Some(f) if f.to_ascii_lowercase().ends_with(".zip") => {
-                files.extend(unzip(&f, &data, MAX_BULK_FILES - files.len().min(MAX_BULK_FILES), &mut budget)?)
+                let room = MAX_BULK_FILES - files.len().min(MAX_BULK_FILES);
+                let mut exp = expansion.take().ok_or_else(|| ApiError::Internal { detail: "no expansion".into() })?;
+                // Decompression is CPU work: off the async threads, so that others are served meanwhile.
+                let (got, exp) = tokio::task::spawn_blocking(move || (unzip(&f, &data, room, &mut exp), exp))
+                    .await
+                    .map_err(|e| ApiError::Internal { detail: format!("opening an archive panicked: {e}") })?;
+                expansion = Some(exp);
+                match got {
+                    Ok(got) => files.extend(got),
+                    Err(e @ ApiError::MemoryBusy { .. }) => {
+                        st.metrics.bodies_refused.fetch_add(1, Ordering::Relaxed);
+                        return Err(e);
+                    }
+                    Err(e) => return Err(e),
+                }
             }
             Some(f) => files.push((f, data)),
             None if name == "options" => {
-                let v: Value = serde_json::from_slice(&data)
-                    .map_err(|e| ApiError::invalid_json(format!("the options part: {e}")))?;
+                let v = json_value(&data, "the options part")?;
                 super::super::strict::check_body(&v, "BulkOptions").map_err(|u| ApiError::UnknownField(Box::new(u)))?;
-                options = serde_json::from_value(v).map_err(|e| ApiError::invalid_json(e.to_string()))?;
+                options = Some(serde_json::from_value(v).map_err(|e| ApiError::invalid_json(e.to_string()))?);
             }
             None => {
                 return Err(ApiError::invalid_request(format!(
@@ -191,6 +230,7 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
             "the bulk upload has no file parts (one part with a file name per shape)",
         ));
     }
+    let options = options.unwrap_or(BulkOptions { fingerprint: default_fingerprint(), ..Default::default() });
     let tags = Tag::parse_all(&options.tags).map_err(ApiError::invalid_request)?;
     if let Some(fp) = &options.fingerprint {
         if fp.dna.k == 0 || fp.dna.k > st.config.max_k {
@@ -212,13 +252,22 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
                 continue;
             }
         };
+        // Tags first: a file whose tags are refused (it would carry too many) is stored but failed, with its
+        // problem, and gets no job (sent again with other tags, it answers 200 and gets it then).
+        if !tags.is_empty() {
+            if let Err(e) = add_tags(&st, &shape.id, &tags) {
+                let (status, p) = e.problem();
+                out.failed += 1;
+                let shape = Some(shape_resource(&st, &shape));
+                out.files.push(BulkFile { name, status: status.as_u16(), shape, job: None, problem: Some(p) });
+                continue;
+            }
+        }
         if created {
             out.created += 1;
         } else {
             out.existing += 1;
         }
-        // Tags first (a failure is reported, and the job still starts).
-        let tagged = if tags.is_empty() { Ok(vec![]) } else { add_tags(&st, &shape.id, &tags) };
         let started = (|| -> Result<Option<JobResource>, ApiError> {
             let Some(fp) = &options.fingerprint else { return Ok(None) };
             let analysis = Analysis::ShapeDna {
@@ -229,16 +278,13 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
             let (job, _) = jobs::submit(&st.jobs, &st.config, shape.clone(), analysis)?;
             Ok(Some(job_resource(&job)))
         })();
-        let (job, mut problem) = match started {
+        let (job, problem) = match started {
             Ok(job) => (job, None),
             Err(e) => {
                 out.unstarted += 1;
                 (None, Some(e.problem().1))
             }
         };
-        if let Err(e) = tagged {
-            problem = problem.or(Some(e.problem().1));
-        }
         let file = BulkFile {
             name,
             status: if created { 201 } else { 200 },
@@ -248,6 +294,7 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         };
         out.files.push(file);
     }
+    drop(expansion);
     Ok(Json(out))
 }
 
@@ -259,36 +306,4 @@ fn multipart_error(st: &AppState, e: &axum::extract::multipart::MultipartError) 
     } else {
         ApiError::invalid_request(format!("multipart: {}", e.body_text()))
     }
-}
-
-/// The files of a zip archive (directories skipped), named `archive/inner`; an entry that cannot be read is
-/// refused with the archive, as is an archive of more than `room` files or expanding beyond what is left of the
-/// request's `budget` of expanded bytes (a zip bomb), counted as read.
-fn unzip(archive: &str, data: &[u8], room: usize, budget: &mut usize) -> Result<Vec<(String, Bytes)>, ApiError> {
-    use std::io::Read;
-    let bad =
-        |e: &dyn std::fmt::Display| ApiError::invalid_request(format!("{archive}: not a readable zip archive: {e}"));
-    let mut z = zip::ZipArchive::new(std::io::Cursor::new(data)).map_err(|e| bad(&e))?;
-    if z.len() > room {
-        return Err(ApiError::invalid_request(format!("{archive}: more than {MAX_BULK_FILES} files in the upload")));
-    }
-    let mut out = vec![];
-    for i in 0..z.len() {
-        let f = z.by_index(i).map_err(|e| bad(&e))?;
-        if f.is_dir() {
-            continue;
-        }
-        let name = format!("{archive}/{}", f.name());
-        let mut buf = vec![];
-        f.take(*budget as u64 + 1).read_to_end(&mut buf).map_err(|e| bad(&e))?;
-        if buf.len() > *budget {
-            return Err(ApiError::invalid_request(format!(
-                "{archive}: the upload's archives expand beyond --max-body-bytes (or 64 MiB) together; send fewer \
-                 files at a time"
-            )));
-        }
-        *budget -= buf.len();
-        out.push((name, Bytes::from(buf)));
-    }
-    Ok(out)
 }

@@ -3,6 +3,7 @@
 //! handlers one file per resource.
 
 mod analyses;
+mod archive;
 mod collection;
 mod health;
 mod registry;
@@ -33,13 +34,13 @@ use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis};
 use axum::body::Bytes;
-use axum::extract::rejection::{BytesRejection, JsonRejection};
+use axum::extract::rejection::BytesRejection;
 use axum::extract::{DefaultBodyLimit, FromRequest, FromRequestParts, Multipart, Path, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode, Uri};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
-use axum::{Json, Router};
+use axum::Router;
 use kac_core::io::Format;
 use kac_core::{ReadOptions, ValidateOptions};
 use serde::{Deserialize, Serialize};
@@ -175,12 +176,12 @@ pub(crate) fn body_error(state: &AppState, e: BytesRejection) -> ApiError {
     }
 }
 
-pub(crate) fn json_error(state: &AppState, e: JsonRejection) -> ApiError {
+/// The problem a JSON body refused by axum's parser is answered with (the body's own errors as [`body_error`]).
+fn json_error(state: &AppState, e: axum::extract::rejection::JsonRejection) -> ApiError {
+    use axum::extract::rejection::JsonRejection as Axum;
     match e {
-        JsonRejection::MissingJsonContentType(_) => {
-            ApiError::UnsupportedMediaType { detail: "send the request body as application/json".into() }
-        }
-        JsonRejection::BytesRejection(b) => body_error(state, b),
+        Axum::MissingJsonContentType(_) => not_json(),
+        Axum::BytesRejection(b) => body_error(state, b),
         other if other.status() == StatusCode::PAYLOAD_TOO_LARGE => {
             ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
         }
@@ -188,14 +189,67 @@ pub(crate) fn json_error(state: &AppState, e: JsonRejection) -> ApiError {
     }
 }
 
-/// A JSON body checked against its OpenAPI schema (no field the document does not declare at its place, see
-/// [`super::strict`]), then deserialized.
+fn not_json() -> ApiError {
+    ApiError::UnsupportedMediaType { detail: "send the request body as application/json".into() }
+}
+
+/// The project's JSON: as a request body, read by [`Json`]'s extractor, which refuses a body whose objects name a
+/// key twice (400 `invalid-json` naming the key, see [`super::strict::duplicate_key`]) before it is parsed, and
+/// answers every refusal as a problem; as a response, serialized as axum's `Json` does.
+pub(crate) struct Json<T>(pub T);
+
+/// What [`Json`] refuses a body with: the problem it is answered with (the body limits it names are the state's).
+pub(crate) type JsonRejection = ApiError;
+
+/// `application/json` or `application/<anything>+json`, parameters (`; charset=utf-8`) ignored, as axum's `Json`.
+fn json_content_type(headers: &HeaderMap) -> bool {
+    let Some(ct) = headers.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()) else { return false };
+    let essence = ct.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
+    match essence.split_once('/') {
+        Some(("application", sub)) => sub == "json" || sub.ends_with("+json"),
+        _ => false,
+    }
+}
+
+impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for Json<T> {
+    type Rejection = ApiError;
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
+        if !json_content_type(req.headers()) {
+            return Err(not_json());
+        }
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| body_error(state, e))?;
+        if let Some(key) = super::strict::duplicate_key(&bytes) {
+            return Err(ApiError::DuplicateKey { within: "the request body".into(), key: Box::new(key) });
+        }
+        axum::Json::<T>::from_bytes(&bytes).map(|axum::Json(v)| Json(v)).map_err(|e| json_error(state, e))
+    }
+}
+
+impl<T: Serialize> IntoResponse for Json<T> {
+    fn into_response(self) -> Response {
+        axum::Json(self.0).into_response()
+    }
+}
+
+/// JSON text a client sent inside a request (a multipart part, a query parameter) as a value: a key named twice
+/// in one object is refused (400 `invalid-json` with its pointer), as is text that is not JSON; `within` names
+/// the part or parameter in the problem.
+pub(crate) fn json_value(text: &[u8], within: &str) -> Result<Value, ApiError> {
+    if let Some(key) = super::strict::duplicate_key(text) {
+        return Err(ApiError::DuplicateKey { within: within.into(), key: Box::new(key) });
+    }
+    serde_json::from_slice(text).map_err(|e| ApiError::invalid_json(format!("{within}: {e}")))
+}
+
+/// A JSON body (no key twice in an object, see [`Json`]) checked against its OpenAPI schema (no field the document
+/// does not declare at its place, see [`super::strict`]), then deserialized. (The state is the extractor's now:
+/// the body's refusal already names its limits.)
 pub(crate) fn strict_body<T: serde::de::DeserializeOwned>(
-    st: &AppState,
+    _: &AppState,
     body: Result<Json<Value>, JsonRejection>,
     schema: &str,
 ) -> Result<T, ApiError> {
-    let Json(v) = body.map_err(|e| json_error(st, e))?;
+    let Json(v) = body?;
     super::strict::check_body(&v, schema).map_err(|u| ApiError::UnknownField(Box::new(u)))?;
     serde_json::from_value(v).map_err(|e| ApiError::invalid_json(e.to_string()))
 }
@@ -230,16 +284,53 @@ pub(crate) async fn identity_encoding_only(req: Request, next: axum::middleware:
     Ok(next.run(req).await)
 }
 
-/// Query parameters whose rejection is a problem document (400 `invalid-request`), not axum's plain text.
+/// Query parameters whose rejection is a problem document (400 `invalid-request` with the `parameter`), not
+/// axum's plain text. A parameter given twice is refused, as is a value its type does not take (a status, an
+/// analysis or an id that names nothing); `wait`, on every route that takes it, is a finite number of seconds, at
+/// least 0.
 pub struct Query<T>(pub T);
 
 impl<T: serde::de::DeserializeOwned, S: Send + Sync> FromRequestParts<S> for Query<T> {
     type Rejection = ApiError;
-    async fn from_request_parts(parts: &mut axum::http::request::Parts, state: &S) -> Result<Self, ApiError> {
-        axum::extract::Query::<T>::from_request_parts(parts, state)
-            .await
-            .map(|q| Query(q.0))
-            .map_err(|e| ApiError::invalid_request(e.body_text()))
+    async fn from_request_parts(parts: &mut axum::http::request::Parts, _: &S) -> Result<Self, ApiError> {
+        let query = parts.uri.query().unwrap_or_default();
+        let mut seen: Vec<std::borrow::Cow<str>> = vec![];
+        for (name, value) in form_urlencoded::parse(query.as_bytes()) {
+            if seen.contains(&name) {
+                return Err(ApiError::InvalidParameter {
+                    detail: format!("the query parameter `{name}` is given more than once: give it once"),
+                    parameter: name.into_owned(),
+                });
+            }
+            if name == "wait" {
+                wait_seconds(&value)?;
+            }
+            seen.push(name);
+        }
+        let uri = parts.uri.clone();
+        axum::extract::Query::<T>::try_from_uri(&uri).map(|q| Query(q.0)).map_err(|e| {
+            // axum's text is "Failed to deserialize query string: {parameter}: {why}" (serde_path_to_error's path).
+            let text = e.body_text();
+            let why = text.strip_prefix("Failed to deserialize query string: ").unwrap_or(&text);
+            match why.split_once(": ").filter(|(p, _)| seen.iter().any(|n| n == p)) {
+                Some((parameter, why)) => ApiError::InvalidParameter {
+                    detail: format!("the query parameter `{parameter}`: {why}"),
+                    parameter: parameter.to_string(),
+                },
+                None => ApiError::invalid_request(format!("the query string: {why}")),
+            }
+        })
+    }
+}
+
+/// A `wait` query parameter: seconds, a finite number of at least 0 (larger values are cut to --max-wait-s).
+pub(crate) fn wait_seconds(text: &str) -> Result<f64, ApiError> {
+    match text.trim().parse::<f64>() {
+        Ok(w) if w.is_finite() && w >= 0.0 => Ok(w),
+        _ => Err(ApiError::InvalidParameter {
+            parameter: "wait".into(),
+            detail: format!("wait = {text:?}: give a finite number of seconds, at least 0"),
+        }),
     }
 }
 

@@ -5,6 +5,7 @@ use super::*;
 #[derive(Deserialize, utoipa::IntoParams)]
 pub struct CompareQuery {
     /// Seconds to wait for the result (default 10, at most --max-wait-s); 0 answers 202 with the job at once.
+    #[param(minimum = 0)]
     pub wait: Option<f64>,
 }
 
@@ -93,6 +94,7 @@ pub(crate) const MAX_FINGERPRINT_VALUE: f64 = 1e100;
 pub struct SearchQuery {
     /// With `shape_id` whose fingerprint is not stored yet: seconds to wait for its `shape-dna` job (default 10, at
     /// most --max-wait-s) before answering 202 with the job.
+    #[param(minimum = 0)]
     pub wait: Option<f64>,
 }
 

@@ -91,7 +91,7 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
         let mut mp = Multipart::from_request(req, st)
             .await
             .map_err(|e| ApiError::invalid_request(format!("multipart: {}", e.body_text())))?;
-        let mut got = false;
+        let (mut got, mut format_part) = (false, false);
         loop {
             let field = match mp.next_field().await {
                 Ok(Some(f)) => f,
@@ -123,7 +123,25 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
                     ApiError::invalid_request(format!("multipart: {}", e.body_text()))
                 }
             })?;
-            if super::analyses::ARRAY_FIELDS.contains(&name.as_str()) {
+            let named_before = up.arrays.iter().any(|(n, _)| *n == name) || up.fields.iter().any(|(n, _)| *n == name);
+            let array = super::analyses::ARRAY_FIELDS.contains(&name.as_str());
+            if got && !array && (filename.is_some() || name == "file" || name == "shape") {
+                return Err(ApiError::InvalidParameter {
+                    detail: format!(
+                        "the multipart part `{name}` is a second file: send one shape per upload (many at once with \
+                         /v1/shapes/bulk)"
+                    ),
+                    parameter: name,
+                });
+            }
+            if named_before || (name == "format" && format_part) {
+                // The second would silently replace the first, or be ignored.
+                return Err(ApiError::InvalidParameter {
+                    detail: format!("the multipart part `{name}` is sent more than once: send it once"),
+                    parameter: name,
+                });
+            }
+            if array {
                 up.arrays.push((name, data));
             } else if !got && (filename.is_some() || name == "file" || name == "shape") {
                 up.bytes = data;
@@ -131,6 +149,7 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
                 up.media_type = media;
                 got = true;
             } else if name == "format" {
+                format_part = true;
                 let f = String::from_utf8_lossy(&data).trim().to_string();
                 up.format = Some(parse_format(&f)?);
             } else {
