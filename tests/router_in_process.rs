@@ -70,6 +70,33 @@ async fn search_wants_one_query_and_unknown_shapes_are_not_found() {
     assert_eq!((status, p["code"].as_str()), (StatusCode::NOT_FOUND, Some("not-found")));
     let (status, p) = call(&app, post_json("/v1/search", json!({ "fingerprint": [1.0, 2.0], "k": 2 }))).await;
     assert_eq!((status, p["searched"].as_u64()), (StatusCode::OK, Some(0)), "an empty store: {p}");
+    // A fingerprint of another length than k is refused even where its family holds no rows yet.
+    let (status, p) = call(&app, post_json("/v1/search", json!({ "fingerprint": [1.0, 2.0, 3.0], "k": 2 }))).await;
+    assert_eq!((status, p["code"].as_str()), (StatusCode::BAD_REQUEST, Some("invalid-request")), "{p}");
+    assert!(p["detail"].as_str().unwrap().starts_with("fingerprint: 3 values, but k = 2"), "{p}");
+}
+
+/// `GET /v1/search/audit` compares the index with the store: consistent after fingerprints are kept, each row
+/// counted.
+#[tokio::test]
+async fn the_search_audit_compares_the_index_with_the_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(dir.path());
+    let (status, a) = call(&app, Request::get("/v1/search/audit").body(Body::empty()).unwrap()).await;
+    assert_eq!((status, a["consistent"].as_bool(), a["rows"].as_u64()), (StatusCode::OK, Some(true), Some(0)), "{a}");
+    let off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(1));
+    let (status, shape) = call(&app, Request::post("/v1/shapes?format=off").body(Body::from(off)).unwrap()).await;
+    assert_eq!(status, StatusCode::CREATED);
+    let id = shape["id"].as_str().unwrap();
+    let (status, r) = call(&app, post_json("/v1/search?wait=30", json!({ "shape_id": id, "k": 5 }))).await;
+    assert_eq!(status, StatusCode::OK, "{r}");
+    let (status, a) = call(&app, Request::get("/v1/search/audit").body(Body::empty()).unwrap()).await;
+    assert_eq!((status, a["consistent"].as_bool(), a["rows"].as_u64()), (StatusCode::OK, Some(true), Some(1)), "{a}");
+    let fam = &a["families"][0];
+    assert_eq!(
+        (fam["store_rows"].as_u64(), fam["index_rows"].as_u64(), fam["missing"].as_u64()),
+        (Some(1), Some(1), Some(0))
+    );
 }
 
 /// The same JSON, key for key, with numbers equal to `tol` relative (the CLI and the service may use different

@@ -284,8 +284,10 @@ pub static REGISTRY: &[Entry] = &[
         ..spectral(
             "heat-curvature",
             "Gaussian curvature heard from the heat kernel's small-time expansion",
-            "the fit's residual per vertex; `curvature-window-unresolved` warning when the window's times are \
-             below the mesh's resolution",
+            "the fit's residual per vertex; the window kept below the shape's curvature scale 1/κ_max² \
+             (`curvature_scale`: expansion bias ≤ 3 % on a sphere and a torus), `curvature-window-too-coarse` \
+             warning when the mesh's resolution or the pairs do not allow that, `curvature-window-unresolved` \
+             when the window's times are below the mesh's resolution",
         )
     },
     spectral("wave", "the wave equation by modal superposition, with its conserved energy", "energy drift"),

@@ -432,7 +432,8 @@ pub enum Analysis {
     HeatCurvature {
         #[serde(default = "k_curvature")]
         k: usize,
-        /// The window's times (default: 8 log-spaced in [4 ln 10 / λ_k, 4× that]).
+        /// The window's times (default: 8 log-spaced from the larger of 4 ln 10 / λ_k and the mesh's resolution
+        /// time, up to 4× that but kept at or below the curvature scale 1/κ_max², never less than 2×).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         times: Option<Vec<f64>>,
         #[serde(default)]

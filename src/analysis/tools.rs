@@ -43,7 +43,12 @@ pub(crate) fn run(
             let pair = &e.operator.pair;
             // The measure (area) per unknown: Σ of all of M's entries over n.
             let resolved = 20.0 * pair.mass.iter().sum::<f64>() / pair.n().max(1) as f64;
-            let mut hc = curvature::heat_curvature(&basis_of(&e, *k), times.as_deref(), resolved)?;
+            // The shape's own curvature scale bounds the window from above (the expansion is one in t κ²).
+            let scale = match &v.shape {
+                Shape::TriangleMesh(mesh) => Some(curvature::curvature_scale(mesh)?),
+                _ => None,
+            };
+            let mut hc = curvature::heat_curvature(&basis_of(&e, *k), times.as_deref(), resolved, scale.as_ref())?;
             // The expansion holds away from a boundary (there it has a boundary term): boundary vertices get no
             // value, and the output says that vertices within about √t of the boundary are affected too.
             let boundary = operators::boundary::boundary_vertices(&v.shape);
@@ -70,6 +75,46 @@ pub(crate) fn run(
                         "the window starts at t = {:.3e}, below the smallest time the mesh resolves ({resolved:.3e}, \
                          20 × the mean area per vertex): the estimate follows the mesh, not the surface",
                         hc.times[0]
+                    ),
+                ));
+            }
+            if let (true, Some(scale), Some(bound)) =
+                (hc.beyond_scale, &hc.curvature_scale, hc.curvature_scale.and_then(|s| s.time_bound))
+            {
+                let largest = hc.times.iter().copied().fold(0.0, f64::max);
+                let smallest = hc.times.iter().copied().fold(f64::INFINITY, f64::min);
+                let lk = e.spectrum.values.get(*k - 1).copied().unwrap_or(0.0);
+                let pairs = curvature::pairs_time(lk);
+                // The default window spans a factor MIN_WINDOW_RATIO at least: it fits below the bound once its
+                // start is at or below bound / MIN_WINDOW_RATIO.
+                let start = bound / curvature::MIN_WINDOW_RATIO;
+                let todo = if times.is_some() {
+                    format!("the times were given: give times at or below {bound:.3e}")
+                } else if resolved >= pairs {
+                    format!(
+                        "the window cannot start before the mesh resolves the kernel (t = {resolved:.3e}, 20 × \
+                         the mean area per vertex): use a finer mesh, with a mean area per vertex below {:.3e} \
+                         (now {:.3e})",
+                        start / 20.0,
+                        resolved / 20.0
+                    )
+                } else {
+                    format!(
+                        "the window cannot start before the {k} pairs decide the kernel (t = {pairs:.3e}, \
+                         e^(−λ_k t) = 1e-4): ask for more eigenpairs, up to λ_k ≥ {:.3e} (now {lk:.3e}){}",
+                        curvature::pairs_time(1.0) / start,
+                        if resolved > start { ", and a finer mesh" } else { "" }
+                    )
+                };
+                warnings.push(Warning::new(
+                    "curvature-window-too-coarse",
+                    format!(
+                        "the window [{smallest:.3e}, {largest:.3e}] reaches beyond the shape's curvature scale \
+                         t ≤ 1/κ_max² = {bound:.3e} (κ_max = {:.3}, the {}th percentile of the principal \
+                         curvatures), where the small-time expansion is biased (above 3 %, about 30 % at six times \
+                         the scale); {todo}",
+                        scale.kappa_max,
+                        (scale.quantile * 100.0).round()
                     ),
                 ));
             }

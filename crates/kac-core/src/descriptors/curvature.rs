@@ -10,9 +10,20 @@
 //!   prefactor is (4πt)^(−d/2) with d = 2, and the first heat invariant is a₁ = R/6 with scalar curvature R = 2K.
 //!   The chapter (Example 9.10) writes (4πt)^(−1/2) Σ a_k t^k with a₁ = K/6, a prefactor for d = 1 and a
 //!   coefficient that takes K for R; both are wrong on a surface. K(x) is estimated by fitting
-//!   4πt·k_t(x,x) − 1 = a t + b t² over a window of small times, K = 3a; by default the window starts where the
-//!   computed eigenpairs decide the kernel (e^{−λ_k t} = 10⁻⁴), and the truncation bound of the heat trace there
-//!   is reported.
+//!   4πt·k_t(x,x) − 1 = a t + b t² over a window of small times, K = 3a.
+//! - **The window.** It is squeezed from both sides. From below: the computed eigenpairs decide the kernel only
+//!   from e^{−λ_k t} = 10⁻⁴ on (the truncation bound of the heat trace there is reported), and the mesh resolves
+//!   it only from a few rings of triangles on (`resolved`, passed by the caller). From above: the expansion is an
+//!   expansion in t κ², κ the principal curvatures, so the window's largest time is kept at or below the
+//!   curvature scale 1/κ_max² ([`curvature_scale`]: κ = H ± √max(H² − K, 0) from the two estimates above, κ_max
+//!   their 95th percentile in absolute value over interior vertices). Measured, the fit's bias from the terms it
+//!   neglects at t_max = 1/κ²: −2.8 % on the unit sphere (closed-form kernel), +0.2 % / −2.8 % at the outer /
+//!   inner equator of the ring torus R = 2, r = 1/2 (P2, n = 64); at t_max = 2/κ² it is −13 % and −6.7 %, and at
+//!   the old default window of that torus (t_max = 6/κ²) −33 %. The default window is [t₀, 4t₀] when that lies
+//!   below the scale, else [t₀, 1/κ_max²] while that spans a factor of 2 at least (a narrower window no longer
+//!   separates the t and t² terms), else [t₀, 2t₀]: then it reaches beyond the scale and
+//!   [`HeatCurvature::beyond_scale`] says so (the analysis warns `curvature-window-too-coarse`: a finer mesh or
+//!   more eigenpairs move t₀ down). Times given explicitly are used as given, and flagged the same way.
 //! - **Angle defect.** K(x) = (2π − Σ angles at x) / A(x), A the mixed Voronoi area; boundary vertices flagged.
 
 use crate::descriptors::{Basis, DescriptorError};
@@ -144,6 +155,77 @@ pub fn angle_defect(mesh: &TriangleMesh) -> Result<Vec<f64>, OperatorError> {
         .collect())
 }
 
+/// The quantile of max(|κ₁|, |κ₂|) over interior vertices that sets the curvature scale: a few vertices at creases,
+/// corners or noise (where κ grows like 1/h) do not set it; the estimate there is local anyway.
+pub const CURVATURE_SCALE_QUANTILE: f64 = 0.95;
+
+/// The heat-curvature window's largest time is kept at or below this × 1/κ_max² (see the module's notes for the
+/// measurement that sets it).
+pub const CURVATURE_TIME_FACTOR: f64 = 1.0;
+
+/// The smallest ratio t_max / t_min of a default window: narrower, the fit no longer separates the t and t² terms.
+pub const MIN_WINDOW_RATIO: f64 = 2.0;
+
+/// The ratio t_max / t_min of the default window where the curvature scale does not constrain it.
+pub const DEFAULT_WINDOW_RATIO: f64 = 4.0;
+
+/// The shape's own curvature scale, which bounds the times at which the heat kernel's small-time expansion holds.
+#[derive(Debug, Clone, Copy, Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct CurvatureScale {
+    /// The 95th percentile over interior vertices of max(|κ₁|, |κ₂|), κ = H ± √max(H² − K, 0) with H from
+    /// M⁻¹LX = 2Hn and K the angle defect (1/r on a sphere of radius r, 1/r on a torus of tube radius r).
+    pub kappa_max: f64,
+    /// The quantile taken (0.95).
+    pub quantile: f64,
+    /// 1/κ_max²: the window's times are kept at or below it; absent on a flat shape (κ_max = 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_bound: Option<f64>,
+    /// Interior vertices with a finite estimate, over which the quantile was taken.
+    pub vertices: usize,
+}
+
+/// The curvature scale of a triangle mesh (see [`CurvatureScale`]).
+pub fn curvature_scale(mesh: &TriangleMesh) -> Result<CurvatureScale, OperatorError> {
+    let h = mean_curvature(mesh)?;
+    let k = angle_defect(mesh)?;
+    let mut kappa: Vec<f64> =
+        h.h.iter()
+            .zip(&k)
+            .filter(|(h, k)| h.is_finite() && k.is_finite())
+            .map(|(h, k)| h.abs() + (h * h - k).max(0.0).sqrt())
+            .collect();
+    kappa.sort_by(f64::total_cmp);
+    let kappa_max = match kappa.len() {
+        0 => 0.0,
+        len => kappa[((len - 1) as f64 * CURVATURE_SCALE_QUANTILE).round() as usize],
+    };
+    // Flat: a radius of curvature 10⁴ times the shape's extent or more. A plane's H and K are rounding (~1e-12),
+    // which the square root in κ lifts to ~1e-6.
+    let extent = (0..3)
+        .map(|c| {
+            let (lo, hi) = mesh.vertices.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p[c]), b.max(p[c])));
+            (hi - lo).max(0.0)
+        })
+        .fold(0.0, f64::max);
+    let time_bound = (kappa_max * extent > 1e-4).then(|| CURVATURE_TIME_FACTOR / (kappa_max * kappa_max));
+    Ok(CurvatureScale { kappa_max, quantile: CURVATURE_SCALE_QUANTILE, time_bound, vertices: kappa.len() })
+}
+
+/// The time from which k eigenpairs decide the heat kernel: e^{−λ_k t} = 10⁻⁴, t = 4 ln 10 / λ_k.
+pub fn pairs_time(lambda_k: f64) -> f64 {
+    4.0 * std::f64::consts::LN_10 / lambda_k.max(1e-300)
+}
+
+/// The default window, 8 log-spaced times over [t₀, t₁]: t₀ the larger of `pairs_time(λ_k)` and `resolved`, t₁ =
+/// 4t₀ clamped to the curvature scale's bound but never below 2t₀ (see the module's notes).
+pub fn default_window(lambda_k: f64, resolved: f64, time_bound: Option<f64>) -> Vec<f64> {
+    let t0 = pairs_time(lambda_k).max(resolved);
+    let t1 =
+        time_bound.map_or(DEFAULT_WINDOW_RATIO * t0, |b| b.clamp(MIN_WINDOW_RATIO * t0, DEFAULT_WINDOW_RATIO * t0));
+    (0..8).map(|j| t0 * (t1 / t0).powf(j as f64 / 7.0)).collect()
+}
+
 /// The Gaussian curvature estimated from the heat kernel's diagonal, with how it was fitted.
 #[derive(Debug, Clone, Serialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -156,17 +238,24 @@ pub struct HeatCurvature {
     pub truncation_bound: f64,
     /// The expansion used: 4πt·k_t(x,x) = 1 + t K/3 + O(t²), fitted by least squares with a t² term.
     pub expansion: &'static str,
+    /// The shape's curvature scale that bounded the window (absent where the caller gave none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub curvature_scale: Option<CurvatureScale>,
+    /// The window's largest time exceeds the curvature scale's bound 1/κ_max²: the expansion's neglected terms
+    /// bias the estimate (more than 3 % on a sphere, 7 % at 2/κ_max², 30 % at 6/κ_max² on a torus).
+    pub beyond_scale: bool,
 }
 
-/// K(x) from k_t(x, x) = Σ e^{−λt} φ(x)² at small t (see the module's notes). `times`: the window, or None for
-/// the default: 8 log-spaced times over [t₀, 4 t₀] with t₀ the larger of 4 ln 10 / λ_k (where the computed
-/// eigenpairs decide the kernel) and `resolved`, the smallest time the discretization resolves (the analyses pass
-/// 20 × the mean vertex area: the kernel then spans a few rings of triangles; below that the estimate follows the
-/// mesh, not the surface).
+/// K(x) from k_t(x, x) = Σ e^{−λt} φ(x)² at small times (see the module's notes). `times`: the window, or None
+/// for [`default_window`]; `resolved`: the smallest time the discretization resolves (the analyses pass 20 × the
+/// mean vertex area: the kernel then spans a few rings of triangles; below that the estimate follows the mesh, not
+/// the surface); `scale`: the shape's curvature scale ([`curvature_scale`]), which bounds the default window from
+/// above and flags given times beyond it (None: no bound).
 pub fn heat_curvature(
     basis: &Basis<'_>,
     times: Option<&[f64]>,
     resolved: f64,
+    scale: Option<&CurvatureScale>,
 ) -> Result<HeatCurvature, DescriptorError> {
     let k = basis.k();
     if k < 2 {
@@ -175,15 +264,15 @@ pub fn heat_curvature(
         });
     }
     let lk = basis.values[k - 1];
+    let time_bound = scale.and_then(|s| s.time_bound);
     let times: Vec<f64> = match times {
         Some(t) => t.to_vec(),
-        None => {
-            // e^{−λ_k t_min} = 10⁻⁴: beyond λ_k the kernel's terms are below that.
-            let t0 = (4.0 * std::f64::consts::LN_10 / lk.max(1e-300)).max(resolved);
-            (0..8).map(|j| t0 * 4f64.powf(j as f64 / 7.0)).collect()
-        }
+        None => default_window(lk, resolved, time_bound),
     };
     crate::descriptors::check_times("times", &times)?;
+    let largest = times.iter().copied().fold(0.0, f64::max);
+    // A relative slack so that a window clamped to the bound is not flagged by rounding.
+    let beyond_scale = time_bound.is_some_and(|b| largest > b * (1.0 + 1e-9));
     let n = basis.n();
     let z0: f64 = basis.values.iter().map(|l| (-l * times[0]).exp()).sum();
     let truncation_bound = crate::descriptors::heat::heat_trace_tail_bound(basis.values, n, times[0]) / z0;
@@ -205,7 +294,14 @@ pub fn heat_curvature(
             3.0 * a
         })
         .collect();
-    Ok(HeatCurvature { k: kx, times, truncation_bound, expansion: "4πt·k_t(x,x) = 1 + t·K(x)/3 + O(t²)" })
+    Ok(HeatCurvature {
+        k: kx,
+        times,
+        truncation_bound,
+        expansion: "4πt·k_t(x,x) = 1 + t·K(x)/3 + O(t²)",
+        curvature_scale: scale.copied(),
+        beyond_scale,
+    })
 }
 
 #[cfg(test)]
@@ -277,12 +373,15 @@ mod tests {
     #[test]
     fn heat_kernel_hears_the_sphere_curvature() {
         let m = scaled(generate::icosphere(4), 1.5);
-        let op = operators::build(&crate::Shape::TriangleMesh(m), &OperatorOptions::default()).unwrap();
+        let op = operators::build(&crate::Shape::TriangleMesh(m.clone()), &OperatorOptions::default()).unwrap();
         let opts = crate::spectrum::EigenOptions { k: 300, ..Default::default() };
         let s = crate::spectrum::eigs(&op.pair, &opts, None, Default::default()).unwrap();
         let basis = Basis::of(&s, &op.pair);
         let resolved = 20.0 * op.pair.mass.iter().sum::<f64>() / op.pair.n() as f64;
-        let hk = heat_curvature(&basis, None, resolved).unwrap();
+        let scale = curvature_scale(&m).unwrap();
+        let hk = heat_curvature(&basis, None, resolved, Some(&scale)).unwrap();
+        // The scale (1/r² = 0.44 here) lies beyond the whole default window [t₀, 4t₀]: the window is unchanged.
+        assert!(!hk.beyond_scale && (hk.times[7] / hk.times[0] - 4.0).abs() < 1e-9, "{:?}", hk.times);
         let exact = 1.0 / (1.5 * 1.5);
         let mean = hk.k.iter().sum::<f64>() / hk.k.len() as f64;
         assert!((mean - exact).abs() < 0.03 * exact, "mean K {mean} vs {exact}; window {:?}", hk.times);
@@ -294,5 +393,35 @@ mod tests {
         let q = |p: f64| errs[((errs.len() - 1) as f64 * p) as usize];
         assert!(q(0.5) < 0.02 && q(1.0) < 0.1, "relative errors: median {}, worst {}", q(0.5), q(1.0));
         assert!(hk.truncation_bound < 1e-2, "{}", hk.truncation_bound);
+    }
+
+    /// The curvature scale is the largest principal curvature: 1/r on a sphere of radius r, the tube's 1/r on a
+    /// ring torus (its other principal curvature, cos θ/(R + r cos θ), is at most 1/(R − r) in size); none on a
+    /// flat disk.
+    #[test]
+    fn curvature_scale_is_the_largest_principal_curvature() {
+        let s = curvature_scale(&scaled(generate::icosphere(4), 2.0)).unwrap();
+        assert!((s.kappa_max - 0.5).abs() < 0.01, "sphere: {s:?}");
+        assert!((s.time_bound.unwrap() - 4.0).abs() < 0.2, "sphere: {s:?}");
+        let s = curvature_scale(&generate::torus(2.0, 0.5, 128, 64)).unwrap();
+        assert!((s.kappa_max - 2.0).abs() < 0.04 && s.vertices == 128 * 64, "torus: {s:?}");
+        let s = curvature_scale(&generate::unit_disk(20)).unwrap();
+        assert!(s.time_bound.is_none() && s.vertices > 0, "disk: {s:?}");
+    }
+
+    /// The default window: [t₀, 4t₀] below the scale, cut at the scale while it spans a factor of 2, else
+    /// [t₀, 2t₀] (beyond the scale: the caller warns).
+    #[test]
+    fn default_window_is_clamped_to_the_curvature_scale() {
+        let lk = 4.0 * std::f64::consts::LN_10 / 0.1; // t₀ = 0.1 from the pairs
+        let ends = |w: Vec<f64>| (w[0], w[7], w.len());
+        let close =
+            |(a, b, n): (f64, f64, usize), (x, y): (f64, f64)| n == 8 && (a - x).abs() < 1e-12 && (b - y).abs() < 1e-12;
+        assert!(close(ends(default_window(lk, 0.0, None)), (0.1, 0.4)));
+        assert!(close(ends(default_window(lk, 0.0, Some(10.0))), (0.1, 0.4)));
+        assert!(close(ends(default_window(lk, 0.0, Some(0.25))), (0.1, 0.25)));
+        assert!(close(ends(default_window(lk, 0.0, Some(0.15))), (0.1, 0.2)));
+        // The resolution bound moves t₀ up (the torus R = 2, r = 1/2 at n = 32: 0.385 against a bound of 0.25).
+        assert!(close(ends(default_window(lk, 0.385, Some(0.25))), (0.385, 0.77)));
     }
 }
