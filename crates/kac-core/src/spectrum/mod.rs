@@ -139,7 +139,8 @@ pub fn eigs(
             head: head.as_ref(),
         };
         let o = EigenOptions { k: k - z, ..options.clone() };
-        let (single, mut plan) = match slicing::solve(pair, &o, sym, control, &deflation, &zero_values, head.as_ref())? {
+        let (single, mut plan) = match slicing::solve(pair, &o, sym, control, &deflation, &zero_values, head.as_ref())?
+        {
             slicing::Sliced::Solved(s) => (Some(*s), None),
             slicing::Sliced::NotPlanned => (lanczos::eigs_block_lanczos(pair, &o, Some(sym), control, &run)?, None),
             slicing::Sliced::GivenUp(reason) => (

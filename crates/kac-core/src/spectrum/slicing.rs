@@ -751,7 +751,10 @@ pub(crate) fn solve(
         .collect();
     let mut s = stitch(pair, parts, head, &slices, &control, threads)?;
     if s.values.len() < k + head.map_or(0, |h| h.values.len()) {
-        return Ok(Sliced::GivenUp(format!("the slices held {} pairs together, fewer than the {k} asked", s.values.len())));
+        return Ok(Sliced::GivenUp(format!(
+            "the slices held {} pairs together, fewer than the {k} asked",
+            s.values.len()
+        )));
     }
     s.stats.slices = reports;
     s.stats.timings.iteration_s = t0.elapsed().as_secs_f64();
