@@ -6,7 +6,7 @@
 use clap::Parser;
 use kac::service::config::Config;
 use kac::service::search::{Index, LoadReport, Query};
-use kac::service::store::{self, Backend, ShapeRecord, StoredShape};
+use kac::service::store::{self, Backend, ShapeRecord, StoredResult, StoredShape};
 use kac_core::descriptors::shape_dna::Metric;
 use serde_json::json;
 
@@ -267,8 +267,14 @@ fn the_audit_names_the_rows_and_tags_that_differ() {
 #[test]
 fn a_start_removes_leftovers_of_interrupted_writes() {
     let dir = tempfile::tempdir().unwrap();
+    // A result whose numbers its record names: kept.
+    let result_id = "ab".repeat(16);
     let kept = {
         let b = backend(dir.path());
+        let a =
+            kac::analysis::VertexArray { name: "eigenvectors", rows: 2, cols: 1, data: vec![1.0, 2.0], columns: None };
+        let summary = json!({ "k": 1, "arrays": { "eigenvectors": { "rows": 2, "cols": 1 } } });
+        b.results.put(std::sync::Arc::new(StoredResult::new(&result_id, summary, vec![a]))).unwrap();
         fill(&b, 3)
     };
     let shapes = dir.path().join("shapes");
@@ -292,4 +298,6 @@ fn a_start_removes_leftovers_of_interrupted_writes() {
         assert!(shapes.join(id).exists(), "a recorded shape's file is kept");
         assert!(b.shapes.get(&kac::service::ids::ShapeId::parse(id).unwrap()).unwrap().is_some());
     }
+    let back = b.results.get(&kac::service::ids::JobId::parse(&result_id).unwrap()).unwrap().expect("the result");
+    assert_eq!(back.arrays[0].data, vec![1.0, 2.0], "a result's named numbers are kept");
 }

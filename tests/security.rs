@@ -1071,4 +1071,13 @@ fn a_part_sent_twice_is_refused_naming_it() {
         "request",
     );
     assert_eq!(reply(agent().get(&s.url("/v1/shapes")).call()).body["total"], 0);
+    // The analysis sent as a file (curl's -F analysis=@request.json), before or after the shape, is the analysis.
+    for parts in [
+        [("file", Some("a.off"), &a[..]), ("analysis", Some("request.json"), &spectrum[..])],
+        [("analysis", Some("request.json"), &spectrum[..]), ("file", Some("a.off"), &a[..])],
+    ] {
+        let r = post("/v1/analyze?wait=30", &parts);
+        assert_eq!(r.status, 200, "{}", r.body);
+        assert_eq!(r.body["eigenvalues"].as_array().map(Vec::len), Some(3), "{}", r.body);
+    }
 }

@@ -47,7 +47,13 @@ pub fn check_per_vertex(v: &Validated, name: &str, values: &[f64]) -> Result<(),
             values.len()
         )));
     }
-    values.iter().enumerate().try_for_each(|(i, &x)| check_value(name, &format!("value {i}"), x))
+    // A vertex validation dropped is never read (results written in the upload's numbering hold NaN there, and
+    // may be sent back as inputs).
+    values
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| v.vertex_map[i] != u32::MAX)
+        .try_for_each(|(i, &x)| check_value(name, &format!("value {i}"), x))
 }
 
 /// Vertex indices in the upload's numbering: each one a vertex validation kept.
@@ -258,6 +264,26 @@ mod tests {
     /// Per-vertex inputs of 1e308 overflowed at once (a Poisson solution of NaN everywhere, served as nulls):
     /// each is refused naming the parameter and the first value, as are wrong lengths and vertices that do not
     /// exist; values at the bound pass.
+    #[test]
+    fn a_dropped_vertex_s_value_is_not_read() {
+        // The icosahedron with one vertex no face uses: validation drops it, and a result written in the upload's
+        // numbering holds NaN there; sent back as an input, that NaN is not read.
+        let mut off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(0));
+        off = off.replacen("12 20 0", "13 20 0", 1);
+        let at = off.find("\n3 ").unwrap();
+        off.insert_str(at, "\n5 5 5");
+        let v = kac_core::load_bytes(off.as_bytes(), kac_core::Format::Off, &Default::default(), &Default::default())
+            .unwrap();
+        assert_eq!((v.vertex_map.len(), v.vertex_map[12]), (13, u32::MAX));
+        let mut g = vec![1.0; 13];
+        g[12] = f64::NAN;
+        let p = Analysis::Poisson { g: g.clone(), dirichlet_values: None, operator: Default::default() };
+        assert!(p.check_inputs(&v).is_ok());
+        g[3] = f64::NAN;
+        let p = Analysis::Poisson { g, dirichlet_values: None, operator: Default::default() };
+        assert!(refused(p.check_inputs(&v)).starts_with("g: value 3"));
+    }
+
     #[test]
     fn per_vertex_inputs_are_bounded_and_named() {
         let v = sphere();

@@ -68,9 +68,10 @@ fn u64_at(d: &[u8], at: usize) -> Option<u64> {
 }
 
 /// Where the central directory is and how many entries it lists: `(entries, start, end)`, from the end of
-/// central directory record (the last one whose comment ends the data) and, where a count, size or offset
-/// overflows it, the zip64 record its locator names. The directory ends where that record begins, so an archive
-/// with data before it (offsets relative to a shorter file) is read too.
+/// central directory record (the last one whose comment ends the data) and, where a zip64 locator precedes it
+/// (writers add one when a count, size or offset overflows the classic record, and some always), the zip64 record
+/// it names. The directory ends where that record begins, so an archive with data before it (offsets relative to a
+/// shorter file) is read too.
 fn central_directory(d: &[u8]) -> Result<(u64, usize, usize), String> {
     let last = d.len().checked_sub(22).ok_or("shorter than an end of central directory record")?;
     let eocd = (last.saturating_sub(u16::MAX as usize)..=last)
@@ -85,11 +86,10 @@ fn central_directory(d: &[u8]) -> Result<(u64, usize, usize), String> {
     let (on_disk, total) = (u16_at(d, eocd + 8).unwrap_or(0), u16_at(d, eocd + 10).unwrap_or(0));
     let (size, offset) = (field(12)?, field(16)?);
     let (mut entries, mut size, mut offset, mut end) = (u64::from(total), u64::from(size), u64::from(offset), eocd);
-    if total == u16::MAX || size == u32::MAX as u64 || offset == u32::MAX as u64 {
-        let locator = eocd.checked_sub(20).ok_or("zip64 sizes without a zip64 locator")?;
-        if u32_at(d, locator) != Some(ZIP64_END_LOCATOR) {
-            return Err("zip64 sizes without a zip64 locator".into());
-        }
+    let overflows = total == u16::MAX || size == u32::MAX as u64 || offset == u32::MAX as u64;
+    let located = eocd.checked_sub(20).filter(|&l| u32_at(d, l) == Some(ZIP64_END_LOCATOR));
+    if overflows || located.is_some() {
+        let locator = located.ok_or("zip64 sizes without a zip64 locator")?;
         // The zip64 record ends where the locator begins (its recorded offset may be shifted like the others').
         let record = (|| {
             let at = usize::try_from(u64_at(d, locator + 8)?).ok()?;
@@ -397,6 +397,9 @@ mod tests {
         }
         let mut z = w.finish().unwrap().into_inner();
         assert!(z.windows(4).any(|w| w == ZIP64_END_LOCATOR.to_le_bytes()), "a zip64 directory");
+        // As the writer made it: the classic record holds the real values too, and the directory ends where the
+        // zip64 record begins.
+        assert_eq!(listed_names(&z, "x.zip", 10).unwrap(), [b"a.off".to_vec(), b"b.off".to_vec()]);
         // The classic record says to look there: count, size and offset at their overflow values.
         let eocd = z.len() - 22;
         z[eocd + 8..eocd + 12].copy_from_slice(&[0xff; 4]);

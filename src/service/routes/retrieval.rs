@@ -262,7 +262,8 @@ fn stored_fingerprint(st: &AppState, family: &str, id: &str) -> Result<Option<Ve
 /// index with the same single-precision values and rounding bound (listed in its cell), the index may hold no other
 /// row, and the tags must agree. A search's `exact: true` proves the neighbours exact among the index's rows; this
 /// verifies those rows against the store. Differences are checked again after the log's later changes, so a change
-/// made meanwhile is not reported. It reads every fingerprint of the store (seconds at 10⁶).
+/// made meanwhile is not reported. It reads every fingerprint of the store (seconds at 10⁶), holding the embedded
+/// store's connection meanwhile; one audit runs at a time (503 while one runs).
 #[utoipa::path(get, path = "/v1/search/audit", tag = "jobs",
     responses((status = 200, description = "the comparison: `consistent` and, per family, rows missing, extra or differing", body = crate::service::search::AuditReport),
               (status = 503, body = crate::service::error::Problem, content_type = "application/problem+json")))]
@@ -273,7 +274,10 @@ pub(crate) async fn search_audit(
     let report = tokio::task::spawn_blocking(move || state.index.audit(&*state.fingerprints))
         .await
         .map_err(|e| ApiError::Internal { detail: format!("the audit stopped: {e}") })?
-        .map_err(store_error)?;
+        .map_err(|e| match e.kind() {
+            std::io::ErrorKind::WouldBlock => ApiError::NotReady { detail: e.to_string() },
+            _ => store_error(e),
+        })?;
     if !report.consistent {
         tracing::warn!(
             families = ?report.families.iter().filter(|f| f.missing + f.extra + f.differing > 0).map(|f| &f.family).collect::<Vec<_>>(),

@@ -125,7 +125,11 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
             })?;
             let named_before = up.arrays.iter().any(|(n, _)| *n == name) || up.fields.iter().any(|(n, _)| *n == name);
             let array = super::analyses::ARRAY_FIELDS.contains(&name.as_str());
-            if got && !array && (filename.is_some() || name == "file" || name == "shape") {
+            // A part named for a field (`analysis`, `format`) is that field even when sent as a file
+            // (`-F analysis=@request.json`); any other part with a file name, or named `file` or `shape`, is the shape.
+            let field_part = name == "analysis" || name == "format";
+            let shape_part = !array && !field_part && (filename.is_some() || name == "file" || name == "shape");
+            if got && shape_part {
                 return Err(ApiError::InvalidParameter {
                     detail: format!(
                         "the multipart part `{name}` is a second file: send one shape per upload (many at once with \
@@ -143,7 +147,7 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
             }
             if array {
                 up.arrays.push((name, data));
-            } else if !got && (filename.is_some() || name == "file" || name == "shape") {
+            } else if shape_part {
                 up.bytes = data;
                 up.filename = filename;
                 up.media_type = media;

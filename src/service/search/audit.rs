@@ -81,6 +81,12 @@ impl Index {
     /// checked again after the log's later changes are applied, so that a change made during the comparison (on
     /// this replica or another) is not reported; what still differs then is reported.
     pub fn audit(&self, store: &dyn FingerprintStore) -> std::io::Result<AuditReport> {
+        let Ok(_one) = self.auditing.try_lock() else {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::WouldBlock,
+                "an audit of the search index is running; ask again when it has answered",
+            ));
+        };
         let t = std::time::Instant::now();
         self.sync(store)?;
         let log_position = self.synced.lock().unwrap_or_else(|e| e.into_inner()).0;

@@ -640,6 +640,9 @@ pub struct Index {
     changed: std::sync::atomic::AtomicUsize,
     /// Held while a snapshot is written: one writer at a time.
     writing: std::sync::Mutex<()>,
+    /// Held while the index is audited against the store ([`Index::audit`]): one audit at a time, since it reads
+    /// every fingerprint of the store.
+    pub(crate) auditing: std::sync::Mutex<()>,
 }
 
 /// What loading the index did, for the start-up log and the benchmark.
@@ -677,6 +680,7 @@ impl Index {
                         store_id: store_id.clone(),
                         changed: Default::default(),
                         writing: Default::default(),
+                        auditing: Default::default(),
                     };
                     index.copy_tags();
                     // The log's later changes applied, the snapshot must hold what the store holds.

@@ -78,8 +78,10 @@ pub(crate) fn write(
     w.text(store)?;
     w.u64(at.0 as u64)?;
     w.text(&at.1)?;
-    w.u32(families.len() as u32)?;
-    for (name, f) in families {
+    // Families without rows are left out (one never given a row has no width, which a reader refuses).
+    let held: Vec<(&String, &Family)> = families.iter().filter(|(_, f)| f.len() > 0).collect();
+    w.u32(held.len() as u32)?;
+    for (name, f) in held {
         w.text(name)?;
         w.u32(f.k as u32)?;
         w.u64(f.len() as u64)?;

@@ -451,13 +451,27 @@ fn factor_shift(
         // is not), and any σ inside the window serves the slice.
         let a = if w.lo.is_finite() { w.lo } else { 0.0 };
         let b = if w.hi.is_finite() { w.hi } else { 2.0 * w.sigma - a };
-        let tries = std::iter::once(w.sigma).chain(WINDOW_SHIFTS.iter().map(|f| a + f * (b - a)));
+        let mut tries: Vec<f64> = vec![];
+        for sigma in std::iter::once(w.sigma).chain(WINDOW_SHIFTS.iter().map(|f| a + f * (b - a))) {
+            // Each shift once (the first slice's planned shift is one of the fractions).
+            if sigma.is_finite() && sigma > a && sigma < b && tries.iter().all(|t| (t - sigma).abs() > 1e-12 * b.abs())
+            {
+                tries.push(sigma);
+            }
+        }
         let mut last = None;
-        for sigma in tries.filter(|s| s.is_finite() && *s > a && *s < b) {
+        for sigma in tries {
             control.check()?;
             let values = pair.shifted(sigma);
-            let (factor, below) =
-                Cholesky::factor_ldlt_stoppable(sym, &values, par, stop).map_err(|e| failed(sigma, e))?;
+            // A failed factorization (a zero pivot) is tried elsewhere too; only a stop ends the search.
+            let (factor, below) = match Cholesky::factor_ldlt_stoppable(sym, &values, par, stop) {
+                Ok(f) => f,
+                Err(FactorError::Stopped) => return Err(EigenError::Canceled),
+                Err(FactorError::Failed(message)) => {
+                    last = Some(format!("σ = {sigma:e}: {message}"));
+                    continue;
+                }
+            };
             let e = solve_backward_error(pair, &values, &factor, par);
             if e <= LDLT_BACKWARD_ERROR {
                 return Ok(Shifted { sigma, factor, below_sigma: Some(below) });
