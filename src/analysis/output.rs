@@ -88,7 +88,7 @@ pub struct Fingerprint {
 pub fn fingerprint_family(options: &ShapeDnaOptions, operator: &OperatorSpec) -> String {
     use sha2::Digest;
     let canonical =
-        serde_json::to_vec(&json!({ "options": options, "operator": operator, "version": ALGORITHM_VERSION }))
+        serde_json::to_vec(&json!({ "options": options, "operator": operator, "version": FINGERPRINT_VERSION }))
             .unwrap_or_default();
     sha2::Sha256::digest(&canonical).iter().take(8).map(|b| format!("{b:02x}")).collect()
 }

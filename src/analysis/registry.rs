@@ -243,7 +243,8 @@ pub static REGISTRY: &[Entry] = &[
     spectral(
         "shape-dna",
         "shape-DNA (normalized, reweighted eigenvalues) and Weyl's-law estimates",
-        "Weyl estimates with uncertainties, omitted where meaningless; `weyl-underresolved` warning",
+        "Weyl estimates with calibrated uncertainties, omitted where unresolved (`weyl-estimate-omitted`) or \
+         meaningless; `weyl-underresolved` warning",
     ),
     Entry {
         methods: &["spectral", "implicit"],

@@ -6,7 +6,13 @@ use kac_core::operators::manifold::CloudNormalization;
 use kac_core::operators::p2::Midpoints;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
-pub const ALGORITHM_VERSION: u32 = 9;
+pub const ALGORITHM_VERSION: u32 = 10;
+
+/// Bumped whenever a fingerprint's values could change for the same shape-DNA options and operator (part of the
+/// fingerprint family, so that stored fingerprints stay comparable across versions that change other numbers
+/// only). Version 10 of the analyses changed Weyl estimates, heat curvature's window and result fields, not
+/// shape-DNA's values.
+pub const FINGERPRINT_VERSION: u32 = 9;
 
 /// Which operator to build (see `kac_core::operators`): one type for the service's `operator` object and the
 /// CLI's operator flags (`--operator`, `--mass`, `--boundary`, `--dirichlet-vertices`, `--neighbours`, `--time`,

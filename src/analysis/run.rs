@@ -165,27 +165,45 @@ pub fn measures(v: &Validated, op: Option<&Operator>) -> Measures {
 pub const WEYL_MIN_SPACINGS_PER_WAVELENGTH: f64 = 10.0;
 
 /// Warnings about Weyl's estimates: `weyl-underresolved` when the wavelength 2π/√λ_k of the highest eigenvalue
-/// used spans fewer than [`WEYL_MIN_SPACINGS_PER_WAVELENGTH`] mesh spacings h = (|Ω|/n)^{1/d}.
+/// used spans fewer than [`WEYL_MIN_SPACINGS_PER_WAVELENGTH`] mesh spacings h = (|Ω|/n)^{1/d};
+/// `weyl-estimate-omitted` when an estimate was left out because the eigenvalues do not resolve it (its 2σ
+/// interval reaches zero or the wrong sign; `descriptors::weyl`).
 pub(crate) fn weyl_warnings(
     w: Option<&kac_core::descriptors::weyl::WeylEstimate>,
     m: &Measures,
     n: usize,
 ) -> Vec<Warning> {
-    let (Some(w), Some(measure)) = (w, m.measure()) else { return vec![] };
-    let Some(lk) = w.highest_eigenvalue.filter(|l| *l > 0.0) else { return vec![] };
-    let h = (measure / n.max(1) as f64).powf(1.0 / f64::from(w.dimension.max(1)));
-    let per = 2.0 * std::f64::consts::PI / (lk.sqrt() * h);
-    if per >= WEYL_MIN_SPACINGS_PER_WAVELENGTH {
-        return vec![];
+    let Some(w) = w else { return vec![] };
+    let mut warnings = vec![];
+    if let (Some(measure), Some(lk)) = (m.measure(), w.highest_eigenvalue.filter(|l| *l > 0.0)) {
+        let h = (measure / n.max(1) as f64).powf(1.0 / f64::from(w.dimension.max(1)));
+        let per = 2.0 * std::f64::consts::PI / (lk.sqrt() * h);
+        if per < WEYL_MIN_SPACINGS_PER_WAVELENGTH {
+            warnings.push(Warning::new(
+                "weyl-underresolved",
+                format!(
+                    "λ_k = {lk:.4e} has a wavelength of {per:.1} mesh spacings (under \
+                     {WEYL_MIN_SPACINGS_PER_WAVELENGTH}): the highest eigenvalues, on which Weyl's estimates rest, \
+                     are several percent too high and the measure and boundary estimates are biased low; refine the \
+                     mesh or lower k"
+                ),
+            ));
+        }
     }
-    vec![Warning::new(
-        "weyl-underresolved",
-        format!(
-            "λ_k = {lk:.4e} has a wavelength of {per:.1} mesh spacings (under {WEYL_MIN_SPACINGS_PER_WAVELENGTH}): \
-             the highest eigenvalues, on which Weyl's estimates rest, are several percent too high and the \
-             measure and boundary estimates are biased low; refine the mesh or lower k"
-        ),
-    )]
+    if !w.unresolved.is_empty() {
+        let omitted: Vec<String> =
+            w.unresolved.iter().map(|u| format!("{} ({:.4} ± {:.4})", u.field, u.estimate, u.uncertainty)).collect();
+        warnings.push(Warning::new(
+            "weyl-estimate-omitted",
+            format!(
+                "the {} non-zero eigenvalues do not resolve Weyl's {} (the 2σ interval reaches zero or the wrong \
+                 sign): omitted; compute more eigenvalues (a larger k) to hear it",
+                w.eigenvalues_used,
+                omitted.join(" and ")
+            ),
+        ));
+    }
+    warnings
 }
 
 /// The shape-DNA of a shape, typed (for `shape-dna` jobs and comparisons), with the eigenpairs it came from and
@@ -572,12 +590,16 @@ fn compute(
                              divided by the vertex's mass (`mass`)",
                 mass: mass.name(),
                 meaning: match mass {
-                    Mass::Voronoi => "the mean of div X over the vertex's mixed Voronoi cell, the cell the cotan \
+                    Mass::Voronoi => {
+                        "the mean of div X over the vertex's mixed Voronoi cell, the cell the cotan \
                                       Laplacian integrates over: div ∇x² = 2 exactly at the interior vertices of a \
-                                      uniform grid, cut by one diagonal or by both",
-                    _ => "the integrated divergence over a third of the incident triangles' area (a quarter of the \
+                                      uniform grid, cut by one diagonal or by both"
+                    }
+                    _ => {
+                        "the integrated divergence over a third of the incident triangles' area (a quarter of the \
                           incident tetrahedra's volume): biased where the vertices' cells differ from those shares \
-                          (a criss-cross grid: 1.5 and 3.0 for div ∇x² = 2 at its valence-8 and valence-4 vertices)",
+                          (a criss-cross grid: 1.5 and 3.0 for div ∇x² = 2 at its valence-8 and valence-4 vertices)"
+                    }
                 },
             };
             Part::new(Summary::Divergence(body), vec![a])
