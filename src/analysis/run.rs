@@ -154,6 +154,7 @@ pub fn measures(v: &Validated, op: Option<&Operator>) -> Measures {
                 area: None,
                 volume: mass_total.filter(|_| d == 3),
                 has_boundary: None,
+                condition: None,
             }
         }
         _ => m,
@@ -175,10 +176,12 @@ pub(crate) fn weyl_warnings(
 ) -> Vec<Warning> {
     let Some(w) = w else { return vec![] };
     let mut warnings = vec![];
+    let mut underresolved = false;
     if let (Some(measure), Some(lk)) = (m.measure(), w.highest_eigenvalue.filter(|l| *l > 0.0)) {
         let h = (measure / n.max(1) as f64).powf(1.0 / f64::from(w.dimension.max(1)));
         let per = 2.0 * std::f64::consts::PI / (lk.sqrt() * h);
         if per < WEYL_MIN_SPACINGS_PER_WAVELENGTH {
+            underresolved = true;
             warnings.push(Warning::new(
                 "weyl-underresolved",
                 format!(
@@ -191,13 +194,26 @@ pub(crate) fn weyl_warnings(
         }
     }
     if !w.unresolved.is_empty() {
-        let omitted: Vec<String> =
-            w.unresolved.iter().map(|u| format!("{} ({:.4} ± {:.4})", u.field, u.estimate, u.uncertainty)).collect();
+        let omitted: Vec<String> = w
+            .unresolved
+            .iter()
+            .map(|u| match (u.estimate, u.uncertainty) {
+                (Some(e), Some(s)) => format!("{} ({e:.4} ± {s:.4}: {})", u.field, u.reason),
+                _ => format!("{} ({})", u.field, u.reason),
+            })
+            .collect();
+        // What would help depends on why: a mesh too coarse for λ_k is not helped by more eigenvalues.
+        let advice = if underresolved {
+            "refine the mesh or use order-2 elements (more eigenvalues would not help: the highest are already \
+             under-resolved)"
+        } else {
+            "compute more eigenvalues (a larger k), and check the boundary condition where the boundary has the \
+             wrong sign"
+        };
         warnings.push(Warning::new(
             "weyl-estimate-omitted",
             format!(
-                "the {} non-zero eigenvalues do not resolve Weyl's {} (the 2σ interval reaches zero or the wrong \
-                 sign): omitted; compute more eigenvalues (a larger k) to hear it",
+                "the {} non-zero eigenvalues do not resolve Weyl's {}: omitted; {advice}",
                 w.eigenvalues_used,
                 omitted.join(" and ")
             ),
@@ -408,7 +424,15 @@ fn compute(
         Analysis::ShapeDna { options, operator, solver } => {
             let (e, dna, want) = shape_dna_of(v, options, operator, solver, hooks, reused)?;
             let b = basis_of(&e, want);
-            let m = measures(v, Some(&e.operator));
+            let mut m = measures(v, Some(&e.operator));
+            // The operator's boundary condition gives the sign of Weyl's boundary term (given Dirichlet vertices:
+            // mixed, no boundary estimate).
+            use kac_core::descriptors::shape_dna::BoundaryCondition;
+            m.condition = Some(match (e.operator.dirichlet(), operator.dirichlet_vertices.is_some()) {
+                (false, _) => BoundaryCondition::Neumann,
+                (true, true) => BoundaryCondition::Mixed,
+                (true, false) => BoundaryCondition::Dirichlet,
+            });
             let weyl = weyl_estimate(b.values, b.zero_tol, &m).ok();
             let warnings = weyl_warnings(weyl.as_ref(), &m, e.operator.pair.n());
             let family = fingerprint_family(options, operator);

@@ -83,7 +83,8 @@ pub(crate) fn run(
             {
                 let largest = hc.times.iter().copied().fold(0.0, f64::max);
                 let smallest = hc.times.iter().copied().fold(f64::INFINITY, f64::min);
-                let lk = e.spectrum.values.get(*k - 1).copied().unwrap_or(0.0);
+                // λ_k of the pairs the fit used (the basis' last).
+                let lk = basis_of(&e, *k).values.last().copied().unwrap_or(0.0);
                 let pairs = curvature::pairs_time(lk);
                 // The default window spans a factor MIN_WINDOW_RATIO at least: it fits below the bound once its
                 // start is at or below bound / MIN_WINDOW_RATIO.

@@ -371,6 +371,7 @@ pub fn compare(a: CompareCmd) -> Result<(), Failure> {
                 volume: field("Volume"),
                 length: None,
                 has_boundary: None,
+                condition: None,
             };
             let f =
                 compare::fingerprint_eigenvalues(&source, &ev.eigenvalues, &m, &a.dna).map_err(|e| fail(path, &e))?;

@@ -232,7 +232,7 @@ fn judge(reported: Option<(f64, f64)>, omitted: Option<(f64, f64)>, truth: f64) 
 }
 
 fn unresolved(w: &WeylEstimate, field: &str) -> Option<(f64, f64)> {
-    w.unresolved.iter().find(|u| u.field == field).map(|u| (u.estimate, u.uncertainty))
+    w.unresolved.iter().find(|u| u.field == field).and_then(|u| Some((u.estimate?, u.uncertainty?)))
 }
 
 /// The Weyl estimates of each case at each k (the first k non-zero eigenvalues), judged; per class, and the log.

@@ -128,6 +128,22 @@ pub struct Measures {
     /// curves.
     #[serde(default)]
     pub has_boundary: Option<bool>,
+    /// The boundary condition of the operator the eigenvalues are of, which gives the sign of Weyl's boundary
+    /// term; `None` (a library caller's spectrum, exact spectra): read from the zero modes (a spectrum with zero
+    /// modes is Neumann). `mixed` (Dirichlet on part of the boundary) leaves the boundary estimate out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub condition: Option<BoundaryCondition>,
+}
+
+/// The boundary condition of a spectrum, for Weyl's boundary term.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BoundaryCondition {
+    Neumann,
+    Dirichlet,
+    /// Dirichlet on part of the boundary only.
+    Mixed,
 }
 
 impl Measures {
@@ -494,7 +510,7 @@ impl Measures {
             ShapeKind::TetMesh => Some(true),
             _ => None,
         };
-        Measures { dimension, length: summary.length, area, volume: summary.volume, has_boundary }
+        Measures { dimension, length: summary.length, area, volume: summary.volume, has_boundary, condition: None }
     }
 }
 

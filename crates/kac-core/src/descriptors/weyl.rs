@@ -104,9 +104,11 @@ pub struct WeylEstimate {
 pub struct UnresolvedEstimate {
     /// The field it would have filled: `measure_estimate` or `boundary_length_estimate`.
     pub field: &'static str,
-    pub estimate: f64,
-    /// One σ, as for the reported estimates.
-    pub uncertainty: f64,
+    /// The estimate and its one σ, as for the reported estimates; absent where no fit gave a finite one.
+    pub estimate: Option<f64>,
+    pub uncertainty: Option<f64>,
+    /// Why it is left out.
+    pub reason: &'static str,
 }
 
 /// The windows of the heat trace fit, t ∈ [a/λ_k, b/λ_k].
@@ -392,8 +394,16 @@ pub fn weyl_estimate(eigenvalues: &[f64], zero_tol: f64, measures: &Measures) ->
     let measure_estimate_leading = least_squares(&lead_rows).map_or(f64::NAN, |f| to_measure(f.coefficients[0]));
     // The boundary term is fitted unless the domain is known to have no boundary, and reported only where it is
     // known to have one; its sign is + with zero modes (a free boundary), − without (Dirichlet).
+    use super::shape_dna::BoundaryCondition;
     let fit_boundary = measures.has_boundary != Some(false);
-    let sign = if zeros > 0 { 1.0 } else { -1.0 };
+    let sign = match measures.condition {
+        Some(BoundaryCondition::Neumann) => 1.0,
+        Some(BoundaryCondition::Dirichlet | BoundaryCondition::Mixed) => -1.0,
+        None if zeros > 0 => 1.0,
+        None => -1.0,
+    };
+    // Under mixed conditions the two signs' parts of the boundary cannot be told apart: no boundary estimate.
+    let report_boundary = measures.has_boundary == Some(true) && measures.condition != Some(BoundaryCondition::Mixed);
     let windows: Vec<WindowEstimate> = if nz.len() >= 8 {
         WINDOWS.iter().filter_map(|&w| window_estimate(eigenvalues, zeros, d, fit_boundary, w)).collect()
     } else {
@@ -407,19 +417,31 @@ pub fn weyl_estimate(eigenvalues: &[f64], zero_tol: f64, measures: &Measures) ->
         .map(|(x, u)| (sign * x, u))
         .filter(|&b| finite(b))
         .min_by(|a, b| a.1.total_cmp(&b.1))
-        .filter(|_| measures.has_boundary == Some(true));
+        .filter(|_| report_boundary);
     let mut unresolved = vec![];
-    // Resolved: the 2σ interval stays above zero (for the boundary: on the side its condition gives).
-    let mut resolved = |field: &'static str, e: Option<(f64, f64)>| match e {
+    // Resolved: the 2σ interval stays above zero (for the boundary: on the side its condition gives). An estimate
+    // no fit gave (too few eigenvalues, every window's fit failed) is listed too: nothing is left out silently.
+    let too_few = nz.len() < 8;
+    let mut resolved = |field: &'static str, wanted: bool, e: Option<(f64, f64)>| match e {
         Some((x, u)) if x > 2.0 * u => Some((x, u)),
         Some((x, u)) => {
-            unresolved.push(UnresolvedEstimate { field, estimate: x, uncertainty: u });
+            let reason = "its 2σ interval reaches zero or the wrong sign";
+            unresolved.push(UnresolvedEstimate { field, estimate: Some(x), uncertainty: Some(u), reason });
+            None
+        }
+        None if wanted => {
+            let reason = if too_few {
+                "fewer than 8 non-zero eigenvalues: no fit"
+            } else {
+                "no window's fit gave a finite estimate and uncertainty"
+            };
+            unresolved.push(UnresolvedEstimate { field, estimate: None, uncertainty: None, reason });
             None
         }
         None => None,
     };
-    let measure = resolved("measure_estimate", measure);
-    let boundary = resolved("boundary_length_estimate", boundary);
+    let measure = resolved("measure_estimate", true, measure);
+    let boundary = resolved("boundary_length_estimate", report_boundary, boundary);
     let measure_name = match d {
         1 => "length",
         2 => "area",
@@ -442,8 +464,8 @@ pub fn weyl_estimate(eigenvalues: &[f64], zero_tol: f64, measures: &Measures) ->
         string_length_estimate: (d == 1).then(|| PI / nz[0].0.sqrt()),
         unresolved,
         method: "heat trace Z(t) = Σ e^{−λt} of the k eigenvalues fitted as Σ_j c_j (4πt)^{−s_j} P(s_j, λ_k t) + δ \
-                 e^{−λ_k t}, s_j = d/2, (d−1)/2, …: c_0 = |Ω|, c_1 = ±¼|∂Ω| (+ with zero modes, Neumann; − \
-                 without, Dirichlet), P the regularized incomplete gamma function (the trace cut at λ_k), over \
+                 e^{−λ_k t}, s_j = d/2, (d−1)/2, …: c_0 = |Ω|, c_1 = ±¼|∂Ω| (+ Neumann, − Dirichlet: the \
+                 operator's condition, else + with zero modes), P the regularized incomplete gamma function (the trace cut at λ_k), over \
                  t in [1, 8], [3, 16] or [8, 40] / λ_k (the window with the smallest uncertainty); uncertainty \
                  (1σ): standard error, the largest change with the window's ends halved or doubled and one term \
                  more or fewer, and the change with the lower half of the spectrum extrapolated (docs/weyl.md)",
@@ -487,5 +509,40 @@ mod tests {
             let (dim, du) = (w.dimension_estimate, w.dimension_uncertainty.unwrap());
             assert!((dim - 3.0).abs() < 2.0 * du, "{start}: dimension {dim} ± {du}");
         }
+    }
+
+    /// The operator's condition gives the boundary term's sign, whatever the zero modes say: the Dirichlet unit
+    /// square's exact spectrum with a zero mode beside it (a closed component the boundary does not anchor) is
+    /// still heard as a square of perimeter 4 when the condition is given, and as a wrong-signed boundary, left
+    /// out, when it is read from the zero modes. Mixed conditions give no boundary estimate; too few eigenvalues
+    /// for a fit are listed as unresolved, with the reason.
+    #[test]
+    fn the_boundary_sign_follows_the_condition_given() {
+        use super::super::shape_dna::BoundaryCondition;
+        let mut ev: Vec<f64> =
+            (1..40).flat_map(|m| (1..40).map(move |n| PI * PI * (m * m + n * n) as f64)).collect::<Vec<_>>();
+        ev.sort_by(f64::total_cmp);
+        ev.truncate(200);
+        ev.insert(0, 0.0);
+        let square = |condition| Measures {
+            dimension: 2,
+            area: Some(1.0),
+            has_boundary: Some(true),
+            condition,
+            ..Default::default()
+        };
+        let w = weyl_estimate(&ev, 1e-9, &square(Some(BoundaryCondition::Dirichlet))).unwrap();
+        let (b, db) = (w.boundary_length_estimate.expect("the perimeter"), w.boundary_length_uncertainty.unwrap());
+        assert!((b - 4.0).abs() < 2.0 * db, "perimeter {b} ± {db}");
+        let read = weyl_estimate(&ev, 1e-9, &square(None)).unwrap();
+        assert!(read.boundary_length_estimate.is_none(), "read as Neumann: {read:?}");
+        assert!(read.unresolved.iter().any(|u| u.field == "boundary_length_estimate"));
+        let mixed = weyl_estimate(&ev, 1e-9, &square(Some(BoundaryCondition::Mixed))).unwrap();
+        assert!(mixed.boundary_length_estimate.is_none() && mixed.unresolved.is_empty(), "{mixed:?}");
+        assert!(mixed.measure_estimate.is_some());
+        let few = weyl_estimate(&ev[1..7], 1e-9, &square(Some(BoundaryCondition::Dirichlet))).unwrap();
+        assert!(few.measure_estimate.is_none());
+        let reasons: Vec<&str> = few.unresolved.iter().map(|u| u.reason).collect();
+        assert_eq!(reasons, ["fewer than 8 non-zero eigenvalues: no fit"; 2], "{few:?}");
     }
 }
