@@ -119,55 +119,13 @@ const TIMES: usize = 32;
 /// overstates what the fit with it still misses).
 const FEWER_TERMS_WEIGHT: f64 = 0.3;
 
-/// The regularized lower incomplete gamma function P(s, x) = γ(s, x)/Γ(s) for s a non-negative multiple of ½,
-/// with P(0, x) = 1: series for x < s + 1, Lentz's continued fraction otherwise (Numerical Recipes §6.2).
+/// The regularized lower incomplete gamma function P(s, x) = γ(s, x)/Γ(s), with P(0, x) = 1 for the expansion's
+/// constant term (a cut at λ_k leaves a constant whole): the operators' incomplete gamma otherwise.
 fn gamma_p(s: f64, x: f64) -> f64 {
     if s <= 0.0 {
         return 1.0;
     }
-    if x <= 0.0 {
-        return 0.0;
-    }
-    // ln Γ(s) exactly for multiples of ½: Γ(½) = √π, Γ(1) = 1, Γ(s + 1) = s Γ(s).
-    let half = (s - s.floor() - 0.5).abs() < 1e-9;
-    let (mut ln_gamma, mut z) = if half { (0.5 * PI.ln(), 0.5) } else { (0.0, 1.0) };
-    while z < s - 1e-9 {
-        ln_gamma += z.ln();
-        z += 1.0;
-    }
-    let front = (s * x.ln() - x - ln_gamma).exp();
-    if x < s + 1.0 {
-        let (mut sum, mut term, mut a) = (1.0 / s, 1.0 / s, s);
-        for _ in 0..1000 {
-            a += 1.0;
-            term *= x / a;
-            sum += term;
-            if term.abs() < sum.abs() * 1e-16 {
-                break;
-            }
-        }
-        (front * sum).min(1.0)
-    } else {
-        let tiny = 1e-300;
-        let mut b = x + 1.0 - s;
-        let (mut c, mut d) = (1.0 / tiny, 1.0 / b);
-        let mut h = d;
-        for i in 1..1000 {
-            let an = -(i as f64) * (i as f64 - s);
-            b += 2.0;
-            d = an * d + b;
-            d = if d.abs() < tiny { tiny } else { d };
-            c = b + an / c;
-            c = if c.abs() < tiny { tiny } else { c };
-            d = 1.0 / d;
-            let step = d * c;
-            h *= step;
-            if (step - 1.0).abs() < 1e-16 {
-                break;
-            }
-        }
-        (1.0 - front * h).max(0.0)
-    }
+    crate::operators::manifold::gamma_p(s, x)
 }
 
 /// A least-squares solution with the standard errors of its coefficients.
