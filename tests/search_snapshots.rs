@@ -3,10 +3,13 @@
 //! refused and the index built from the store; the shutdown snapshot of a small store loads; an audit compares every
 //! row with the store; a start removes what interrupted writes left.
 
+#[path = "support/stored.rs"]
+mod stored;
+
 use clap::Parser;
 use kac::service::config::Config;
 use kac::service::search::{Index, LoadReport, Query};
-use kac::service::store::{self, Backend, ShapeRecord, StoredResult, StoredShape};
+use kac::service::store::{self, Backend, StoredResult, StoredShape};
 use kac_core::descriptors::shape_dna::Metric;
 use serde_json::json;
 
@@ -25,17 +28,7 @@ fn backend(dir: &std::path::Path) -> Backend {
 fn shape(i: usize) -> (StoredShape, Vec<u8>) {
     let mut mesh = kac_core::geometry::generate::icosphere(0);
     mesh.vertices[0][0] += 1e-4 * (i + 1) as f64;
-    let off = kac_core::io::write::off(&mesh).into_bytes();
-    let validated =
-        kac_core::load_bytes(&off, kac_core::Format::Off, &Default::default(), &Default::default()).unwrap();
-    let record = ShapeRecord {
-        id: validated.id.hex(),
-        format: "off".into(),
-        created_at: "2026-01-01T00:00:00.000Z".into(),
-        bytes: off.len(),
-        summary: json!({ "vertices": validated.shape.vertex_count() }),
-    };
-    (StoredShape { record, validated }, off)
+    stored::stored(&mesh)
 }
 
 /// A fingerprint of `k` ascending values for shape `i` (distinct for every i).

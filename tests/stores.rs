@@ -7,13 +7,16 @@
 #[path = "support/pg.rs"]
 mod pg;
 
+#[path = "support/stored.rs"]
+mod stored;
+
 use clap::Parser;
 use kac::analysis::VertexArray;
 use kac::service::config::Config;
 use kac::service::error::ApiError;
 use kac::service::ids::{JobId, ShapeId};
 use kac::service::jobs::{JobProgress, JobView, Status};
-use kac::service::store::{self, Backend, Enqueued, Lease, ShapeRecord, StoredResult, StoredShape};
+use kac::service::store::{self, Backend, Enqueued, Lease, StoredResult, StoredShape};
 use serde_json::json;
 use std::sync::Arc;
 use std::time::Duration;
@@ -33,17 +36,7 @@ fn backend(dir: &std::path::Path, store_url: Option<&str>) -> Backend {
 }
 
 fn shape(level: u32) -> (StoredShape, Vec<u8>) {
-    let off = kac_core::io::write::off(&kac_core::geometry::generate::icosphere(level)).into_bytes();
-    let validated =
-        kac_core::load_bytes(&off, kac_core::Format::Off, &Default::default(), &Default::default()).unwrap();
-    let record = ShapeRecord {
-        id: validated.id.hex(),
-        format: "off".into(),
-        created_at: "2026-01-01T00:00:00.000Z".into(),
-        bytes: off.len(),
-        summary: json!({ "vertices": validated.shape.vertex_count() }),
-    };
-    (StoredShape { record, validated }, off)
+    stored::stored(&kac_core::geometry::generate::icosphere(level))
 }
 
 fn job(id: &str) -> JobView {

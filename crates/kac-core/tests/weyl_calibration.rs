@@ -32,16 +32,8 @@ struct Case {
 }
 
 fn mesh_area(m: &TriangleMesh) -> f64 {
-    m.faces
-        .iter()
-        .map(|f| {
-            let [a, b, c] = f.map(|i| m.vertices[i as usize]);
-            let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let x = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-            0.5 * (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()
-        })
-        .sum()
+    let norm = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    m.faces.iter().map(|f| 0.5 * norm(kac_core::geometry::topology::tri_area2(&m.vertices, f))).sum()
 }
 
 /// The `k` lowest eigenpairs (plus the zero mode under Neumann conditions) of a generated shape's FEM operator.
