@@ -6,6 +6,9 @@
 //! submission; the default Krylov basis counts against the output limit, a sliced solve's by its slices' bases; and
 //! the smaller items of the issue.
 
+#[path = "support/multipart.rs"]
+mod multipart_body;
+use multipart_body::multipart;
 #[path = "support/faults.rs"]
 mod faults;
 #[allow(dead_code)]
@@ -694,23 +697,6 @@ fn a_read_body_no_longer_holds_the_budget() {
 }
 
 // Issue 47: archives inside the memory budget, and every input of the HTTP boundary bounded.
-
-/// A multipart/form-data body of (part name, file name, bytes): (content type, body).
-fn multipart(parts: &[(&str, Option<&str>, &[u8])]) -> (String, Vec<u8>) {
-    let boundary = "kac-security-boundary-5d1e";
-    let mut body = vec![];
-    for (name, file, bytes) in parts {
-        body.extend(format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").bytes());
-        if let Some(f) = file {
-            body.extend(format!("; filename=\"{f}\"").bytes());
-        }
-        body.extend(b"\r\n\r\n");
-        body.extend(*bytes);
-        body.extend(b"\r\n");
-    }
-    body.extend(format!("--{boundary}--\r\n").bytes());
-    (format!("multipart/form-data; boundary={boundary}"), body)
-}
 
 fn bulk(s: &Server, parts: &[(&str, Option<&str>, &[u8])]) -> server::Reply {
     let (ct, body) = multipart(parts);

@@ -3,6 +3,9 @@
 //! every class of bad input with its problem code, a full queue, the OpenAPI document, and the README's curl
 //! walkthrough run as written.
 
+#[path = "support/multipart.rs"]
+mod multipart_body;
+use multipart_body::multipart;
 #[path = "../crates/kac-core/tests/common/mod.rs"]
 mod common;
 #[path = "support/faults.rs"]
@@ -1151,23 +1154,6 @@ fn cors_answers_real_origin_requests() {
     assert_eq!(up.status(), 201);
     assert_eq!(up.header("access-control-allow-origin"), Some("https://front.example"));
     assert!(up.header("access-control-expose-headers").unwrap_or("").to_lowercase().contains("location"));
-}
-
-/// A multipart/form-data body of (part name, file name, bytes).
-fn multipart(parts: &[(&str, Option<&str>, &[u8])]) -> (String, Vec<u8>) {
-    let boundary = "kac-test-boundary-7f3a9c";
-    let mut body = vec![];
-    for (name, file, bytes) in parts {
-        body.extend(format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").bytes());
-        if let Some(f) = file {
-            body.extend(format!("; filename=\"{f}\"").bytes());
-        }
-        body.extend(b"\r\n\r\n");
-        body.extend(*bytes);
-        body.extend(b"\r\n");
-    }
-    body.extend(format!("--{boundary}--\r\n").bytes());
-    (format!("multipart/form-data; boundary={boundary}"), body)
 }
 
 /// Issue 33, items 3 and 4: a collection uploaded in one request (files and a zip archive of more), each file
