@@ -27,7 +27,6 @@ pub(crate) async fn compare(
     headers: HeaderMap,
     body: Result<Json<Value>, JsonRejection>,
 ) -> Result<Response, ApiError> {
-    finite_wait(q.wait)?;
     let req: CompareRequest = strict_body(&st, body, "CompareRequest")?;
     let max = crate::service::compare::MAX_SHAPES;
     let shapes: Vec<Arc<StoredShape>> = match &req.shape_ids {
@@ -71,20 +70,11 @@ pub(crate) async fn correspondence(
     headers: HeaderMap,
     body: Result<Json<Value>, JsonRejection>,
 ) -> Result<Response, ApiError> {
-    finite_wait(q.wait)?;
     let req: CorrespondenceRequest = strict_body(&st, body, "CorrespondenceRequest")?;
     let source = stored_shape(&st, &req.source_id)?;
     let target = stored_shape(&st, &req.target_id)?;
     let (job, _) = jobs::submit_correspondence(&st.jobs, &st.config, req, &source, &target)?;
     answer_within(&st, &job, q.wait, &headers).await
-}
-
-/// A `wait` that is a number of seconds (NaN or ±∞ refused).
-fn finite_wait(wait: Option<f64>) -> Result<(), ApiError> {
-    match wait.filter(|w| !w.is_finite()) {
-        Some(w) => Err(ApiError::invalid_request(format!("wait = {w}: give a finite number of seconds"))),
-        None => Ok(()),
-    }
 }
 
 /// The largest magnitude of a query fingerprint's values: a thousand squared differences of it stay finite.
@@ -118,7 +108,6 @@ pub(crate) async fn search(
     Query(q): Query<SearchQuery>,
     body: Result<Json<Value>, JsonRejection>,
 ) -> Result<Response, ApiError> {
-    finite_wait(q.wait)?;
     let req: SearchRequest = strict_body(&st, body, "SearchRequest")?;
     // What other replicas computed or removed since the last search.
     st.index.sync(&*st.fingerprints).map_err(store_error)?;
