@@ -13,7 +13,7 @@ scale or resolution may be), each slightly perturbed (0.1 % white and 0.2 % smoo
 some stored synthetic rows perturbed the same way; shuffled together. Recall is reported for the two kinds
 apart.
 
-Data model (as src/service/store/sqlite.rs creates it): DATA_DIR/kac.sqlite3 holds
+Data model (as crates/kac-engine/src/store/sqlite/ creates it): DATA_DIR/kac.sqlite3 holds
 `fingerprints (family TEXT, shape_id TEXT, fingerprint BLOB, PRIMARY KEY (family, shape_id))`, the BLOB being
 the k values as little-endian float64. A family is the hash of the shape-DNA options and the operator; this
 script learns it from one real search (a generated icosphere uploaded and searched by its id, which runs a

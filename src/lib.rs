@@ -6,6 +6,6 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 #![deny(clippy::undocumented_unsafe_blocks)]
 
-pub mod analysis;
+pub use kac_engine::analysis;
 pub mod cli;
 pub mod service;

@@ -7,10 +7,10 @@
 mod stored;
 
 use clap::Parser;
-use kac::service::config::Config;
 use kac::service::search::{Index, LoadReport, Query};
 use kac::service::store::{self, Backend, StoredResult, StoredShape};
 use kac_core::descriptors::shape_dna::Metric;
+use kac_engine::EngineConfig as Config;
 use serde_json::json;
 
 #[derive(Parser)]

@@ -159,7 +159,7 @@ fn every_shared_mesh_uploads_and_matches_the_library() {
                     assert_eq!(r.location.as_deref(), Some(format!("/v1/shapes/{}", v.id.hex()).as_str()));
                     count += 1;
                 }
-                Err(err) => assert_problem(&r, r.status, err.code()),
+                Err(err) => assert_problem(&r, r.status, kac_engine::Code::from(&err).as_str()),
             }
         }
     }

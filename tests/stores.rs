@@ -12,11 +12,10 @@ mod stored;
 
 use clap::Parser;
 use kac::analysis::VertexArray;
-use kac::service::config::Config;
-use kac::service::error::ApiError;
 use kac::service::ids::{JobId, ShapeId};
 use kac::service::jobs::{JobProgress, JobView, Status};
 use kac::service::store::{self, Backend, Enqueued, Lease, StoredResult, StoredShape};
+use kac_engine::{Code, EngineConfig, Failure};
 use serde_json::json;
 use std::sync::Arc;
 use std::time::Duration;
@@ -24,7 +23,7 @@ use std::time::Duration;
 #[derive(Parser)]
 struct Args {
     #[command(flatten)]
-    config: Config,
+    config: EngineConfig,
 }
 
 fn backend(dir: &std::path::Path, store_url: Option<&str>) -> Backend {
@@ -68,8 +67,8 @@ fn jid(name: &str) -> JobId {
     JobId::parse(&h(name)).expect("a job id")
 }
 
-fn problem() -> kac::service::error::Problem {
-    ApiError::Canceled.problem().1
+fn problem() -> Failure {
+    Failure::canceled()
 }
 
 /// Every behaviour of the store interface, on one backend. `reopen` opens the same store again (a restart, or
@@ -257,7 +256,7 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     std::thread::sleep(Duration::from_millis(1200));
     assert_eq!(q.requeue_expired(&[]).unwrap(), vec![h("j5")]);
     let v = reopen().queue.get(&jid("j5")).unwrap().unwrap();
-    assert_eq!((v.status, v.error.map(|p| p.code)), (Status::Canceled, Some("canceled".to_string())));
+    assert_eq!((v.status, v.error.map(|p| p.code)), (Status::Canceled, Some(Code::Canceled)));
     assert!(q.claim("r1:5", lease).unwrap().is_none(), "a canceled job is not claimed again");
     // A job claimed by its id (a job taking back its own slice job), by one claim only, and only while enqueued.
     assert!(matches!(q.enqueue(job(&h("j6")), 9).unwrap(), Enqueued::New(_)));

@@ -1133,7 +1133,7 @@ fn refused(cell: &Cell, why: &str, cache: &Cache) -> Result<String, String> {
     }
     match analysis::run(&v, &a, Hooks { cache: Some(cache), ..Default::default() }) {
         Ok(_) => Err(format!("computed, though the registry refuses it ({why})")),
-        Err(e) if e.code() == "unsupported" => {
+        Err(e) if e.code() == kac_engine::Code::Unsupported => {
             let m = e.to_string();
             if !m.contains(cell.analysis) || !m.contains(cell.class.label()) {
                 return Err(format!("the refusal does not name the analysis and the class: {m}"));
@@ -1156,7 +1156,7 @@ fn not_expressible(cell: &Cell, field: &str) -> Result<String, String> {
     .into_iter()
     .filter_map(|(lacks, name)| lacks.then_some(name))
     .collect();
-    match kac::service::strict::check_body(&request, "JobRequest") {
+    match kac::service::strict::check_body(kac::service::openapi::served(), &request, "JobRequest") {
         Err(u) if lacking.iter().any(|l| u.detail().contains(&format!("unknown field `{l}`"))) => {
             Ok(format!("no `{field}`: {}", u.detail()))
         }

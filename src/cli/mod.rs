@@ -226,10 +226,9 @@ pub fn run() -> i32 {
 
 /// Runs `f` on this thread made one of the global rayon pool's workers (built with `threads` workers when given,
 /// `use_current_thread`). The solver's serial parts then run on the pool beside its parallel ones, and each parallel
-/// step is a fork on the pool instead of a hand-off from this thread and back (164k vertices, k = 200, two threads:
-/// 3.9 → 3.6 s; 10k vertices, k = 50: 0.110 → 0.092 s). This thread, not a spawned worker, keeps the solve's large
-/// allocations: on a spawned worker glibc's arena for that thread held about 60 MB more at the peak (10⁶ vertices,
-/// k = 100). Where the pool was built already, `f` runs here as before.
+/// step is a fork on the pool instead of a hand-off from this thread and back. This thread, not a spawned worker,
+/// keeps the solve's large allocations, since glibc gives a spawned worker an arena of its own that holds more at the
+/// peak (BENCHMARKS.md, "Why the code is as it is"). Where the pool was built already, `f` runs here.
 pub(crate) fn on_pool<T>(threads: usize, f: impl FnOnce() -> T) -> T {
     let mut pool = rayon::ThreadPoolBuilder::new().use_current_thread();
     if threads > 0 {

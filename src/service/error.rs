@@ -7,6 +7,7 @@ use kac_core::ShapeError;
 use serde_json::{Map, Value};
 
 pub use super::problem::Problem;
+use kac_engine::{Code, Failure};
 
 /// Everything a handler can fail with.
 #[derive(Debug)]
@@ -116,71 +117,21 @@ impl ApiError {
         ApiError::InvalidJson { detail: detail.into() }
     }
 
-    /// The one mapping from errors to status, code, title and extra members.
+    /// The one mapping from errors to code, title and extra members; the status is the code's ([`status_of`]).
     pub fn problem(&self) -> (StatusCode, Problem) {
         let mut extra = Map::new();
-        let (status, code, title, detail): (StatusCode, &str, &str, String) = match self {
+        let (code, title, detail): (Code, &str, String) = match self {
             ApiError::Shape(e) => {
-                let status = match e {
-                    ShapeError::UnknownFormat { .. } | ShapeError::FormatMismatch { .. } => {
-                        StatusCode::UNSUPPORTED_MEDIA_TYPE
-                    }
-                    ShapeError::LimitExceeded { .. } => StatusCode::PAYLOAD_TOO_LARGE,
-                    ShapeError::Io { .. } => StatusCode::INTERNAL_SERVER_ERROR,
-                    ShapeError::Syntax { .. }
-                    | ShapeError::Truncated { .. }
-                    | ShapeError::NonFinite { .. }
-                    | ShapeError::IndexOutOfRange { .. }
-                    | ShapeError::InvalidElement { .. }
-                    | ShapeError::Empty { .. }
-                    | ShapeError::Unsupported { .. } => StatusCode::UNPROCESSABLE_ENTITY,
-                };
                 if let Ok(Value::Object(m)) = serde_json::to_value(e) {
                     extra.insert("error".into(), Value::Object(m));
                 }
-                (status, e.code(), "The shape cannot be read", e.to_string())
+                (Code::from(e), "The shape cannot be read", e.to_string())
             }
-            // The errors a job can end with: one mapping, in the problem type (the job engine records them).
-            ApiError::Analysis(e) => return with_status(Problem::of_analysis(e)),
-            ApiError::Canceled => return with_status(Problem::canceled()),
-            ApiError::JobTimeout { seconds } => return with_status(Problem::job_timeout(*seconds)),
-            ApiError::JobPanicked { detail } => return with_status(Problem::job_panicked(detail)),
-            ApiError::NotFound { what, id } => {
-                (StatusCode::NOT_FOUND, "not-found", "Not found", format!("no {what} with id '{id}'"))
-            }
-            ApiError::RouteNotFound { path } => {
-                (StatusCode::NOT_FOUND, "route-not-found", "Not found", format!("no route {path}; see /openapi.json"))
-            }
-            ApiError::MethodNotAllowed => (
-                StatusCode::METHOD_NOT_ALLOWED,
-                "method-not-allowed",
-                "Method not allowed",
-                "this method is not allowed on this resource; see /openapi.json".into(),
-            ),
-            ApiError::BodyTooLarge { limit } => {
-                extra.insert("limit_bytes".into(), (*limit).into());
-                (
-                    StatusCode::PAYLOAD_TOO_LARGE,
-                    "body-too-large",
-                    "Request body too large",
-                    format!("the request body exceeds the limit of {limit} bytes (--max-body-bytes)"),
-                )
-            }
-            ApiError::InvalidRequest { detail } => {
-                (StatusCode::BAD_REQUEST, "invalid-request", "Bad request", detail.clone())
-            }
-            ApiError::InvalidJson { detail } => {
-                (StatusCode::BAD_REQUEST, "invalid-json", "Bad request", detail.clone())
-            }
-            ApiError::InvalidParameter { parameter, detail } => {
-                extra.insert("parameter".into(), parameter.clone().into());
-                (StatusCode::BAD_REQUEST, "invalid-request", "Bad request", detail.clone())
-            }
-            ApiError::DuplicateKey { within, key } => {
-                extra.insert("pointer".into(), key.pointer.clone().into());
-                extra.insert("field".into(), key.key.clone().into());
-                (StatusCode::BAD_REQUEST, "invalid-json", "Bad request", format!("{within}: {}", key.detail()))
-            }
+            // The errors a job can end with: the engine's failures, recorded with the job.
+            ApiError::Analysis(e) => return with_status((&Failure::of_analysis(e)).into()),
+            ApiError::Canceled => return with_status((&Failure::canceled()).into()),
+            ApiError::JobTimeout { seconds } => return with_status((&Failure::job_timeout(*seconds)).into()),
+            ApiError::JobPanicked { detail } => return with_status((&Failure::job_panicked(detail)).into()),
             ApiError::UnknownField(u) => {
                 extra.insert("pointer".into(), u.pointer.clone().into());
                 extra.insert("field".into(), u.name.clone().into());
@@ -188,30 +139,54 @@ impl ApiError {
                 extra.insert("belongs_in".into(), u.belongs_in.as_deref().into());
                 extra.insert("accepted".into(), u.allowed.clone().into());
                 let title = if u.not_a_name.is_some() { "Invalid value" } else { "Unknown field" };
-                (StatusCode::UNPROCESSABLE_ENTITY, "invalid-request", title, u.detail())
+                (Code::UnknownField, title, u.detail())
+            }
+            ApiError::NotFound { what, id } => (Code::NotFound, "Not found", format!("no {what} with id '{id}'")),
+            ApiError::RouteNotFound { path } => {
+                (Code::RouteNotFound, "Not found", format!("no route {path}; see /openapi.json"))
+            }
+            ApiError::MethodNotAllowed => (
+                Code::MethodNotAllowed,
+                "Method not allowed",
+                "this method is not allowed on this resource; see /openapi.json".into(),
+            ),
+            ApiError::BodyTooLarge { limit } => {
+                extra.insert("limit_bytes".into(), (*limit).into());
+                (
+                    Code::BodyTooLarge,
+                    "Request body too large",
+                    format!("the request body exceeds the limit of {limit} bytes (--max-body-bytes)"),
+                )
+            }
+            ApiError::InvalidRequest { detail } => (Code::InvalidRequest, "Bad request", detail.clone()),
+            ApiError::InvalidJson { detail } => (Code::InvalidJson, "Bad request", detail.clone()),
+            ApiError::InvalidParameter { parameter, detail } => {
+                extra.insert("parameter".into(), parameter.clone().into());
+                (Code::InvalidRequest, "Bad request", detail.clone())
+            }
+            ApiError::DuplicateKey { within, key } => {
+                extra.insert("pointer".into(), key.pointer.clone().into());
+                extra.insert("field".into(), key.key.clone().into());
+                (Code::InvalidJson, "Bad request", format!("{within}: {}", key.detail()))
             }
             ApiError::UnsupportedMediaType { detail } => {
-                (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported-media-type", "Unsupported media type", detail.clone())
+                (Code::UnsupportedMediaType, "Unsupported media type", detail.clone())
             }
             ApiError::QueueFull { capacity, retry_after_s } => {
                 extra.insert("capacity".into(), (*capacity).into());
                 extra.insert("retry_after_s".into(), (*retry_after_s).into());
                 (
-                    StatusCode::SERVICE_UNAVAILABLE,
-                    "queue-full",
+                    Code::QueueFull,
                     "The job queue is full",
                     format!("{capacity} jobs are queued or running; retry later"),
                 )
             }
-            ApiError::BodyTooSlow { detail } => {
-                (StatusCode::REQUEST_TIMEOUT, "body-timeout", "The request body came too slowly", detail.clone())
-            }
+            ApiError::BodyTooSlow { detail } => (Code::BodyTimeout, "The request body came too slowly", detail.clone()),
             ApiError::MemoryBusy { budget, retry_after_s } => {
                 extra.insert("budget_bytes".into(), (*budget).into());
                 extra.insert("retry_after_s".into(), (*retry_after_s).into());
                 (
-                    StatusCode::SERVICE_UNAVAILABLE,
-                    "memory-busy",
+                    Code::MemoryBusy,
                     "Request bodies in flight hold their memory budget",
                     format!(
                         "request bodies being received and archives being expanded hold the budget of {budget} bytes \
@@ -219,32 +194,20 @@ impl ApiError {
                     ),
                 )
             }
-            ApiError::KTooLarge { detail } => {
-                (StatusCode::PAYLOAD_TOO_LARGE, "k-too-large", "A limit was exceeded", detail.clone())
-            }
-            ApiError::TooManySamples { detail } => {
-                (StatusCode::PAYLOAD_TOO_LARGE, "too-many-samples", "A limit was exceeded", detail.clone())
-            }
-            ApiError::OutputTooLarge { detail } => {
-                (StatusCode::PAYLOAD_TOO_LARGE, "output-too-large", "A limit was exceeded", detail.clone())
-            }
-            ApiError::NotReady { detail } => {
-                (StatusCode::SERVICE_UNAVAILABLE, "not-ready", "Not ready", detail.clone())
-            }
+            ApiError::KTooLarge { detail } => (Code::KTooLarge, "A limit was exceeded", detail.clone()),
+            ApiError::TooManySamples { detail } => (Code::TooManySamples, "A limit was exceeded", detail.clone()),
+            ApiError::OutputTooLarge { detail } => (Code::OutputTooLarge, "A limit was exceeded", detail.clone()),
+            ApiError::NotReady { detail } => (Code::NotReady, "Not ready", detail.clone()),
             ApiError::Unauthorized => (
-                StatusCode::UNAUTHORIZED,
-                "unauthorized",
+                Code::Unauthorized,
                 "Unauthorized",
                 "this service needs an API key: send Authorization: Bearer KEY".into(),
             ),
-            ApiError::Forbidden => {
-                (StatusCode::FORBIDDEN, "forbidden", "Forbidden", "the API key is not valid for this service".into())
-            }
+            ApiError::Forbidden => (Code::Forbidden, "Forbidden", "the API key is not valid for this service".into()),
             ApiError::RateLimited { retry_after_s, per_minute } => {
                 extra.insert("retry_after_s".into(), (*retry_after_s).into());
                 (
-                    StatusCode::TOO_MANY_REQUESTS,
-                    "rate-limited",
+                    Code::RateLimited,
                     "Too many requests",
                     format!("this key may make {per_minute} requests per minute; retry after {retry_after_s} s"),
                 )
@@ -252,8 +215,7 @@ impl ApiError {
             ApiError::AuthThrottled { retry_after_s, per_minute } => {
                 extra.insert("retry_after_s".into(), (*retry_after_s).into());
                 (
-                    StatusCode::TOO_MANY_REQUESTS,
-                    "rate-limited",
+                    Code::RateLimited,
                     "Too many failed API keys",
                     format!(
                         "this address sent {per_minute} wrong API keys within a minute (--auth-failures-per-minute); \
@@ -262,30 +224,70 @@ impl ApiError {
                 )
             }
             ApiError::BodyTimeout { seconds } => (
-                StatusCode::REQUEST_TIMEOUT,
-                "body-timeout",
+                Code::BodyTimeout,
                 "Request body too slow",
                 format!("the request body paused for more than {seconds} s (--body-read-timeout-s)"),
             ),
-            ApiError::Internal { detail } => return with_status(Problem::internal(detail.clone())),
+            ApiError::Internal { detail } => return with_status((&Failure::internal(detail.clone())).into()),
         };
-        (
-            status,
-            Problem {
-                type_: format!("/problems/{code}"),
-                title: title.into(),
-                status: status.as_u16(),
-                detail,
-                code: code.into(),
-                extra,
-            },
-        )
+        with_status(Problem { extra, ..Problem::new(code, title, detail) })
     }
 }
 
 /// A problem with its status as the HTTP type.
 fn with_status(p: Problem) -> (StatusCode, Problem) {
     (StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR), p)
+}
+
+/// The one mapping from a code to its HTTP status: a request at fault is 4xx (400 malformed, 404 nothing there,
+/// 408/413/415 how it was sent, 422 understood but refused), a busy or unready service 503, a stopped job 409, and a
+/// computation or the service itself 500.
+pub fn status_of(code: Code) -> StatusCode {
+    match code {
+        Code::MalformedInput
+        | Code::TruncatedInput
+        | Code::NonFiniteValue
+        | Code::IndexOutOfRange
+        | Code::InvalidElement
+        | Code::EmptyShape
+        | Code::UnsupportedContent
+        | Code::UnknownField
+        | Code::InvalidK
+        | Code::InvalidOption
+        | Code::InvalidParameter
+        | Code::TooFewEigenpairs
+        | Code::NotApplicable
+        | Code::Unsupported
+        | Code::OperatorNotApplicable
+        | Code::MassNotApplicable
+        | Code::DegenerateElement
+        | Code::NonManifold
+        | Code::InvalidBoundary => StatusCode::UNPROCESSABLE_ENTITY,
+        Code::FormatMismatch | Code::UnknownFormat | Code::UnsupportedMediaType => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        Code::LimitExceeded | Code::BodyTooLarge | Code::KTooLarge | Code::TooManySamples | Code::OutputTooLarge => {
+            StatusCode::PAYLOAD_TOO_LARGE
+        }
+        Code::IoError
+        | Code::InternalError
+        | Code::JobPanicked
+        | Code::JobTimeout
+        | Code::FactorizationFailed
+        | Code::NoConvergence
+        | Code::IncompleteSpectrum
+        | Code::SolveFailed
+        | Code::NonFiniteResult => StatusCode::INTERNAL_SERVER_ERROR,
+        Code::NotFound | Code::RouteNotFound => StatusCode::NOT_FOUND,
+        Code::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
+        Code::InvalidJson | Code::InvalidRequest => StatusCode::BAD_REQUEST,
+        Code::QueueFull | Code::MemoryBusy | Code::TooManyConnections | Code::NotReady => {
+            StatusCode::SERVICE_UNAVAILABLE
+        }
+        Code::BodyTimeout => StatusCode::REQUEST_TIMEOUT,
+        Code::Unauthorized => StatusCode::UNAUTHORIZED,
+        Code::Forbidden => StatusCode::FORBIDDEN,
+        Code::RateLimited => StatusCode::TOO_MANY_REQUESTS,
+        Code::Canceled => StatusCode::CONFLICT,
+    }
 }
 
 /// A store that cannot be reached: 503 `not-ready` (the client may retry).
@@ -315,6 +317,12 @@ pub fn problem_response(status: StatusCode, p: &Problem) -> Response {
     r
 }
 
+/// A job's failure as its problem document, with the status of its code.
+pub fn failure_response(f: &Failure) -> Response {
+    let p = Problem::from(f);
+    problem_response(status_of(f.code), &p)
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let (status, p) = self.problem();
@@ -341,98 +349,6 @@ impl From<crate::analysis::AnalysisError> for ApiError {
         ApiError::Analysis(e)
     }
 }
-
-/// Every stable problem code with a one-line description (served at `/problems/{code}`).
-pub const CODES: &[(&str, &str)] = &[
-    ("malformed-input", "The file does not follow its format's syntax; the detail names the line or byte."),
-    ("truncated-input", "The file ends before the data it declares."),
-    ("non-finite-value", "A coordinate or weight is NaN or infinite."),
-    ("index-out-of-range", "An element refers to a vertex that does not exist."),
-    ("invalid-element", "An element breaks a rule (too few vertices, repeated index, …); the detail names it."),
-    ("empty-shape", "Nothing usable is left after validation."),
-    ("unsupported-content", "The file uses a feature of its format that kac does not read."),
-    (
-        "format-mismatch",
-        "The bytes could not be read as the format given (by ?format=, the media type or the file name) and look like \
-         another format; the problem names both and how the bytes begin. Send the right format name.",
-    ),
-    ("unknown-format", "No format was given and none could be recognized."),
-    ("limit-exceeded", "The shape is larger than the configured limit (--max-vertices)."),
-    ("io-error", "The server could not read or write its storage."),
-    ("not-found", "No resource with this id."),
-    ("route-not-found", "No such route."),
-    ("method-not-allowed", "The method is not allowed on this resource."),
-    ("body-too-large", "The request body exceeds --max-body-bytes."),
-    (
-        "invalid-json",
-        "The request body (or a JSON part or parameter) is not valid JSON for this endpoint, or names a key twice in \
-         one object (with `pointer` and `field`).",
-    ),
-    (
-        "invalid-request",
-        "A parameter is missing or malformed (400), or a field or query parameter is not one this request takes \
-         (422, with `pointer`, `field`, `suggestion`, `belongs_in` and `accepted`).",
-    ),
-    ("unsupported-media-type", "The Content-Type cannot be used here."),
-    ("queue-full", "The job queue is at capacity; retry after Retry-After seconds."),
-    (
-        "memory-busy",
-        "Request bodies being received and archives being expanded hold --max-body-memory-bytes together; retry \
-         after Retry-After seconds.",
-    ),
-    ("k-too-large", "k exceeds the configured limit (--max-k)."),
-    ("body-timeout", "The request body paused for longer than --body-read-timeout-s."),
-    (
-        "too-many-connections",
-        "The server holds --max-connections open connections; this one was answered and closed. Retry shortly.",
-    ),
-    (
-        "too-many-samples",
-        "A list or grid of the request (times, energies, τ samples, frequencies, sources, steps, values) is longer \
-         than --max-samples; the detail names the field.",
-    ),
-    (
-        "output-too-large",
-        "The analysis would hold a per-vertex array (eigenvectors included) of more than --max-output-values \
-         values (vertices × columns); the detail gives both.",
-    ),
-    ("unauthorized", "The service requires an API key (Authorization: Bearer KEY) and none was sent."),
-    ("forbidden", "The API key sent is not one the service accepts."),
-    ("rate-limited", "The key exceeded its requests per minute; retry after Retry-After seconds."),
-    ("not-ready", "The service is not ready (draining or storage unavailable)."),
-    ("internal-error", "An unexpected failure; the job or request can be retried."),
-    ("job-panicked", "The computation panicked; the job failed and the service kept serving."),
-    ("job-timeout", "The job ran longer than --job-timeout-s and was stopped."),
-    ("canceled", "The job was canceled."),
-    ("invalid-k", "k is out of range for the operator's size."),
-    ("invalid-option", "An eigensolver option is out of range."),
-    ("factorization-failed", "L − σM could not be factored."),
-    ("no-convergence", "The eigensolver did not converge within its step limit."),
-    (
-        "incomplete-spectrum",
-        "Sylvester's inertia counts more eigenvalues below the check's shift than the solver found, after its \
-         repair rounds; no result is given rather than an incomplete one.",
-    ),
-    ("invalid-parameter", "A descriptor or operator parameter is out of range."),
-    ("too-few-eigenpairs", "The descriptor needs more eigenpairs than were requested."),
-    ("not-applicable", "The analysis does not apply to this kind of shape."),
-    (
-        "unsupported",
-        "The truth table of analyses refuses this combination of analysis, shape class, boundary condition, \
-         order and extrapolation (GET /v1/analyses lists what is supported).",
-    ),
-    ("solve-failed", "A linear system could not be solved."),
-    (
-        "non-finite-result",
-        "The computation gave a NaN or an infinity where the result must hold a number; the detail names the field \
-         or array and its first such element. No result is stored rather than one holding it.",
-    ),
-    ("operator-not-applicable", "The operator does not apply to this kind of shape."),
-    ("mass-not-applicable", "The mass matrix does not apply to this operator."),
-    ("degenerate-element", "An element is degenerate for this operator."),
-    ("non-manifold", "The operator needs a manifold mesh; use 'robust'."),
-    ("invalid-boundary", "The boundary condition cannot be applied (no boundary, unknown vertex, …)."),
-];
 
 #[cfg(test)]
 mod tests {
@@ -564,17 +480,17 @@ mod tests {
         all
     }
 
-    /// Every problem the service can build has a documented code: listed in `CODES` (so served at
+    /// Every problem the service can build has a documented code: listed in `Code::ALL` (so served at
     /// `/problems/{code}`), in the OpenAPI document's `Problem.code` enum, and in the problem-code table of
     /// docs/service.md; and every listed code is one some error produces (plus the connection limit's, written by
     /// the listener).
     #[test]
     fn every_code_is_served_documented_and_in_the_openapi_document() {
-        let listed: std::collections::BTreeSet<&str> = CODES.iter().map(|(c, _)| *c).collect();
+        let listed: std::collections::BTreeSet<&str> = Code::ALL.iter().map(|c| c.as_str()).collect();
         let mut produced = std::collections::BTreeSet::new();
         for e in every_error() {
             let (status, p) = e.problem();
-            assert!(listed.contains(p.code.as_str()), "{} is not in CODES", p.code);
+            assert!(listed.contains(p.code.as_str()), "{} is not in Code::ALL", p.code);
             assert_eq!((p.type_.clone(), p.status), (format!("/problems/{}", p.code), status.as_u16()));
             produced.insert(p.code);
         }
@@ -605,6 +521,9 @@ mod tests {
             assert!(rows.contains(c), "{c} has no row in the problem-code table of docs/service.md");
         }
         let stale: Vec<_> = rows.iter().filter(|c| !listed.contains(*c)).collect();
-        assert!(stale.is_empty(), "docs/service.md's problem-code table has codes that are not in CODES: {stale:?}");
+        assert!(
+            stale.is_empty(),
+            "docs/service.md's problem-code table has codes that are not in Code::ALL: {stale:?}"
+        );
     }
 }

@@ -1,77 +1,11 @@
-//! Ids that can only be ids. Every id a client sends (a path segment, a body field) is parsed here into a typed
-//! value before it reaches a store, a file name or SQL; what does not parse names nothing and is answered 404
-//! `not-found` with the rule it breaks. Stores take these types only, so no text from a request can become a path.
-//!
-//! - a shape id ([`ShapeId`]): the SHA-256 of the canonical shape, 64 lowercase hex digits;
-//! - a job id ([`JobId`]), which is also its result's id: the first 16 bytes of SHA-256 over the request, 32
-//!   lowercase hex digits.
+//! Ids from requests: a path segment parsed into the engine's typed ids ([`kac_engine::ids`]) before a handler
+//! sees it; what does not parse names nothing and is answered 404 `not-found` with the rule it breaks.
 
 use super::error::ApiError;
 use axum::extract::{FromRequestParts, Path};
 use axum::http::request::Parts;
-pub use kac_core::geometry::hash::ShapeId;
-use std::fmt;
+pub use kac_engine::ids::*;
 
-/// A job's id, and the id of the result it stores: 16 bytes, written as 32 lowercase hex digits.
-#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct JobId(pub [u8; 16]);
-
-/// A result's id is its job's id.
-pub type ResultId = JobId;
-
-fn lower_hex(s: &str, out: &mut [u8]) -> bool {
-    if s.len() != 2 * out.len() || !s.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f')) {
-        return false;
-    }
-    for (i, o) in out.iter_mut().enumerate() {
-        match u8::from_str_radix(&s[2 * i..2 * i + 2], 16) {
-            Ok(b) => *o = b,
-            Err(_) => return false,
-        }
-    }
-    true
-}
-
-impl JobId {
-    /// The id its 32 lowercase hex digits name; nothing else parses.
-    pub fn parse(s: &str) -> Option<JobId> {
-        let mut b = [0u8; 16];
-        lower_hex(s, &mut b).then_some(JobId(b))
-    }
-    /// The first 16 bytes of a digest.
-    pub fn from_digest(d: &[u8]) -> JobId {
-        let mut b = [0u8; 16];
-        b.copy_from_slice(&d[..16]);
-        JobId(b)
-    }
-    pub fn hex(&self) -> String {
-        self.0.iter().map(|b| format!("{b:02x}")).collect()
-    }
-}
-
-impl fmt::Display for JobId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.hex())
-    }
-}
-
-impl fmt::Debug for JobId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "JobId({})", self.hex())
-    }
-}
-
-/// How a text that is not an id is described (quoted, at most 80 characters, control characters escaped), so
-/// that a problem document never echoes a long or binary path back whole.
-fn shown(s: &str) -> String {
-    let mut t: String = s.chars().take(80).flat_map(char::escape_debug).collect();
-    if s.chars().count() > 80 {
-        t.push('…');
-    }
-    format!("'{t}'")
-}
-
-/// A shape id a client sent, or 404 naming the rule it breaks.
 pub fn shape_id(s: &str) -> Result<ShapeId, ApiError> {
     ShapeId::parse(s).ok_or_else(|| ApiError::NotFound {
         what: "shape",
@@ -137,60 +71,14 @@ impl<S: Send + Sync> FromRequestParts<S> for ResultPath {
     }
 }
 
-/// A file name inside `dir` built from a typed id and a fixed suffix; refused (an error, never a path elsewhere)
-/// if the name could leave the directory. Ids are hex, so this holds by construction; the check keeps it so if a
-/// caller ever passes something else.
-pub fn file_in(dir: &std::path::Path, name: &str) -> std::io::Result<std::path::PathBuf> {
-    let ok = !name.is_empty()
-        && name != "."
-        && name != ".."
-        && name.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'.' | b'-' | b'_'))
-        && !name.starts_with('.');
-    if !ok {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            format!("{} is not a file name inside the store's directory", shown(name)),
-        ));
-    }
-    Ok(dir.join(name))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn only_lowercase_hex_of_the_exact_length_is_an_id() {
-        let job = "0123456789abcdef0123456789abcdef";
-        assert_eq!(JobId::parse(job).map(|j| j.hex()), Some(job.to_string()));
-        let shape = format!("{job}{job}");
-        assert_eq!(ShapeId::parse(&shape).map(|s| s.hex()), Some(shape.clone()));
-        for bad in [
-            "",
-            "..",
-            "../kac.sqlite3",
-            "..%2Fkac.sqlite3",
-            "%2e%2e",
-            "/etc/passwd",
-            "0123456789ABCDEF0123456789ABCDEF",
-            "0123456789abcdef0123456789abcde",
-            "0123456789abcdef0123456789abcdef0",
-            "0123456789abcdef0123456789abcde\0",
-            "0123456789abcdef0123456789abcdeg",
-            "0123456789abcdef0123456789abcdé",
-        ] {
-            assert!(JobId::parse(bad).is_none(), "{bad:?}");
-            assert!(ShapeId::parse(&format!("{bad}{bad}")).is_none(), "{bad:?}");
-        }
+    fn an_id_that_does_not_parse_is_not_found() {
+        let shape = "0123456789abcdef".repeat(4);
+        assert!(shape_id(&shape).is_ok() && job_id(&shape[..32]).is_ok() && result_id(&shape[..32]).is_ok());
         assert!(shape_id("..%2Fx").is_err() && job_id(&shape).is_err() && result_id(&shape).is_err());
-    }
-
-    #[test]
-    fn file_names_never_leave_their_directory() {
-        let d = std::path::Path::new("/data/results");
-        assert_eq!(file_in(d, "ab12.result.json").unwrap(), d.join("ab12.result.json"));
-        for bad in ["", ".", "..", "../x", "a/b", "/abs", ".hidden", "a\0b", "a\\b", "é"] {
-            assert!(file_in(d, bad).is_err(), "{bad:?}");
-        }
     }
 }

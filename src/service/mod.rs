@@ -3,107 +3,57 @@
 //! JSON (and `.npy` / coloured PLY per array) with strong ETags; every error is RFC 9457 problem+json.
 
 pub mod bodies;
-pub mod compare;
 pub mod config;
-pub mod correspondence;
 pub mod error;
-pub mod faults;
 pub mod ids;
-pub mod jobs;
-pub mod limits;
 pub mod listener;
 pub mod openapi;
 pub mod ops;
 pub mod problem;
 pub mod routes;
-pub mod search;
-pub mod store;
 pub mod strict;
 
-use config::Config;
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
-use store::{EigenCache, FingerprintStore, ResultStore, ShapeStore};
+pub use kac_engine::{compare, correspondence, faults, jobs, limits, search, store};
 
+use config::Config;
+use kac_engine::Engine;
+use std::sync::Arc;
+
+/// The HTTP layer's state: the engine it drives, and what only HTTP has (the flags of `kac serve`, the metrics of
+/// requests, API keys and rate limits, the memory of bodies in flight). Reads through to the engine's fields.
 pub struct Inner {
+    pub engine: Arc<Engine>,
     pub config: Config,
-    pub shapes: Arc<dyn ShapeStore>,
-    pub results: Arc<dyn ResultStore>,
-    pub fingerprints: Arc<dyn FingerprintStore>,
-    /// Every stored fingerprint, by family, for `/v1/search`.
-    pub index: search::Index,
-    pub cache: Arc<EigenCache>,
-    pub jobs: Arc<jobs::Jobs>,
-    pub metrics: ops::Metrics,
+    pub metrics: Arc<ops::Metrics>,
     pub access: ops::Access,
     /// The memory request bodies in flight hold together.
     pub bodies: bodies::BodyBudget,
-    pub draining: AtomicBool,
-    /// Jobs enqueued when this process started (those a dead process held included).
-    pub recovered: usize,
-    /// Faults the tests inject (debug builds only; see [`faults`]).
-    pub faults: faults::Faults,
+}
+
+impl std::ops::Deref for Inner {
+    type Target = Engine;
+    fn deref(&self) -> &Engine {
+        &self.engine
+    }
 }
 
 pub type AppState = Arc<Inner>;
 
 impl Inner {
-    /// Opens the store, puts back in the queue what a dead process held, and starts this replica's dispatcher
-    /// (claims jobs while a worker is free) and supervisor (heartbeats, cancels, timeouts).
+    /// Checks the configuration (fail closed: before any store is opened), then opens the engine.
     pub fn new(config: Config) -> std::io::Result<AppState> {
-        // Fail closed: a configuration that does not check stops the start, before any store is opened.
-        config.check().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
-        let keys = config.api_keys().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
-        let faults =
-            faults::Faults::from_env().map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
-        let workers = if config.workers == 0 {
-            std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
-        } else {
-            config.workers
-        };
-        let backend = store::open(&config)?;
-        let (index, loaded) = search::Index::load(&*backend.fingerprints, backend.index_snapshot.clone())?;
-        tracing::info!(
-            from = loaded.from,
-            fingerprints = loaded.fingerprints,
-            seconds = loaded.seconds,
-            refused = loaded.snapshot_refused.as_deref().unwrap_or(""),
-            "search index loaded"
-        );
-        let lease = std::time::Duration::from_secs_f64(config.lease_s.max(0.3));
-        let timeout = std::time::Duration::from_secs(config.job_timeout_s);
-        let mut jobs = jobs::Jobs::new(
-            workers,
-            config.queue_capacity.max(1),
-            backend.queue.clone(),
-            lease,
-            timeout,
-            Arc::new(jobs::SystemClock::default()),
-        );
-        jobs.solver_threads = config.solver_threads;
-        let jobs = Arc::new(jobs);
-        let recovered = jobs::recover(&jobs)?;
-        let state = Arc::new(Inner {
-            shapes: backend.shapes,
-            fingerprints: backend.fingerprints,
-            index,
-            results: backend.results,
-            cache: Arc::new(EigenCache::new(config.cache_bytes)),
-            jobs,
-            metrics: ops::Metrics::default(),
+        let invalid = |e: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, e);
+        config.check().map_err(invalid)?;
+        let keys = config.api_keys().map_err(invalid)?;
+        let metrics = Arc::new(ops::Metrics::default());
+        let engine = Engine::open(config.engine.clone(), metrics.clone(), |c| error::status_of(c).as_u16())?;
+        Ok(Arc::new(Inner {
+            engine,
+            metrics,
             bodies: bodies::BodyBudget::new(config.max_body_memory_bytes),
             access: ops::Access::new(&keys, config.rate_limit_per_minute, config.auth_failures_per_minute),
-            draining: AtomicBool::new(false),
-            recovered,
-            faults,
             config,
-        });
-        let st = state.clone();
-        std::thread::Builder::new().name("kac-dispatch".into()).spawn(move || jobs::dispatch(st))?;
-        jobs::wake_on_changes(&state.jobs)?;
-        let st = state.clone();
-        std::thread::Builder::new().name("kac-supervise".into()).spawn(move || jobs::supervise(st))?;
-        Ok(state)
+        }))
     }
 }
 

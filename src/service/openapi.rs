@@ -54,11 +54,11 @@ problem+json with a stable `type` (`/problems/{code}`).",
         super::routes::JobForm,
         super::compare::CompareRequest,
         super::correspondence::CorrespondenceRequest,
-        super::search::SearchRequest,
+        super::routes::SearchRequest,
         super::search::AuditReport,
         super::search::FamilyAudit,
         super::search::TagAudit,
-        super::jobs::JobView,
+        super::routes::JobBody,
         super::routes::JobResource,
         super::jobs::Status,
         super::jobs::JobProgress,
@@ -92,6 +92,13 @@ problem+json with a stable `type` (`/problems/{code}`).",
 pub struct ApiDoc;
 
 /// The document as pretty JSON (what `kac openapi` prints and `/openapi.json` serves).
+/// The served document as JSON, built once: what the strict checks of bodies and queries read
+/// ([`super::strict`]).
+pub fn served() -> &'static serde_json::Value {
+    static DOC: std::sync::OnceLock<serde_json::Value> = std::sync::OnceLock::new();
+    DOC.get_or_init(|| serde_json::from_str(&document()).unwrap_or(serde_json::Value::Null))
+}
+
 pub fn document() -> String {
     let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
     flatten_requests(&mut doc, &["CompareRequest", "SearchRequest", "CorrespondenceRequest"]);
@@ -443,7 +450,7 @@ fn type_raw_bodies(doc: &mut serde_json::Value) {
 /// Every problem code the service can answer with, as the `enum` of `Problem.code` (each is described at
 /// `/problems/{code}`): the contract a client can switch on, and schemathesis checks every problem against it.
 fn list_problem_codes(doc: &mut serde_json::Value) {
-    let codes: Vec<serde_json::Value> = super::error::CODES.iter().map(|(c, _)| (*c).into()).collect();
+    let codes: Vec<serde_json::Value> = kac_engine::Code::ALL.iter().map(|c| c.as_str().into()).collect();
     if let Some(serde_json::Value::Array(parts)) = doc.pointer_mut("/components/schemas/Problem/allOf") {
         for p in parts {
             if let Some(serde_json::Value::Object(code)) = p.pointer_mut("/properties/code") {

@@ -19,7 +19,6 @@ use serde::de::{DeserializeSeed, Deserializer, Error as _, MapAccess, SeqAccess,
 use serde_json::{Map, Value};
 use std::cell::RefCell;
 use std::collections::{BTreeSet, HashSet};
-use std::sync::OnceLock;
 
 /// A field or parameter the document does not declare where it was sent.
 #[derive(Debug, Clone, PartialEq)]
@@ -161,12 +160,6 @@ pub fn duplicate_key(json: &[u8]) -> Option<DuplicateKey> {
     let mut de = serde_json::Deserializer::from_slice(json);
     let _ = NoRepeats { at: &Step::Root, found: &found }.deserialize(&mut de);
     found.into_inner()
-}
-
-/// The served OpenAPI document as JSON (built once).
-fn document() -> &'static Value {
-    static DOC: OnceLock<Value> = OnceLock::new();
-    DOC.get_or_init(|| serde_json::from_str(&super::openapi::document()).unwrap_or(Value::Null))
 }
 
 fn resolve<'a>(doc: &'a Value, schema: &'a Value) -> &'a Value {
@@ -375,16 +368,14 @@ fn check_value(doc: &Value, schema: &Value, value: &Value, pointer: &str) -> Res
 }
 
 /// Checks a request body against the named component schema of the served document.
-pub fn check_body(value: &Value, schema: &str) -> Result<(), Unknown> {
-    let doc = document();
+pub fn check_body(doc: &Value, value: &Value, schema: &str) -> Result<(), Unknown> {
     let schema = serde_json::json!({ "$ref": format!("#/components/schemas/{schema}") });
     check_value(doc, &schema, value, "")
 }
 
 /// Checks query parameter names against those the document declares for the operation (`path` as routed, e.g.
 /// `/v1/jobs/{id}`).
-pub fn check_query(path: &str, method: &str, query: &str) -> Result<(), Unknown> {
-    let doc = document();
+pub fn check_query(doc: &Value, path: &str, method: &str, query: &str) -> Result<(), Unknown> {
     let Some(op) = doc.get("paths").and_then(|p| p.get(path)).and_then(|p| p.get(method.to_ascii_lowercase())) else {
         return Ok(());
     };
@@ -416,11 +407,16 @@ pub fn check_query(path: &str, method: &str, query: &str) -> Result<(), Unknown>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn doc() -> &'static Value {
+        crate::service::openapi::served()
+    }
     use serde_json::json;
 
     #[test]
     fn misspelt_fields_get_the_closest_name() {
         let e = check_body(
+            doc(),
             &json!({"shape_id": "x", "analysis": "shape-dna", "options": {"normalisation": "area"}}),
             "JobRequest",
         )
@@ -433,6 +429,7 @@ mod tests {
     fn a_tag_that_is_not_a_name_is_refused_not_read_as_an_index() {
         for tag in [json!(5), json!(6), json!(null), json!(true), json!(["gps"]), json!({"x": 1})] {
             let e = check_body(
+                doc(),
                 &json!({"shape_id": "x", "analysis": tag, "options": {"normalisation": "area"}}),
                 "JobRequest",
             )
@@ -444,8 +441,9 @@ mod tests {
 
     #[test]
     fn misplaced_fields_say_where_they_belong() {
-        let e = check_body(&json!({"shape_id": "x", "analysis": "spectrum", "boundary": "dirichlet"}), "JobRequest")
-            .unwrap_err();
+        let e =
+            check_body(doc(), &json!({"shape_id": "x", "analysis": "spectrum", "boundary": "dirichlet"}), "JobRequest")
+                .unwrap_err();
         assert_eq!((e.pointer.as_str(), e.belongs_in.as_deref()), ("/boundary", Some("operator")));
         assert!(e.detail().contains("`boundary` belongs in `operator`"), "{}", e.detail());
     }
@@ -453,7 +451,7 @@ mod tests {
     #[test]
     fn a_field_of_another_analysis_is_unknown_here() {
         // `scale_invariant` is no field of `hks` (the scale-invariant form is the `si-hks` analysis).
-        let e = check_body(&json!({"shape_id": "x", "analysis": "hks", "scale_invariant": true}), "JobRequest")
+        let e = check_body(doc(), &json!({"shape_id": "x", "analysis": "hks", "scale_invariant": true}), "JobRequest")
             .unwrap_err();
         assert_eq!(e.pointer, "/scale_invariant");
     }
@@ -467,23 +465,23 @@ mod tests {
             json!({"shape_id": "x", "analysis": "interpolate", "values": [[0, 1.0], [3, 2.0]]}),
             json!({"shape_id": "x", "analysis": "no-such-analysis"}),
         ] {
-            check_body(&body, "JobRequest").unwrap_or_else(|e| panic!("{body}: {}", e.detail()));
+            check_body(doc(), &body, "JobRequest").unwrap_or_else(|e| panic!("{body}: {}", e.detail()));
         }
     }
 
     #[test]
     fn query_parameters_are_checked_against_the_operation() {
-        assert!(check_query("/v1/analyze", "POST", "wait=1&format=off").is_ok());
-        let e = check_query("/v1/analyze", "POST", "wiat=1").unwrap_err();
+        assert!(check_query(doc(), "/v1/analyze", "POST", "wait=1&format=off").is_ok());
+        let e = check_query(doc(), "/v1/analyze", "POST", "wiat=1").unwrap_err();
         assert_eq!((e.pointer.as_str(), e.suggestion.as_deref()), ("?wiat", Some("wait")));
     }
 
     #[test]
     fn flattened_parts_of_a_tagged_branch_are_checked() {
         let ok = json!({ "shape_id": "x", "analysis": "wave", "times": [0.1], "source": 3, "width": 0.2 });
-        assert!(check_body(&ok, "JobRequest").is_ok());
+        assert!(check_body(doc(), &ok, "JobRequest").is_ok());
         let bad = json!({ "shape_id": "x", "analysis": "wave", "times": [0.1], "sourse": 3 });
-        let e = check_body(&bad, "JobRequest").unwrap_err();
+        let e = check_body(doc(), &bad, "JobRequest").unwrap_err();
         assert_eq!(e.suggestion.as_deref(), Some("source"));
     }
 

@@ -1,6 +1,6 @@
 //! Typed errors of the core. Each variant carries structured fields (which element, which rule, where in the
-//! input) and a stable machine-readable `code()`; the service maps codes to HTTP in one place, the CLI prints
-//! the message. Nothing here knows about HTTP.
+//! input); the engine gives each variant its stable code (`kac_engine::code`), the CLI prints the message. Nothing
+//! here knows about the service.
 
 use serde::Serialize;
 use std::fmt;
@@ -107,23 +107,6 @@ pub enum ShapeError {
     Io { path: String, message: String },
 }
 
-impl ShapeError {
-    /// Stable machine-readable code (used as the problem `type` suffix by the service).
-    pub fn code(&self) -> &'static str {
-        match self {
-            ShapeError::Syntax { .. } => "malformed-input",
-            ShapeError::Truncated { .. } => "truncated-input",
-            ShapeError::NonFinite { .. } => "non-finite-value",
-            ShapeError::IndexOutOfRange { .. } => "index-out-of-range",
-            ShapeError::InvalidElement { .. } => "invalid-element",
-            ShapeError::Empty { .. } => "empty-shape",
-            ShapeError::Unsupported { .. } => "unsupported-content",
-            ShapeError::UnknownFormat { .. } => "unknown-format",
-            ShapeError::FormatMismatch { .. } => "format-mismatch",
-            ShapeError::LimitExceeded { .. } => "limit-exceeded",
-            ShapeError::Io { .. } => "io-error",
-        }
-    }
-}
+impl ShapeError {}
 
 pub type Result<T, E = ShapeError> = std::result::Result<T, E>;

@@ -4,7 +4,20 @@
 //! ([`io`], [`geometry`]), validation with repairs and a report, content-hash ids, discrete Laplace operators,
 //! generalized eigensolvers and the descriptors read from a spectrum.
 //!
-//! This crate has no HTTP, no async runtime and no global state; the service and CLI are thin layers over it.
+//! This crate has no HTTP and no async runtime; the service and CLI are thin layers over it. Its global state is
+//! two items, each kept because what it counts or limits spans more than one call:
+//!
+//! - a thread-local limit on the values of a factor (the private `FACTOR_LIMIT` in [`cholesky::factor`], set only
+//!   inside [`cholesky::factor::with_factor_limit`], which restores the previous value, and read by
+//!   [`cholesky::factor::factor_limit`]): a host bounds every factor the PDE tools and descriptors make during one
+//!   analysis without a limit parameter on each of their signatures; unset, there is no limit;
+//! - a process-wide count of the threads running work a caller may abandon (a private `static` in
+//!   [`spectrum::Control::abandonable`]): abandoned work keeps its thread until it ends, so the cap of one such
+//!   thread per core must count across callers and outlive each call.
+//!
+//! Not global, though kept between calls: a [`cholesky::factor::Cholesky`] caches its parallel solve plan
+//! (`OnceLock`) and its parallel solve's scratch block (`Mutex`), per factor. Statics in `#[cfg(test)]` code only
+//! serve the tests.
 //!
 //! Conventions (stated once, echoed in every result): the Laplacian `L` is positive semidefinite (the stiffness
 //! matrix; libigl's `cotmatrix` is `−L`), the eigenproblem is `L φ = λ M φ` with `M` the mass matrix,
@@ -26,13 +39,16 @@
 // `!(x > 0.0)` is deliberate throughout: it is also true for NaN, which must fail every positivity check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod cholesky;
 pub mod correspondence;
 pub mod descriptors;
 pub mod error;
 pub mod geometry;
 pub mod io;
 pub mod operators;
+pub mod pattern;
 pub mod pde;
+pub mod point_cloud;
 pub mod simd;
 pub mod spectrum;
 

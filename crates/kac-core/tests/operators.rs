@@ -197,7 +197,7 @@ fn robust_laplacian_on_nonmanifold_and_degenerate_meshes() {
     // The cotan Laplacian refuses the degenerate triangles the robust one takes.
     let Some(v) = read("off/degtri_sliding.off", &keep) else { return };
     let e = operators::build(&v.shape, &OperatorOptions::default()).unwrap_err();
-    assert_eq!(e.code(), "degenerate-element");
+    assert!(matches!(e, operators::OperatorError::DegenerateElement { .. }), "{e:?}");
 }
 
 #[test]

@@ -46,6 +46,15 @@ pub struct Metrics {
     pub auth_throttled: AtomicU64,
 }
 
+impl kac_engine::Metrics for Metrics {
+    fn record_job(&self, analysis: &str, status: &str, seconds: f64) {
+        Metrics::record_job(self, analysis, status, seconds)
+    }
+    fn record_solve(&self, stats: &kac_core::spectrum::Stats) {
+        Metrics::record_solve(self, stats)
+    }
+}
+
 impl Metrics {
     pub fn record_job(&self, analysis: &str, status: &str, seconds: f64) {
         let mut m = self.jobs_finished.lock().unwrap_or_else(|e| e.into_inner());

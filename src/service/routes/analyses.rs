@@ -81,11 +81,51 @@ pub struct JobLinks {
     pub shape: String,
 }
 
+// The engine's record of a job, with its failure as a problem document (the status its code maps to).
+/// What clients see of a job.
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+#[schema(as = JobView)]
+pub struct JobBody {
+    pub id: String,
+    pub shape_id: String,
+    pub analysis: String,
+    pub status: Status,
+    pub progress: JobProgress,
+    /// RFC 3339 timestamps.
+    pub created_at: String,
+    pub started_at: Option<String>,
+    pub finished_at: Option<String>,
+    pub error: Option<Problem>,
+    /// Link to the result once succeeded.
+    pub result: Option<String>,
+    /// The request, canonical (defaults filled in).
+    #[schema(value_type = Object)]
+    pub request: serde_json::Value,
+}
+
+impl From<&JobView> for JobBody {
+    fn from(v: &JobView) -> JobBody {
+        JobBody {
+            id: v.id.clone(),
+            shape_id: v.shape_id.clone(),
+            analysis: v.analysis.clone(),
+            status: v.status,
+            progress: v.progress.clone(),
+            created_at: v.created_at.clone(),
+            started_at: v.started_at.clone(),
+            finished_at: v.finished_at.clone(),
+            error: v.error.as_ref().map(Problem::from),
+            result: v.result.clone(),
+            request: v.request.clone(),
+        }
+    }
+}
+
 /// A job as the routes answer it: its view and its links.
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct JobResource {
     #[serde(flatten)]
-    pub job: JobView,
+    pub job: JobBody,
     pub links: JobLinks,
 }
 
@@ -96,7 +136,7 @@ pub(crate) fn job_resource(v: &JobView) -> JobResource {
             events: format!("/v1/jobs/{}/events", v.id),
             shape: format!("/v1/shapes/{}", v.shape_id),
         },
-        job: v.clone(),
+        job: v.into(),
     }
 }
 
@@ -131,7 +171,7 @@ pub(crate) async fn create_job(State(st): State<AppState>, request: Request) -> 
         strict_body(&st, Json::<Value>::from_request(request, &st).await, "JobRequest")?
     };
     let shape = stored_shape(&st, &req.shape_id)?;
-    let (job, created) = jobs::submit(&st.jobs, &st.config, shape, req.analysis)?;
+    let (job, created) = jobs::submit(&st.jobs, &st.engine.config, shape, req.analysis)?;
     Ok(job_response(if created { StatusCode::ACCEPTED } else { StatusCode::OK }, &job))
 }
 
@@ -341,12 +381,13 @@ pub(crate) async fn analyze(
         .ok_or_else(|| ApiError::invalid_request("give the analysis as a multipart part or ?analysis=JSON"))?;
     let mut value = json_value(text.as_bytes(), "analysis")?;
     merge_arrays(&mut value, &up.arrays)?;
-    crate::service::strict::check_body(&value, "Analysis").map_err(|u| ApiError::UnknownField(Box::new(u)))?;
+    crate::service::strict::check_body(crate::service::openapi::served(), &value, "Analysis")
+        .map_err(|u| ApiError::UnknownField(Box::new(u)))?;
     let analysis: Analysis =
         serde_json::from_value(value).map_err(|e| ApiError::invalid_json(format!("analysis: {e}")))?;
     up.fields.clear();
     let (_, shape) = ingest(&st, up).await?;
-    let (job, _) = jobs::submit(&st.jobs, &st.config, shape, analysis)?;
+    let (job, _) = jobs::submit(&st.jobs, &st.engine.config, shape, analysis)?;
     answer_within(&st, &job, q.wait, &headers).await
 }
 
@@ -392,9 +433,8 @@ pub(crate) async fn answer_within(
             Ok(with_location(result_response(&r, headers, true), &format!("/v1/results/{}", view.id)))
         }
         Status::Failed | Status::Canceled => {
-            let p = view.error.clone().ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
-            let status = StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
-            Ok(with_location(problem_response(status, &p), &format!("/v1/jobs/{}", view.id)))
+            let f = view.error.as_ref().ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
+            Ok(with_location(failure_response(f), &format!("/v1/jobs/{}", view.id)))
         }
         _ => Ok(job_response(StatusCode::ACCEPTED, &view)),
     }

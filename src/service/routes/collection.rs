@@ -211,7 +211,8 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
             Some(f) => files.push((f, data)),
             None if name == "options" => {
                 let v = json_value(&data, "the options part")?;
-                super::super::strict::check_body(&v, "BulkOptions").map_err(|u| ApiError::UnknownField(Box::new(u)))?;
+                super::super::strict::check_body(super::super::openapi::served(), &v, "BulkOptions")
+                    .map_err(|u| ApiError::UnknownField(Box::new(u)))?;
                 options = Some(serde_json::from_value(v).map_err(|e| ApiError::invalid_json(e.to_string()))?);
             }
             None => {
@@ -233,10 +234,10 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
     let options = options.unwrap_or(BulkOptions { fingerprint: default_fingerprint(), ..Default::default() });
     let tags = Tag::parse_all(&options.tags).map_err(ApiError::invalid_request)?;
     if let Some(fp) = &options.fingerprint {
-        if fp.dna.k == 0 || fp.dna.k > st.config.max_k {
+        if fp.dna.k == 0 || fp.dna.k > st.engine.config.max_k {
             return Err(ApiError::invalid_request(format!(
                 "fingerprint k = {}: 1 to --max-k {}",
-                fp.dna.k, st.config.max_k
+                fp.dna.k, st.engine.config.max_k
             )));
         }
     }
@@ -275,7 +276,7 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
                 operator: fp.operator.clone(),
                 solver: analysis::SolverSpec::default(),
             };
-            let (job, _) = jobs::submit(&st.jobs, &st.config, shape.clone(), analysis)?;
+            let (job, _) = jobs::submit(&st.jobs, &st.engine.config, shape.clone(), analysis)?;
             Ok(Some(job_resource(&job)))
         })();
         let (job, problem) = match started {

@@ -38,11 +38,13 @@ pub(crate) async fn metrics(State(st): State<AppState>) -> Response {
     responses((status = 200, description = "the code's description", body = ProblemType),
               (status = 404, description = "unknown code", body = crate::service::error::Problem, content_type = "application/problem+json")))]
 pub(crate) async fn problem_doc(Path(code): Path<String>) -> Result<Json<ProblemType>, ApiError> {
-    CODES
-        .iter()
-        .find(|(c, _)| *c == code)
-        .map(|(c, d)| {
-            Json(ProblemType { type_: format!("/problems/{c}"), code: (*c).into(), description: (*d).into() })
+    Code::parse(&code)
+        .map(|c| {
+            Json(ProblemType {
+                type_: format!("/problems/{c}"),
+                code: c.as_str().into(),
+                description: c.describe().into(),
+            })
         })
         .ok_or(ApiError::NotFound { what: "problem code", id: code })
 }

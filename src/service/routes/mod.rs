@@ -26,10 +26,11 @@ pub(crate) use viewer::*;
 use super::compare::CompareRequest;
 use super::correspondence::CorrespondenceRequest;
 use super::error::store_error;
-use super::error::{problem_response, ApiError, CODES};
+use super::error::{failure_response, ApiError};
 use super::ids::{JobPath, ResultPath, ShapePath};
-use super::jobs::{self, JobView, Status};
-use super::search::{SearchError, SearchRequest, Tag};
+use super::jobs::{self, JobProgress, JobView, Status};
+use super::problem::Problem;
+use super::search::{SearchError, Tag};
 use super::store::{ShapeRecord, StoredResult, StoredShape};
 use super::AppState;
 use crate::analysis::{self, Analysis};
@@ -43,6 +44,7 @@ use axum::routing::{get, post};
 use axum::Router;
 use kac_core::io::Format;
 use kac_core::{ReadOptions, ValidateOptions};
+use kac_engine::Code;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::sync::atomic::Ordering;
@@ -250,7 +252,7 @@ pub(crate) fn strict_body<T: serde::de::DeserializeOwned>(
     schema: &str,
 ) -> Result<T, ApiError> {
     let Json(v) = body?;
-    super::strict::check_body(&v, schema).map_err(|u| ApiError::UnknownField(Box::new(u)))?;
+    super::strict::check_body(super::openapi::served(), &v, schema).map_err(|u| ApiError::UnknownField(Box::new(u)))?;
     serde_json::from_value(v).map_err(|e| ApiError::invalid_json(e.to_string()))
 }
 
@@ -261,7 +263,7 @@ pub(crate) async fn strict_query(
     next: axum::middleware::Next,
 ) -> Result<Response, ApiError> {
     if let (Some(path), Some(query)) = (matched.as_ref(), req.uri().query()) {
-        super::strict::check_query(path.as_str(), req.method().as_str(), query)
+        super::strict::check_query(super::openapi::served(), path.as_str(), req.method().as_str(), query)
             .map_err(|u| ApiError::UnknownField(Box::new(u)))?;
     }
     Ok(next.run(req).await)

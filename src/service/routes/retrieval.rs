@@ -1,6 +1,52 @@
 //! `/v1/compare` and `/v1/search`: shape-DNA comparisons as jobs, and the nearest stored shapes by fingerprint.
 
 use super::*;
+use crate::analysis::OperatorSpec;
+use kac_core::descriptors::shape_dna::{Metric, ShapeDnaOptions};
+
+/// The nearest stored shapes to a shape or a fingerprint, by shape-DNA.
+#[derive(Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(remote = "Self")]
+pub struct SearchRequest {
+    /// A stored shape to search from (its fingerprint is computed first, as a `shape-dna` job, when the store has
+    /// none of this family); the shape itself is left out of the answer.
+    pub shape_id: Option<String>,
+    /// Or a fingerprint of `k` values computed elsewhere (with the same parameters).
+    pub fingerprint: Option<Vec<f64>>,
+    /// The shape-DNA's options (k, normalization, reweighting, include_zero) at the top level: one type and one
+    /// set of defaults for every request and flag that fingerprints.
+    #[serde(flatten)]
+    pub dna: ShapeDnaOptions,
+    #[serde(default)]
+    pub metric: Metric,
+    /// Nearest shapes returned (default 10, at most 1000).
+    #[serde(default = "default_neighbours")]
+    pub neighbours: usize,
+    /// Only shapes carrying every one of these tags (at most 32).
+    #[serde(default)]
+    pub tags: Vec<String>,
+    /// Compare every fingerprint of the family instead of probing the index's nearest cells (slower on large
+    /// collections; the answer is then exact by construction).
+    #[serde(default)]
+    pub exact: bool,
+    #[serde(default)]
+    pub operator: OperatorSpec,
+}
+
+fn default_neighbours() -> usize {
+    10
+}
+
+kac_core::object_only_serde!(SearchRequest);
+
+impl SearchRequest {
+    pub fn options(&self) -> ShapeDnaOptions {
+        self.dna.clone()
+    }
+    pub fn family(&self) -> String {
+        crate::analysis::fingerprint_family(&self.options(), &self.operator)
+    }
+}
 
 #[derive(Deserialize, utoipa::IntoParams)]
 pub struct CompareQuery {
@@ -46,7 +92,7 @@ pub(crate) async fn compare(
             shapes
         }
     };
-    let (job, _) = jobs::submit_compare(&st.jobs, &st.config, req, shapes)?;
+    let (job, _) = jobs::submit_compare(&st.jobs, &st.engine.config, req, shapes)?;
     answer_within(&st, &job, q.wait, &headers).await
 }
 
@@ -73,7 +119,7 @@ pub(crate) async fn correspondence(
     let req: CorrespondenceRequest = strict_body(&st, body, "CorrespondenceRequest")?;
     let source = stored_shape(&st, &req.source_id)?;
     let target = stored_shape(&st, &req.target_id)?;
-    let (job, _) = jobs::submit_correspondence(&st.jobs, &st.config, req, &source, &target)?;
+    let (job, _) = jobs::submit_correspondence(&st.jobs, &st.engine.config, req, &source, &target)?;
     answer_within(&st, &job, q.wait, &headers).await
 }
 
@@ -116,8 +162,10 @@ pub(crate) async fn search(
             "k = 0: a fingerprint has at least one value",
         )));
     }
-    if req.dna.k > st.config.max_k {
-        return Err(ApiError::KTooLarge { detail: format!("k = {} is above --max-k {}", req.dna.k, st.config.max_k) });
+    if req.dna.k > st.engine.config.max_k {
+        return Err(ApiError::KTooLarge {
+            detail: format!("k = {} is above --max-k {}", req.dna.k, st.engine.config.max_k),
+        });
     }
     if req.neighbours > 1000 {
         return Err(ApiError::invalid_request(format!("neighbours = {}: at most 1000", req.neighbours)));
@@ -160,7 +208,7 @@ pub(crate) async fn search(
                     operator: req.operator.clone(),
                     solver: analysis::SolverSpec::default(),
                 };
-                let (job, _) = jobs::submit(&st.jobs, &st.config, shape, dna)?;
+                let (job, _) = jobs::submit(&st.jobs, &st.engine.config, shape, dna)?;
                 let view = wait_for(&st, &job, q.wait).await?;
                 match (stored_fingerprint(&st, &family, id)?, view.status) {
                     (Some(f), _) => f,
@@ -183,12 +231,11 @@ pub(crate) async fn search(
                         f.values
                     }
                     (None, Status::Failed | Status::Canceled) => {
-                        let p = view
+                        let f = view
                             .error
-                            .clone()
+                            .as_ref()
                             .ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
-                        let status = StatusCode::from_u16(p.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
-                        return Ok(with_location(problem_response(status, &p), &format!("/v1/jobs/{}", view.id)));
+                        return Ok(with_location(failure_response(f), &format!("/v1/jobs/{}", view.id)));
                     }
                     (None, _) => return Ok(job_response(StatusCode::ACCEPTED, &view)),
                 }
@@ -212,7 +259,7 @@ pub(crate) async fn search(
                 exclude,
                 tags: &tags,
                 exact: req.exact,
-                max_cells: st.config.search_cells,
+                max_cells: st.engine.config.search_cells,
             },
             &fetch,
         )
@@ -275,4 +322,17 @@ pub(crate) async fn search_audit(
         );
     }
     Ok(Json(report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The flattened shape-DNA options refuse a field no part declares even without the request check (which
+    /// refuses it first over HTTP, with its suggestion).
+    #[test]
+    fn unknown_fields_are_refused_by_the_type_too() {
+        let search = serde_json::json!({ "fingerprint": [1.0], "k": 1, "reweightin": "index" });
+        assert!(serde_json::from_value::<SearchRequest>(search).is_err());
+    }
 }

@@ -195,7 +195,7 @@ pub(crate) async fn ingest(st: &AppState, up: Upload) -> Result<(bool, Arc<Store
             }
         }
     };
-    let max_vertices = st.config.max_vertices;
+    let max_vertices = st.engine.config.max_vertices;
     let bytes = up.bytes.clone();
     let v = tokio::task::spawn_blocking(move || {
         let read = ReadOptions { max_vertices, ..Default::default() };

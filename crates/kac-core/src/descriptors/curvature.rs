@@ -19,7 +19,7 @@
 //!   their 95th percentile in absolute value over interior vertices). Measured, the fit's bias from the terms it
 //!   neglects at t_max = 1/κ²: −2.8 % on the unit sphere (closed-form kernel), +0.2 % / −2.8 % at the outer /
 //!   inner equator of the ring torus R = 2, r = 1/2 (P2, n = 64); at t_max = 2/κ² it is −13 % and −6.7 %, and at
-//!   the old default window of that torus (t_max = 6/κ²) −33 %. The default window is [t₀, 4t₀] when that lies
+//!   t_max = 6/κ² on that torus −33 %. The default window is [t₀, 4t₀] when that lies
 //!   below the scale, else [t₀, 1/κ_max²] while that spans a factor of 2 at least (a narrower window no longer
 //!   separates the t and t² terms), else [t₀, 2t₀]: then it reaches beyond the scale and
 //!   [`HeatCurvature::beyond_scale`] says so (the analysis warns `curvature-window-too-coarse`: a finer mesh or

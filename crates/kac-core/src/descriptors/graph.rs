@@ -3,9 +3,9 @@
 //! embeddings.
 
 use super::{Basis, DescriptorError};
+use crate::cholesky::factor::Cholesky;
 use crate::operators::graph_laplacian::{graph_pair, GraphKind};
 use crate::operators::sparse::{submatrix, Pattern, SparsePair};
-use crate::spectrum::factor::Cholesky;
 use faer::Mat;
 use serde::Serialize;
 use std::sync::Arc;

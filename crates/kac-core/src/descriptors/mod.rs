@@ -108,15 +108,6 @@ pub enum DescriptorError {
 }
 
 impl DescriptorError {
-    pub fn code(&self) -> &'static str {
-        match self {
-            DescriptorError::InvalidParameter { .. } => "invalid-parameter",
-            DescriptorError::TooFewEigenpairs { .. } => "too-few-eigenpairs",
-            DescriptorError::NotApplicable { .. } => "not-applicable",
-            DescriptorError::Solve { .. } => "solve-failed",
-            DescriptorError::TooLarge { .. } => "output-too-large",
-        }
-    }
     /// Whether the request was at fault (it cannot succeed as given) rather than the computation.
     pub fn caller_fault(&self) -> bool {
         match self {
@@ -128,13 +119,13 @@ impl DescriptorError {
         }
     }
     /// The symbolic analysis of a pattern, refused when its factor would exceed this thread's limit
-    /// ([`crate::spectrum::factor::with_factor_limit`]).
+    /// ([`crate::cholesky::factor::with_factor_limit`]).
     pub(crate) fn analyze(
         pattern: &std::sync::Arc<crate::operators::sparse::Pattern>,
-    ) -> Result<crate::spectrum::factor::Symbolic, DescriptorError> {
-        let sym = crate::spectrum::factor::Symbolic::analyze(pattern)
+    ) -> Result<crate::cholesky::factor::Symbolic, DescriptorError> {
+        let sym = crate::cholesky::factor::Symbolic::analyze(pattern)
             .map_err(|message| DescriptorError::Solve { message })?;
-        let (values, limit) = (sym.inner.len_val(), crate::spectrum::factor::factor_limit());
+        let (values, limit) = (sym.inner.len_val(), crate::cholesky::factor::factor_limit());
         if values > limit {
             return Err(DescriptorError::TooLarge { values, limit });
         }

@@ -27,8 +27,8 @@
 //! function N̄(λ) = Σ_j c_j λ^{s_j} / ((4π)^{s_j} Γ(s_j + 1)), s_j the powers; cut at λ_k, each term becomes
 //! c_j (4πt)^{−s_j} P(s_j, λ_k t), P the regularized lower incomplete gamma function (P(0, x) = 1: the constant is
 //! a step at λ = 0), and the jump of N − N̄ at the cut adds δ e^{−λ_k t}. So the fit holds down to t ≈ 1/λ_k
-//! instead of starting at t ≈ 8/λ_k, where the missing eigenvalues no longer weigh (the old fit's window, which at
-//! small k lay where the lower-order terms dominate: on the Neumann cube at k = 20 it read a volume of −2.96).
+//! instead of starting at t ≈ 8/λ_k, where the missing eigenvalues no longer weigh (a window that, at small k, lies
+//! where the lower-order terms dominate: on the Neumann cube at k = 20 a fit there reads a volume of −2.96).
 //!
 //! Estimates:
 //! - `measure` and `boundary_length`: Z_k fitted by least squares (relative residuals, 32 log-spaced times) with

@@ -3,7 +3,7 @@
 //! `indptr`, uncompressed). Both are written from the matrix's upper triangle as triplets (row ≤ column,
 //! 0-based, explicit zeros left out), the form kac keeps them in.
 
-use crate::operators::sparse::Pattern;
+use crate::pattern::Pattern;
 use std::io::Write;
 
 /// The upper triangle (row ≤ column) of the symmetric matrix with `values` on `p`, without explicit zeros, as

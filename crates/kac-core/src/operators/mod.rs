@@ -5,6 +5,7 @@
 pub mod boundary;
 pub mod cotan_laplacian;
 pub mod denoise;
+pub(crate) mod error;
 pub mod graph_laplacian;
 pub mod intrinsic_delaunay;
 pub mod manifold;
@@ -17,6 +18,7 @@ pub mod robust;
 pub mod sparse;
 pub mod tet_laplacian;
 
+pub use error::OperatorError;
 pub use mass::Mass;
 
 use crate::geometry::{vec3, Point, Shape, ShapeKind};
@@ -215,49 +217,6 @@ impl Default for OperatorOptions {
             polygons: None,
             edge_nodes: None,
             midpoints: p2::Midpoints::Input,
-        }
-    }
-}
-
-/// Why an operator cannot be built.
-#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize)]
-#[serde(tag = "error", rename_all = "snake_case")]
-pub enum OperatorError {
-    #[error("the '{operator}' operator does not apply to a {kind}")]
-    NotApplicable { operator: &'static str, kind: &'static str },
-    #[error("the '{mass}' mass does not apply to the '{operator}' operator")]
-    MassNotApplicable { operator: &'static str, mass: &'static str },
-    #[error("{element} {index} is degenerate: {message}")]
-    DegenerateElement { element: &'static str, index: usize, message: String },
-    #[error("the '{operator}' operator needs a manifold mesh: {message}; use 'robust'")]
-    NonManifold { operator: &'static str, message: String },
-    #[error("Dirichlet boundary: {message}")]
-    Boundary { message: String },
-    #[error("invalid parameter {name}: {message}")]
-    InvalidParameter { name: &'static str, message: String },
-}
-
-impl OperatorError {
-    pub fn code(&self) -> &'static str {
-        match self {
-            OperatorError::NotApplicable { .. } => "operator-not-applicable",
-            OperatorError::MassNotApplicable { .. } => "mass-not-applicable",
-            OperatorError::DegenerateElement { .. } => "degenerate-element",
-            OperatorError::NonManifold { .. } => "non-manifold",
-            OperatorError::Boundary { .. } => "invalid-boundary",
-            OperatorError::InvalidParameter { .. } => "invalid-parameter",
-        }
-    }
-    /// Whether the request was at fault (it cannot succeed as given) rather than the computation: always, since
-    /// every operator error is about the shape or the options asked for.
-    pub fn caller_fault(&self) -> bool {
-        match self {
-            OperatorError::NotApplicable { .. }
-            | OperatorError::MassNotApplicable { .. }
-            | OperatorError::DegenerateElement { .. }
-            | OperatorError::NonManifold { .. }
-            | OperatorError::Boundary { .. }
-            | OperatorError::InvalidParameter { .. } => true,
         }
     }
 }

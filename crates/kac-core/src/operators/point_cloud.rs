@@ -18,9 +18,12 @@
 use super::sparse::{assemble, Kernel, SparsePair};
 use super::{CloudParams, Neighbourhood, OperatorError};
 use crate::geometry::{vec3, Point};
-use kiddo::{KdTree, SquaredEuclidean};
+use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 use std::sync::Arc;
+
+// The point-cloud geometry the operator stands on (`crate::point_cloud`), reachable from the operator too.
+pub use crate::point_cloud::{local_areas, local_frames, voronoi_cell, Cell, Neighbourhoods};
 
 /// The default time of a uniform sample, in units of h² (h the mean distance to the nearest neighbour). Smaller
 /// times leave too few points under the kernel and the eigenvalues fall below the surface's, larger ones smooth
@@ -29,132 +32,6 @@ use std::sync::Arc;
 /// chosen there and confirmed elsewhere: a torus within 0.7 % of a fine mesh (4h²: 2.0 %), and clouds sampled from
 /// six shared meshes nearer their meshes' shape-DNA in 11 of 12 cases.
 pub const UNIFORM_TIME: f64 = 5.0;
-
-/// The k nearest neighbours of every point (itself excluded), nearest first.
-pub struct Neighbourhoods {
-    pub k: usize,
-    pub index: Vec<u32>,
-    pub tree: KdTree<f64, 3>,
-}
-
-impl Neighbourhoods {
-    pub fn knn(points: &[Point], k: usize) -> Result<Self, OperatorError> {
-        if points.len() < 4 {
-            return Err(OperatorError::InvalidParameter {
-                name: "points",
-                message: format!("{} points; a point-cloud Laplacian needs at least 4", points.len()),
-            });
-        }
-        let k = k.clamp(3, points.len() - 1);
-        let mut tree: KdTree<f64, 3> = KdTree::with_capacity(points.len());
-        for (i, p) in points.iter().enumerate() {
-            tree.add(p, i as u64);
-        }
-        let index: Vec<u32> = points
-            .par_iter()
-            .enumerate()
-            .flat_map_iter(|(i, p)| {
-                let found = tree.nearest_n::<SquaredEuclidean>(p, k + 1);
-                let mut out: Vec<u32> = found.iter().map(|n| n.item as u32).filter(|&j| j as usize != i).collect();
-                out.truncate(k);
-                while out.len() < k {
-                    out.push(out.last().copied().unwrap_or(0));
-                }
-                out
-            })
-            .collect();
-        Ok(Neighbourhoods { k, index, tree })
-    }
-    pub fn of(&self, i: usize) -> &[u32] {
-        &self.index[i * self.k..(i + 1) * self.k]
-    }
-}
-
-/// An orthonormal tangent frame (u, v) and normal n at each point, from the covariance of its neighbourhood.
-pub fn local_frames(points: &[Point], nb: &Neighbourhoods) -> Vec<[Point; 3]> {
-    (0..points.len())
-        .into_par_iter()
-        .map(|i| {
-            let mut c = [[0.0; 3]; 3];
-            let p = points[i];
-            for &j in nb.of(i) {
-                let d = vec3::sub(points[j as usize], p);
-                for a in 0..3 {
-                    for b in 0..3 {
-                        c[a][b] += d[a] * d[b];
-                    }
-                }
-            }
-            // The eigenvector of the smallest eigenvalue of the neighbourhood's covariance.
-            let n = super::denoise::eigen3(c).1[0];
-            let helper = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-            let u = vec3::cross(n, helper);
-            let u = vec3::scale(u, 1.0 / vec3::norm(u));
-            let v = vec3::cross(n, u);
-            [u, v, n]
-        })
-        .collect()
-}
-
-/// The Voronoi cell of a point among its projected neighbours: its area and, in angular order, the neighbour
-/// behind each cell edge (`u32::MAX` for an edge of the bounding square, i.e. an open side of the cell).
-pub struct Cell {
-    pub area: f64,
-    pub edges: Vec<u32>,
-}
-
-pub fn voronoi_cell(points: &[Point], nb: &Neighbourhoods, frames: &[[Point; 3]], i: usize) -> Cell {
-    let [u, v, _] = frames[i];
-    let p = points[i];
-    let q: Vec<(f64, f64, u32)> = nb
-        .of(i)
-        .iter()
-        .map(|&j| {
-            let d = vec3::sub(points[j as usize], p);
-            (vec3::dot(d, u), vec3::dot(d, v), j)
-        })
-        .filter(|&(x, y, _)| x * x + y * y > 0.0)
-        .collect();
-    let r = q.iter().map(|&(x, y, _)| (x * x + y * y).sqrt()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-    // The cell is clipped to the square of half-size r (the farthest neighbour): a bound for open cells.
-    let mut poly: Vec<([f64; 2], u32)> =
-        vec![([-r, -r], u32::MAX), ([r, -r], u32::MAX), ([r, r], u32::MAX), ([-r, r], u32::MAX)];
-    // poly[k].1 labels the edge from vertex k to vertex k+1.
-    for &(qx, qy, j) in &q {
-        let c = 0.5 * (qx * qx + qy * qy);
-        let side = |x: [f64; 2]| x[0] * qx + x[1] * qy - c; // ≤ 0 inside
-        let mut out: Vec<([f64; 2], u32)> = Vec::with_capacity(poly.len() + 1);
-        for k in 0..poly.len() {
-            let (a, la) = poly[k];
-            let (b, _) = poly[(k + 1) % poly.len()];
-            let (sa, sb) = (side(a), side(b));
-            if sa <= 0.0 {
-                out.push((a, la));
-            }
-            if (sa <= 0.0) != (sb <= 0.0) {
-                let t = sa / (sa - sb);
-                let x = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
-                // Entering the inside: the new edge continues the old one; leaving: the new edge is j's.
-                out.push((x, if sa <= 0.0 { j } else { la }));
-            }
-        }
-        poly = out;
-        if poly.is_empty() {
-            break;
-        }
-    }
-    let mut area = 0.0;
-    for k in 0..poly.len() {
-        let (a, b) = (poly[k].0, poly[(k + 1) % poly.len()].0);
-        area += a[0] * b[1] - a[1] * b[0];
-    }
-    Cell { area: 0.5 * area.abs(), edges: poly.iter().map(|e| e.1).collect() }
-}
-
-/// Local areas of all points (Voronoi cells in the tangent planes).
-pub fn local_areas(points: &[Point], nb: &Neighbourhoods, frames: &[[Point; 3]]) -> Vec<f64> {
-    (0..points.len()).into_par_iter().map(|i| voronoi_cell(points, nb, frames, i).area).collect()
-}
 
 /// The Belkin–Niyogi pair and the parameters it used (h, t, radius, k, total area).
 pub fn belkin_niyogi_pair(

@@ -14,8 +14,8 @@
 
 use super::sparse::matvec;
 use super::{edge_graph, Operator, OperatorKind};
+use crate::cholesky::factor::{self, Symbolic};
 use crate::geometry::{vec3, Shape};
-use crate::spectrum::{self, factor::Symbolic};
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
@@ -172,7 +172,7 @@ pub fn report(shape: &Shape, op: &Operator) -> PropertyReport {
     let symbolic = Symbolic::analyze(&op.pair.pattern).ok();
     let psd = symbolic
         .as_ref()
-        .map(|s| spectrum::factor::Cholesky::factor(s, &op.pair.shifted(-eps), faer::Par::Seq).is_ok())
+        .map(|s| factor::Cholesky::factor(s, &op.pair.shifted(-eps), faer::Par::Seq).is_ok())
         .unwrap_or(false);
     let positive_semidefinite = check(psd, eps, "ε for which L + εM has a Cholesky factorization");
     // Null space against components.
@@ -184,7 +184,7 @@ pub fn report(shape: &Shape, op: &Operator) -> PropertyReport {
     } else {
         let zero = 1e-8 * scale;
         let expected = if op.dirichlet() { 0 } else { comps };
-        match symbolic.as_ref().map(|s| spectrum::factor::count_below(s, &op.pair, zero)) {
+        match symbolic.as_ref().map(|s| factor::count_below(s, &op.pair, zero)) {
             Some(Ok(dim)) => check(
                 dim == expected,
                 dim as f64,

@@ -3,35 +3,12 @@
 //! L − σM for any σ and either mass has the same pattern and one symbolic Cholesky analysis serves them all.
 
 use faer::reborrow::ReborrowMut;
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::sparse::SparseColMatRef;
 use rayon::prelude::*;
 use std::sync::Arc;
 
-/// A symmetric sparsity pattern in compressed-column form.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Pattern {
-    pub n: usize,
-    pub col_ptr: Vec<usize>,
-    pub row_idx: Vec<usize>,
-}
-
-impl Pattern {
-    pub fn nnz(&self) -> usize {
-        self.row_idx.len()
-    }
-    /// Rows of column `j`.
-    pub fn col(&self, j: usize) -> &[usize] {
-        &self.row_idx[self.col_ptr[j]..self.col_ptr[j + 1]]
-    }
-    /// Position of the diagonal entry of column `j`.
-    pub fn diag_pos(&self, j: usize) -> usize {
-        self.col_ptr[j] + self.col(j).binary_search(&j).expect("the diagonal is always stored")
-    }
-    pub fn faer(&self) -> SymbolicSparseColMatRef<'_, usize> {
-        // SAFETY-free: checked construction (sorted rows, valid pointers).
-        SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
-    }
-}
+// The pattern is vocabulary below the operators and the readers and writers (`crate::pattern`).
+pub use crate::pattern::Pattern;
 
 /// Stiffness and mass on one pattern.
 #[derive(Debug, Clone)]
@@ -442,8 +419,8 @@ pub(crate) mod tests {
 
     /// A block product given two threads of a pool of four makes exactly two ranges of rows, on at most two
     /// threads, every time, and gives the product it gives on one thread. 400,000 rows: enough work that the pool's
-    /// idle threads would take ranges of rows if they were offered (the build before made 390 ranges on the whole
-    /// pool and used three of the four threads).
+    /// idle threads would take ranges of rows if they were offered (splitting over the whole pool would make
+    /// hundreds of ranges on three or four threads).
     #[test]
     fn a_block_product_keeps_to_the_threads_given() {
         let n: usize = 400_000;

@@ -8,7 +8,7 @@
 //! clockwise) and N the unit normal; on a tetrahedron, ∇φ_i = −n_i / (3V)·|F_i| with n_i the outward unit normal
 //! of the face opposite corner i and |F_i| its area, i.e. the area vector of that face over 3V pointing inward.
 
-use crate::descriptors::DescriptorError;
+use super::PdeError;
 use crate::geometry::{vec3, Point, Shape};
 
 /// One element: its corners, the gradients of their hat functions on it, and its measure (area or volume).
@@ -16,7 +16,7 @@ type Element = (Vec<usize>, Vec<Point>, f64);
 
 /// The element gradients of the hat functions, and each element's measure (area or volume); `None` for a
 /// degenerate element (zero measure), which then contributes nothing.
-fn hat_gradients(shape: &Shape) -> Result<Vec<Option<Element>>, DescriptorError> {
+fn hat_gradients(shape: &Shape) -> Result<Vec<Option<Element>>, PdeError> {
     match shape {
         Shape::TriangleMesh(m) => Ok(m
             .faces
@@ -54,7 +54,7 @@ fn hat_gradients(shape: &Shape) -> Result<Vec<Option<Element>>, DescriptorError>
                 Some((t.iter().map(|&i| i as usize).collect(), vec![g0, g1, g2, g3], six_v.abs() / 6.0))
             })
             .collect()),
-        other => Err(DescriptorError::NotApplicable {
+        other => Err(PdeError::NotApplicable {
             message: format!(
                 "gradient and divergence are taken on triangle and tet meshes' elements, not a {}",
                 other.kind().as_str()
@@ -65,10 +65,10 @@ fn hat_gradients(shape: &Shape) -> Result<Vec<Option<Element>>, DescriptorError>
 
 /// The gradient of a per-vertex function on each element (triangle or tetrahedron): one 3-vector per element,
 /// in the element order of the mesh; NaN for a degenerate element.
-pub fn gradient(shape: &Shape, u: &[f64]) -> Result<Vec<Point>, DescriptorError> {
+pub fn gradient(shape: &Shape, u: &[f64]) -> Result<Vec<Point>, PdeError> {
     let n = shape.vertex_count();
     if u.len() != n {
-        return Err(DescriptorError::param("function", format!("{} values for {n} vertices", u.len())));
+        return Err(PdeError::param("function", format!("{} values for {n} vertices", u.len())));
     }
     Ok(hat_gradients(shape)?
         .into_iter()
@@ -83,16 +83,16 @@ pub fn gradient(shape: &Shape, u: &[f64]) -> Result<Vec<Point>, DescriptorError>
 
 /// The integrated divergence of a per-element vector field, per vertex: (div X)_i = −Σ_f |f| X_f·∇φ_i (see the
 /// module's documentation); elements with a non-finite vector are refused.
-pub fn divergence(shape: &Shape, field: &[Point]) -> Result<Vec<f64>, DescriptorError> {
+pub fn divergence(shape: &Shape, field: &[Point]) -> Result<Vec<f64>, PdeError> {
     let elements = hat_gradients(shape)?;
     if field.len() != elements.len() {
-        return Err(DescriptorError::param(
+        return Err(PdeError::param(
             "field",
             format!("{} vectors for {} elements (one per triangle or tetrahedron)", field.len(), elements.len()),
         ));
     }
     if let Some(f) = field.iter().position(|x| x.iter().any(|c| !c.is_finite())) {
-        return Err(DescriptorError::param("field", format!("element {f}'s vector is not finite")));
+        return Err(PdeError::param("field", format!("element {f}'s vector is not finite")));
     }
     let mut div = vec![0.0; shape.vertex_count()];
     for (e, x) in elements.iter().zip(field) {

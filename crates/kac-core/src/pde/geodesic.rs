@@ -12,14 +12,14 @@
 //! backward-Euler substeps at a larger time t' (the one-step kernel of step 1 decays exponentially, not like a
 //! Gaussian, so it cannot serve); it is only meaningful for one source and distances of a few √t'.
 
+use super::PdeError;
 use super::{solve_err, solve_spd};
-use crate::descriptors::DescriptorError;
+use crate::cholesky::factor::Cholesky;
 use crate::geometry::topology::UnionFind;
 use crate::geometry::{vec3, TriangleMesh};
 use crate::operators::cotan_laplacian::{cotan_pair, face_lengths};
 use crate::operators::sparse::matvec;
 use crate::operators::Mass;
-use crate::spectrum::factor::Cholesky;
 use faer::{Mat, Par};
 use serde::{Deserialize, Serialize};
 
@@ -76,23 +76,19 @@ pub struct VaradhanDiscrepancy {
     pub vertices: usize,
 }
 
-pub fn heat_method(
-    mesh: &TriangleMesh,
-    sources: &[usize],
-    opts: &HeatMethodOptions,
-) -> Result<Geodesic, DescriptorError> {
+pub fn heat_method(mesh: &TriangleMesh, sources: &[usize], opts: &HeatMethodOptions) -> Result<Geodesic, PdeError> {
     let n = mesh.vertices.len();
     if sources.is_empty() {
-        return Err(DescriptorError::param("sources", "give at least one source vertex"));
+        return Err(PdeError::param("sources", "give at least one source vertex"));
     }
     if let Some(s) = sources.iter().find(|&&s| s >= n) {
-        return Err(DescriptorError::param("sources", format!("vertex {s} does not exist ({n} vertices)")));
+        return Err(PdeError::param("sources", format!("vertex {s} does not exist ({n} vertices)")));
     }
     if let Some(f) = opts.varadhan_factor.filter(|f| !(*f >= 0.0 && f.is_finite())) {
-        return Err(DescriptorError::param("varadhan_factor", format!("{f} is not a finite number ≥ 0")));
+        return Err(PdeError::param("varadhan_factor", format!("{f} is not a finite number ≥ 0")));
     }
     if !(opts.time_factor > 0.0 && opts.time_factor.is_finite()) {
-        return Err(DescriptorError::param("time_factor", format!("{} is not positive", opts.time_factor)));
+        return Err(PdeError::param("time_factor", format!("{} is not positive", opts.time_factor)));
     }
     let v = &mesh.vertices;
     let f = &mesh.faces;
@@ -104,8 +100,8 @@ pub fn heat_method(
     let h = edge_sum / (3 * f.len()).max(1) as f64;
     let t = opts.time_factor * h * h;
     let pair = cotan_pair(n, f, |i| face_lengths(v, &f[i]), Mass::Lumped)
-        .map_err(|e| DescriptorError::NotApplicable { message: e.to_string() })?;
-    let sym = crate::descriptors::DescriptorError::analyze(&pair.pattern)?;
+        .map_err(|e| PdeError::NotApplicable { message: e.to_string() })?;
+    let sym = PdeError::analyze(&pair.pattern)?;
     // 1. heat
     let k: Vec<f64> = pair.mass.iter().zip(&pair.stiffness).map(|(m, l)| m + t * l).collect();
     let chol = Cholesky::factor(&sym, &k, Par::Seq).map_err(solve_err)?;

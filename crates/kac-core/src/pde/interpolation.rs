@@ -3,7 +3,7 @@
 use super::*;
 
 /// Checks that every connected component of the operator holds a fixed vertex (else the free block is singular).
-pub(crate) fn check_anchored(pair: &SparsePair, mask: &[bool], what: &str) -> Result<(), DescriptorError> {
+pub(crate) fn check_anchored(pair: &SparsePair, mask: &[bool], what: &str) -> Result<(), PdeError> {
     let (labels, count) = components(pair);
     let mut anchored = vec![false; count];
     for (i, &m) in mask.iter().enumerate() {
@@ -13,22 +13,22 @@ pub(crate) fn check_anchored(pair: &SparsePair, mask: &[bool], what: &str) -> Re
     }
     if let Some(c) = anchored.iter().position(|a| !a) {
         let v = labels.iter().position(|&l| l as usize == c).unwrap_or(0);
-        return Err(DescriptorError::NotApplicable {
+        return Err(PdeError::NotApplicable {
             message: format!("component {c} (containing vertex {v}) has no {what}; every component needs one"),
         });
     }
     Ok(())
 }
 
-pub(crate) fn mask_of(n: usize, known: &[(usize, f64)]) -> Result<(Vec<bool>, Vec<f64>), DescriptorError> {
+pub(crate) fn mask_of(n: usize, known: &[(usize, f64)]) -> Result<(Vec<bool>, Vec<f64>), PdeError> {
     let mut mask = vec![false; n];
     let mut g = vec![0.0; n];
     for &(i, v) in known {
         if i >= n {
-            return Err(DescriptorError::param("vertices", format!("vertex {i} does not exist ({n} vertices)")));
+            return Err(PdeError::param("vertices", format!("vertex {i} does not exist ({n} vertices)")));
         }
         if !v.is_finite() {
-            return Err(DescriptorError::param("values", format!("vertex {i} has value {v}")));
+            return Err(PdeError::param("values", format!("vertex {i} has value {v}")));
         }
         mask[i] = true;
         g[i] = v;
@@ -38,7 +38,7 @@ pub(crate) fn mask_of(n: usize, known: &[(usize, f64)]) -> Result<(Vec<bool>, Ve
 
 /// Harmonic interpolation: Δu = 0 away from the vertices with known values, u equal to them there. Reproduces
 /// linear functions on flat meshes with the cotangent Laplacian (linear precision).
-pub fn harmonic(pair: &SparsePair, known: &[(usize, f64)]) -> Result<Vec<f64>, DescriptorError> {
+pub fn harmonic(pair: &SparsePair, known: &[(usize, f64)]) -> Result<Vec<f64>, PdeError> {
     let n = pair.n();
     let (mask, g) = mask_of(n, known)?;
     check_anchored(pair, &mask, "vertex with a known value")?;
@@ -61,13 +61,13 @@ pub struct Labels {
     pub counts: Vec<usize>,
 }
 
-pub fn labels(pair: &SparsePair, labelled: &[(usize, u32)]) -> Result<Labels, DescriptorError> {
+pub fn labels(pair: &SparsePair, labelled: &[(usize, u32)]) -> Result<Labels, PdeError> {
     let n = pair.n();
     let mut classes: Vec<u32> = labelled.iter().map(|l| l.1).collect();
     classes.sort_unstable();
     classes.dedup();
     if classes.is_empty() {
-        return Err(DescriptorError::param("labels", "no labelled vertices"));
+        return Err(PdeError::param("labels", "no labelled vertices"));
     }
     let (mask, _) = mask_of(n, &labelled.iter().map(|&(i, _)| (i, 0.0)).collect::<Vec<_>>())?;
     check_anchored(pair, &mask, "labelled vertex")?;

@@ -20,11 +20,14 @@
 //! "Fixed" vertices (Dirichlet data) are eliminated, never replaced by identity rows.
 
 pub mod calculus;
+mod error;
 pub mod geodesic;
 
-use crate::descriptors::{graph::components, m_project, Basis, DescriptorError};
+pub use error::PdeError;
+
+use crate::cholesky::factor::Cholesky;
+use crate::descriptors::{graph::components, m_project, Basis};
 use crate::operators::sparse::{matvec, submatrix, Pattern, SparsePair};
-use crate::spectrum::factor::Cholesky;
 use faer::{Mat, MatRef, Par};
 use serde::Serialize;
 use std::sync::Arc;
@@ -41,8 +44,8 @@ pub use poisson_eq::*;
 pub use smoothing::*;
 pub use waves::*;
 
-pub(crate) fn solve_err(message: String) -> DescriptorError {
-    DescriptorError::Solve { message }
+pub(crate) fn solve_err(message: String) -> PdeError {
+    PdeError::Solve { message }
 }
 
 /// Solves K X = B for the rows not fixed, with X = G on the fixed rows: K_FF… eliminated, K_II X_I = B_I − K_IF G_F.
@@ -52,11 +55,11 @@ pub fn solve_spd(
     values: &[f64],
     rhs: MatRef<'_, f64>,
     fixed: Option<(&[bool], MatRef<'_, f64>)>,
-) -> Result<Mat<f64>, DescriptorError> {
+) -> Result<Mat<f64>, PdeError> {
     let n = pattern.n;
     let c = rhs.ncols();
     let Some((mask, g)) = fixed.filter(|(m, _)| m.iter().any(|&x| x)) else {
-        let sym = crate::descriptors::DescriptorError::analyze(pattern)?;
+        let sym = PdeError::analyze(pattern)?;
         let chol = Cholesky::factor(&sym, values, Par::Seq).map_err(solve_err)?;
         let mut x = rhs.to_owned();
         chol.solve_in_place(x.as_mut(), Par::Seq);
@@ -89,7 +92,7 @@ pub fn solve_spd(
     }
     let (sub, vals) = submatrix(pattern, &[values], &free);
     let sub = Arc::new(sub);
-    let sym = crate::descriptors::DescriptorError::analyze(&sub)?;
+    let sym = PdeError::analyze(&sub)?;
     let chol = Cholesky::factor(&sym, &vals[0], Par::Seq).map_err(solve_err)?;
     chol.solve_in_place(b.as_mut(), Par::Seq);
     for (k, &i) in free.iter().enumerate() {
@@ -112,16 +115,16 @@ pub(crate) fn mass_times(pair: &SparsePair, u: MatRef<'_, f64>) -> Mat<f64> {
     out
 }
 
-pub(crate) fn check_len(name: &'static str, got: usize, n: usize) -> Result<(), DescriptorError> {
+pub(crate) fn check_len(name: &'static str, got: usize, n: usize) -> Result<(), PdeError> {
     if got != n {
-        return Err(DescriptorError::param(name, format!("{got} values for {n} vertices")));
+        return Err(PdeError::param(name, format!("{got} values for {n} vertices")));
     }
     Ok(())
 }
 
-pub(crate) fn check_positive(name: &'static str, v: f64) -> Result<(), DescriptorError> {
+pub(crate) fn check_positive(name: &'static str, v: f64) -> Result<(), PdeError> {
     if !(v > 0.0 && v.is_finite()) {
-        return Err(DescriptorError::param(name, format!("{v} is not a positive finite number")));
+        return Err(PdeError::param(name, format!("{v} is not a positive finite number")));
     }
     Ok(())
 }

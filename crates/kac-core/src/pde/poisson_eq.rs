@@ -19,7 +19,7 @@ pub struct Poisson {
 /// Poisson's equation Δf = g with Δ = −∇·∇ positive semidefinite: L f = M g (Galerkin FEM, §9.5). With
 /// `dirichlet`, f takes the given values on those vertices; without, the problem is Neumann (compatible only
 /// when g integrates to zero on each component: the mean is removed and reported).
-pub fn poisson(pair: &SparsePair, g: &[f64], dirichlet: Option<&[(usize, f64)]>) -> Result<Poisson, DescriptorError> {
+pub fn poisson(pair: &SparsePair, g: &[f64], dirichlet: Option<&[(usize, f64)]>) -> Result<Poisson, PdeError> {
     match dirichlet {
         Some(known) => poisson_with(pair, g, PoissonBoundary::Values(known)),
         None => poisson_with(pair, g, PoissonBoundary::Neumann),
@@ -39,7 +39,7 @@ pub enum PoissonBoundary<'a> {
 }
 
 /// Poisson's equation Δf = g (L f = M g) under the given condition (see [`poisson`]).
-pub fn poisson_with(pair: &SparsePair, g: &[f64], condition: PoissonBoundary<'_>) -> Result<Poisson, DescriptorError> {
+pub fn poisson_with(pair: &SparsePair, g: &[f64], condition: PoissonBoundary<'_>) -> Result<Poisson, PdeError> {
     let n = pair.n();
     if let PoissonBoundary::Eliminated = condition {
         check_len("g", g.len(), n)?;

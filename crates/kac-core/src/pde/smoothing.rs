@@ -11,7 +11,7 @@ pub fn smooth(
     ubar: MatRef<'_, f64>,
     alpha: f64,
     fixed: Option<&[bool]>,
-) -> Result<Mat<f64>, DescriptorError> {
+) -> Result<Mat<f64>, PdeError> {
     check_len("u", ubar.nrows(), pair.n())?;
     check_positive("alpha", alpha)?;
     let k: Vec<f64> = pair.mass.iter().zip(&pair.stiffness).map(|(m, l)| m + alpha * l).collect();

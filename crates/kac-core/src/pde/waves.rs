@@ -12,14 +12,14 @@ pub fn wave(
     u0: &[f64],
     v0: Option<&[f64]>,
     times: &[f64],
-) -> Result<(Mat<f64>, f64), DescriptorError> {
+) -> Result<(Mat<f64>, f64), PdeError> {
     let n = basis.n();
     check_len("u0", u0.len(), n)?;
     if let Some(v) = v0 {
         check_len("v0", v.len(), n)?;
     }
     if times.iter().any(|t| !t.is_finite()) {
-        return Err(DescriptorError::param("times", "times must be finite"));
+        return Err(PdeError::param("times", "times must be finite"));
     }
     let phi = basis.vectors;
     let (a, dropped) = m_project(basis, pair, u0);
@@ -45,9 +45,9 @@ pub fn wave_energy(
     u: MatRef<'_, f64>,
     (u0, v0): (&[f64], Option<&[f64]>),
     times: &[f64],
-) -> Result<Vec<f64>, DescriptorError> {
+) -> Result<Vec<f64>, PdeError> {
     if u.nrows() != basis.n() || u.ncols() != times.len() {
-        return Err(DescriptorError::param("u", "the wave of these times on this basis"));
+        return Err(PdeError::param("u", "the wave of these times on this basis"));
     }
     let (a, _) = m_project(basis, pair, u0);
     let b = v0.map(|v| m_project(basis, pair, v).0).unwrap_or_else(|| vec![0.0; basis.k()]);
@@ -98,14 +98,14 @@ pub fn schrodinger(
     re0: &[f64],
     im0: Option<&[f64]>,
     times: &[f64],
-) -> Result<Evolution, DescriptorError> {
+) -> Result<Evolution, PdeError> {
     let n = basis.n();
     check_len("initial", re0.len(), n)?;
     if let Some(v) = im0 {
         check_len("initial_imag", v.len(), n)?;
     }
     if times.iter().any(|t| !t.is_finite()) {
-        return Err(DescriptorError::param("times", "times must be finite"));
+        return Err(PdeError::param("times", "times must be finite"));
     }
     let phi = basis.vectors;
     let (a, dropped_re) = m_project(basis, pair, re0);

@@ -5,11 +5,10 @@
 //! Both stream V exactly once, in chunks of rows small enough that the block's rows stay in cache while a few
 //! columns of V pass by, with the accumulators (Gram) or the coefficients (update) of those columns held in
 //! registers. faer's general product packs V into its own buffers first, a second trip through memory for an
-//! operand read only once: measured at 41k rows, 128 columns, b = 8, the Gram product 2.5 against 4.3 ms and the
-//! update 3.1 against 6.7 ms (`cargo bench -p kac-core --bench eigen_kernels`). The kernels cover block widths 4, 8
-//! and 16 on CPUs with AVX2 and FMA, and use AVX-512 for widths 8 and 16 where the CPU has it (checked at run time;
-//! on a Xeon with AVX-512, 41k rows: Gram 2.5 → 1.9 ms, update 2.8 → 2.4 ms); other widths and CPUs use faer's
-//! product. Nothing here knows about Lanczos.
+//! operand read only once, which takes it nearly twice the kernels' time (`cargo bench -p kac-core --bench
+//! eigen_kernels` measures both). The kernels cover block widths 4, 8 and 16 on CPUs with AVX2 and FMA, and use
+//! AVX-512 for widths 8 and 16 where the CPU has it (checked at run time; twice the lanes per instruction); other
+//! widths and CPUs use faer's product. Nothing here knows about Lanczos.
 
 pub use crate::simd::Isa;
 use faer::linalg::matmul::matmul;

@@ -85,8 +85,8 @@ pub(crate) fn dense_with_zero_modes(
     Ok(s)
 }
 
-/// [`dense::eigs_dense`], which is one decomposition that cannot stop inside (96 s at 7,921 unknowns, 2.7 s at
-/// 2,562 on one core): with a stop flag it runs on a thread of its own while this one watches the flag every
+/// [`dense::eigs_dense`], which is one decomposition that cannot stop inside (its time grows as the cube of
+/// the unknowns: minutes at a few thousand): with a stop flag it runs on a thread of its own while this one watches the flag every
 /// 50 ms, and a stop returns `Canceled` at once. The abandoned decomposition then finishes on its thread and
 /// its result is dropped (its cores stay busy until then; the caller's worker is free). It runs on `threads` threads
 /// (those of the rayon pool it is called on, or of the global pool from that thread of its own).

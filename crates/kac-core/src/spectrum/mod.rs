@@ -31,19 +31,20 @@
 //! φᵀLφ / φᵀMφ of the returned vectors), M-orthonormal eigenvectors with the largest-magnitude entry positive, and
 //! per pair the relative residual ‖Lφ − λMφ‖₂ / (max(|λ|, |σ|) · ‖Mφ‖₂).
 
+// The sparse Cholesky factor lives below the solvers (`crate::cholesky`); re-exported where the eigensolver uses it.
+pub use crate::cholesky::{factor, numeric, tree};
+
 pub mod basis_products;
 mod blocks;
 mod completeness;
 pub mod dense;
 pub mod extrapolate;
-pub mod factor;
 pub mod lanczos;
 pub mod null_space;
-pub mod numeric;
 mod options;
 mod result;
 pub mod slicing;
-pub mod tree;
+mod small_dense;
 pub mod weyl_law;
 
 pub use options::*;
@@ -76,7 +77,7 @@ pub fn eigs(
         let zeros = if options.deflate_null_space { null_space::zero_modes(pair) } else { ZeroModes::default() };
         (zeros, Blocks::of(pair))
     };
-    // The symbolic analysis (a serial AMD ordering: 0.1 s at 164k vertices) runs beside the null space on more
+    // The symbolic analysis (a serial AMD ordering) runs beside the null space on more
     // than one thread where the solve is almost surely sparse: past 8,000 unknowns, which the automatic choice
     // solves densely only where the shape falls apart into small components or k nearly reaches the unknowns (then
     // the analysis is dropped unused). Both are serial: two threads.
@@ -166,7 +167,7 @@ pub fn eigs(
         s.stats.timings.symbolic_s = symbolic_s;
         let verify = options.verify && s.stats.method == "block-lanczos";
         // On more than one thread the check's first factorization runs beside `finish` (neither keeps two cores
-        // busy on its own: 164k vertices, k = 200, two threads, 0.2 s each before), on one of the threads given and
+        // busy on its own), on one of the threads given and
         // `finish` on the others. `finish` then holds at most one run's three n × 8 blocks per 24 basis columns the
         // solve held, so that with the check's factor beside them the phase stays below the iteration's memory.
         let early = if verify && threads > 1 {
@@ -399,16 +400,15 @@ pub(crate) fn finish(
     s.residuals = vec![0.0; k];
     // Eight columns at a time as one row-major block: the block products take it without transposing. The blocks
     // are split into runs of consecutive blocks, one per thread up to four (or `most_runs`), side by side, and the
-    // threads beyond the runs share the runs' sparse products (164k vertices, k = 1000: 3.3 s on one thread, 1.6 s
-    // on two, when the signs took a pass of their own; with the signs found here, 0.68–0.76 s on a pool of two
-    // threads, in one run or in two, when the sparse products split their rows over the whole pool).
+    // threads beyond the runs share the runs' sparse products (the sparse products split their rows over the whole
+    // pool, so one run on two threads goes as fast as two runs).
     const B: usize = 8;
     let blocks: Vec<usize> = (0..k).step_by(B).collect();
     let vectors = s.vectors.as_ref();
     let values = &s.values;
     // Each pair: (column, Rayleigh quotient, residual, whether its largest-magnitude entry is negative). The sign is
-    // found as the column is copied for the products (a serial pass over every vector before: 65 ms of 3.9 s at
-    // 164k vertices, k = 200, two threads); the quotient and the residual do not depend on it.
+    // found as the column is copied for the products (rather than in a serial pass of its own over every
+    // vector); the quotient and the residual do not depend on it.
     let block_run = |run: &[usize], product_threads: usize| -> Result<Vec<(usize, f64, f64, bool)>, EigenError> {
         let mut scratch = Vec::new();
         let (mut xr, mut lr, mut mr) = (vec![0.0; n * B], vec![0.0; n * B], vec![0.0; n * B]);

@@ -173,7 +173,7 @@ pub fn zero_modes(pair: &SparsePair) -> ZeroModes {
         let m_raw: Vec<Vec<f64>> = raw.iter().map(|z| m_times(&support, z, &local)).collect();
         let q = members.len();
         let gram = Mat::from_fn(q, q, |a, b| raw[a].iter().zip(&m_raw[b]).map(|(x, y)| x * y).sum::<f64>());
-        let Ok(r) = super::dense::cholesky_lower(gram.as_ref(), faer::Par::Seq) else { continue };
+        let Ok(r) = super::small_dense::cholesky_lower(gram.as_ref(), faer::Par::Seq) else { continue };
         // Z R⁻ᵀ with G = R Rᵀ: column j = Σ_a Z_a (R⁻ᵀ)_{a j}.
         let mut rinv_t = Mat::<f64>::identity(q, q);
         faer::linalg::triangular_solve::solve_lower_triangular_in_place(r.as_ref(), rinv_t.as_mut(), faer::Par::Seq);

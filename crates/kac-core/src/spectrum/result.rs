@@ -153,17 +153,6 @@ pub enum EigenError {
 }
 
 impl EigenError {
-    pub fn code(&self) -> &'static str {
-        match self {
-            EigenError::InvalidK { .. } => "invalid-k",
-            EigenError::Factorization { .. } => "factorization-failed",
-            EigenError::Canceled => "canceled",
-            EigenError::NoConvergence { .. } => "no-convergence",
-            EigenError::InvalidOption { .. } => "invalid-option",
-            EigenError::Incomplete { .. } => "incomplete-spectrum",
-            EigenError::TooLarge { .. } => "output-too-large",
-        }
-    }
     /// Whether the request was at fault (it cannot succeed as given) rather than the computation.
     pub fn caller_fault(&self) -> bool {
         match self {
