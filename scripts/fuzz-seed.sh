@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
-# Seeds the fuzz targets' corpora from the shared meshes (KAC_DATA_DIR, default ../shared/data): every file of a
+# Seeds the fuzz targets' corpora from the shared meshes (KAC_TEST_DATA, default ../shared/data): every file of a
 # reader's format (by extension) into fuzz/corpus/TARGET/, which is git-ignored (the meshes are never copied into
 # the repository), plus the regression inputs for every target. Then `cd fuzz && cargo fuzz run ply` starts from
 # real files instead of an empty corpus.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-DATA="${KAC_DATA_DIR:-$(cd .. && pwd)/shared/data}"
-[ -d "$DATA" ] || { echo "no shared data at $DATA (set KAC_DATA_DIR)"; exit 1; }
+DATA="${KAC_TEST_DATA:-${KAC_DATA_DIR:-$(cd .. && pwd)/shared/data}}"
+[ -d "$DATA" ] || { echo "no shared data at $DATA (set KAC_TEST_DATA)"; exit 1; }
 declare -A EXT=( [obj]=obj [off]=off [ply]=ply [stl]=stl [gltf]="gltf glb" [medit]=mesh [gmsh]=msh [vtk]=vtk
                  [xyz]=xyz [csv]=csv [json]=json [mtx]=mtx )
 total=0

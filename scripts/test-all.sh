@@ -4,8 +4,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# Shared test meshes: one configurable location (tests skip with a message where it is absent).
-export KAC_DATA_DIR="${KAC_DATA_DIR:-$(cd .. && pwd)/shared/data}"
+# Shared test meshes: one configurable location, KAC_TEST_DATA (KAC_DATA_DIR is read too, for the meshes only;
+# tests skip with a message where it is absent). KAC_DATA_DIR is also `kac serve`'s store (--data-dir): it is
+# unset here, so that no server a test starts could take the meshes' directory for its store.
+export KAC_TEST_DATA="${KAC_TEST_DATA:-${KAC_DATA_DIR:-$(cd .. && pwd)/shared/data}}"
+unset KAC_DATA_DIR
 
 # What the tests need from Debian: curl (the README walkthrough, the contract script), python3-venv
 # (schemathesis), chromium and chromium-driver (the viewer's browser tests) and postgresql (the shared backend's tests start throwaway clusters of their own under target/,
@@ -32,17 +35,20 @@ cargo test --workspace --locked
 # wherever the data is, and fail rather than skip if it cannot be read.
 # So are the PostgreSQL tests (store conformance, many replicas under faults) and the browser tests of the viewer
 # (which upload a shared mesh through the page), which need the packages installed above.
-if [ -f "$KAC_DATA_DIR/README.md" ]; then
-  echo "== shared-data and PostgreSQL tests (data at $KAC_DATA_DIR)"
+if [ -f "$KAC_TEST_DATA/README.md" ]; then
+  echo "== shared-data and PostgreSQL tests (data at $KAC_TEST_DATA)"
   cargo test --workspace --locked -- --ignored
 else
-  echo "== shared-data tests NOT RUN: no shared data at $KAC_DATA_DIR (set KAC_DATA_DIR)"
+  echo "== shared-data tests NOT RUN: no shared data at $KAC_TEST_DATA (set KAC_TEST_DATA)"
   echo "== PostgreSQL tests"
   cargo test --locked --test stores --test replicas -- --ignored
 fi
 
 echo "== release build (the command docker/Dockerfile runs)"
 cargo build --release --locked --bin kac
+
+echo "== python: pip install ./crates/kac-python, mypy, pytest (the CLI's numbers, lapy, Ctrl-C, the client)"
+bash scripts/python.sh target/release/kac
 
 echo "== peers: SciPy reads the operator matrices the server serves, and ARPACK agrees with its spectra"
 bash scripts/peers.sh target/release/kac

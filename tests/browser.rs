@@ -149,7 +149,9 @@ async fn no_errors(c: &Client, step: &str) {
 #[tokio::test]
 #[ignore = "needs chromium, chromium-driver and the shared meshes (scripts/test-all.sh installs and runs it)"]
 async fn a_new_user_uploads_a_mesh_and_sees_its_eigenfunctions_and_a_geodesic() {
-    let data = std::env::var("KAC_DATA_DIR").unwrap_or_else(|_| "../shared/data".into());
+    let data = std::env::var("KAC_TEST_DATA")
+        .or_else(|_| std::env::var("KAC_DATA_DIR"))
+        .unwrap_or_else(|_| "../shared/data".into());
     let mesh = PathBuf::from(data).join("obj/fish_low_resolution.obj").canonicalize().expect("the shared fish mesh");
     let dir = tempfile::tempdir().unwrap();
     let (_server, base) = serve(dir.path());

@@ -11,16 +11,17 @@ fn kac() -> Command {
 /// A shared mesh; a test that needs one is #[ignore]d (run by scripts/test-all.sh where the data is) and fails,
 /// never skips silently, when it cannot be found.
 fn data(rel: &str) -> PathBuf {
-    let dir = std::env::var_os("KAC_DATA_DIR")
+    let dir = std::env::var_os("KAC_TEST_DATA")
+        .or_else(|| std::env::var_os("KAC_DATA_DIR"))
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
     let p = dir.join(rel);
-    assert!(p.is_file(), "shared test data not found at {} (set KAC_DATA_DIR)", p.display());
+    assert!(p.is_file(), "shared test data not found at {} (set KAC_TEST_DATA)", p.display());
     p
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn inspect_prints_the_summary_contract() {
     let file = data("obj/torus.obj");
     let out = kac().arg("inspect").arg(&file).output().unwrap();

@@ -494,9 +494,10 @@ fn the_smaller_items_of_the_issue() {
     assert!(!logged.contains("claim was lost"), "{logged}");
 }
 
-/// The shared meshes' directory (`KAC_DATA_DIR`, default `../shared/data`).
+/// The shared meshes' directory (`KAC_TEST_DATA`, or `KAC_DATA_DIR`, default `../shared/data`).
 fn data_dir() -> std::path::PathBuf {
-    std::env::var_os("KAC_DATA_DIR")
+    std::env::var_os("KAC_TEST_DATA")
+        .or_else(|| std::env::var_os("KAC_DATA_DIR"))
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"))
 }
@@ -583,12 +584,12 @@ fn mutations(bytes: &[u8], count: usize, seed: u64) -> Vec<Vec<u8>> {
         .collect()
 }
 
-/// A fuzz pass over the upload and analysis surface, seeded from the shared meshes (`KAC_DATA_DIR`): every file
+/// A fuzz pass over the upload and analysis surface, seeded from the shared meshes (`KAC_TEST_DATA`): every file
 /// mutated 24 ways, uploaded as named and sniffed, and a few analyses with extreme parameters run on what was
 /// stored. No answer, and no job's error, may be a 5xx other than 503; the server stays up throughout. Bounded:
 /// about 1,500 requests to loopback.
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR; scripts/test-all.sh runs this)"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA; scripts/test-all.sh runs this)"]
 fn mutated_shared_meshes_and_extreme_parameters_never_get_a_server_error() {
     let dir = data_dir();
     let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(&dir)

@@ -137,7 +137,7 @@ fn icosphere_off(level: u32) -> Vec<u8> {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn every_shared_mesh_uploads_and_matches_the_library() {
     let dir = common::shared_data("every_shared_mesh_uploads_and_matches_the_library");
     let s = Server::start(&[]);

@@ -92,7 +92,7 @@ fn sample(m: &kac_core::geometry::TriangleMesh, n: usize, sigma: f64, seed: u64)
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn clouds_sampled_from_the_shared_meshes_find_their_mesh() {
     let dir = common::shared_data("clouds_sampled_from_the_shared_meshes_find_their_mesh");
     let meshes: Vec<kac_core::geometry::TriangleMesh> = MESHES

@@ -55,7 +55,7 @@ fn read(rel: &str, opts: &ValidateOptions) -> Option<Validated> {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn invariants_on_every_shared_mesh() {
     for rel in SHARED {
         let Some(v) = read(rel, &ValidateOptions::default()) else { return };

@@ -263,7 +263,7 @@ const SURFACES: &[Expect] = &[
 ];
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn every_shared_surface_matches_its_readme_row() {
     for e in SURFACES {
         // STL is welded by its reader; glTF rows are counted unwelded; the rest are welded exactly, which
@@ -290,7 +290,7 @@ fn every_shared_surface_matches_its_readme_row() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn penguin_polygons_are_triangulated_and_recorded() {
     // 48 triangles, 169 quads and 4 pentagons: 48 + 2·169 + 3·4 = 398 triangles.
     let Some(v) = read("obj/penguin_control_mesh.obj", Weld::Exact, true) else { return };
@@ -303,7 +303,7 @@ fn penguin_polygons_are_triangulated_and_recorded() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn joined_tetrahedra_duplicate_face_is_dropped() {
     let Some(v) = read("obj/joined_tetrahedra.obj", Weld::Exact, true) else { return };
     let dup = v.report.repairs.iter().find(|r| r.code == "duplicate_faces").expect("recorded");
@@ -313,7 +313,7 @@ fn joined_tetrahedra_duplicate_face_is_dropped() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn degenerate_triangles_are_found_and_dropped_by_default() {
     let Some(v) = read("off/degtri_sliding.off", Weld::Exact, true) else { return };
     let z = v.report.repairs.iter().find(|r| r.code == "zero_area_faces").expect("recorded");
@@ -322,7 +322,7 @@ fn degenerate_triangles_are_found_and_dropped_by_default() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn gltf_split_vertices_weld_into_a_closed_cube() {
     for file in ["gltf/Box_embedded.gltf", "gltf/BoxInterleaved.glb"] {
         let Some(v) = read(file, Weld::Exact, true) else { return };
@@ -338,7 +338,7 @@ fn gltf_split_vertices_weld_into_a_closed_cube() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn tricky_binary_stl_with_solid_header_and_trailing_byte() {
     let dir = common::shared_data("stl");
     let bytes = std::fs::read(dir.join("stl/HalfDonut_binary.stl")).unwrap();
@@ -350,7 +350,7 @@ fn tricky_binary_stl_with_solid_header_and_trailing_byte() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn tet_meshes_match_their_readme_rows() {
     let Some(v) = read("tet/cubeTetra.vtk", Weld::Exact, true) else { return };
     let Facts::Solid(f) = &v.report.facts else { panic!("cubeTetra is a solid") };
@@ -373,7 +373,7 @@ fn tet_meshes_match_their_readme_rows() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn point_clouds_read() {
     let Some(v) = read("points/kitten.xyz", Weld::Exact, true) else { return };
     assert_eq!(v.report.kind, ShapeKind::PointCloud);
@@ -385,7 +385,7 @@ fn point_clouds_read() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn the_same_mesh_in_two_formats_has_one_id() {
     let (Some(a), Some(b)) =
         (read("ply/sphere_ascii.ply", Weld::Exact, true), read("stl/sphere_binary.stl", Weld::Exact, true))
@@ -405,7 +405,7 @@ fn the_same_mesh_in_two_formats_has_one_id() {
 }
 
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn every_shared_file_reads_by_sniffing_alone() {
     let dir = common::shared_data("sniffing");
     for rel in [

@@ -394,7 +394,7 @@ fn issue_cases_are_covered() {
 /// disks 8–32 with both conditions, cube tets 6–16 with both, P1 and P2, LaPy's `cubeTetra.vtk` (P1), and the
 /// exact spectra, at k = 20, 50, 100 and 200.
 #[test]
-#[ignore = "needs the shared meshes (KAC_DATA_DIR or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
+#[ignore = "needs the shared meshes (KAC_TEST_DATA or ../shared/data): scripts/test-all.sh runs it with --ignored where they are"]
 fn weyl_calibration_full_set() {
     let mut cases = exact_cases(220);
     for order in [1, 2] {

@@ -4,10 +4,10 @@
 
 use std::path::PathBuf;
 
-/// `KAC_DATA_DIR`, or `../shared/data` beside the repository (the workspace root is the ancestor of the calling
+/// `KAC_TEST_DATA` (or `KAC_DATA_DIR`), or `../shared/data` beside the repository (the workspace root is the ancestor of the calling
 /// crate that holds `Cargo.lock`).
 pub fn data_dir() -> Option<PathBuf> {
-    let dir = match std::env::var_os("KAC_DATA_DIR") {
+    let dir = match std::env::var_os("KAC_TEST_DATA").or_else(|| std::env::var_os("KAC_DATA_DIR")) {
         Some(d) => PathBuf::from(d),
         None => {
             let manifest = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -23,6 +23,6 @@ pub fn data_dir() -> Option<PathBuf> {
 /// data is, and there a missing directory fails them instead of skipping.
 pub fn shared_data(test: &str) -> PathBuf {
     data_dir().unwrap_or_else(|| {
-        panic!("{test}: the shared test data is not at KAC_DATA_DIR or ../shared/data (run it where the data is)")
+        panic!("{test}: the shared test data is not at KAC_TEST_DATA or ../shared/data (run it where the data is)")
     })
 }
