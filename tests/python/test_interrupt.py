@@ -61,3 +61,21 @@ def test_the_gil_is_released_while_solving(meshes):
         t.join()
     gaps = [b - a for a, b in zip(ticks, ticks[1:])]
     assert ticks and max(gaps) < 0.2, max(gaps)
+
+
+def test_an_exception_in_the_progress_callback_stops_the_solve(meshes):
+    import kac
+
+    s = kac.read(meshes["sphere"])
+    calls = []
+
+    def progress(phase, converged, wanted):
+        calls.append(phase)
+        raise RuntimeError("enough")
+
+    with pytest.raises(RuntimeError, match="enough"):
+        kac.spectrum(s, k=200, threads=1, progress=progress)
+    assert len(calls) == 1
+    # The engine is free again: the next solve runs.
+    values, _ = kac.spectrum(s, k=5)
+    assert len(values) == 5

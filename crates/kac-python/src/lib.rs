@@ -329,20 +329,22 @@ fn interruptible<T: Send + 'static>(
             }
             Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
         }
-        if let Err(e) = py.check_signals() {
-            stop.store(true, Ordering::SeqCst);
-            // The work ends at its next check of the flag; its result is dropped.
-            let _ = py.allow_threads(|| rx.lock().unwrap_or_else(|e| e.into_inner()).recv());
-            return Err(e);
-        }
-        if let Some(cb) = progress {
+        // A signal (Ctrl-C), or an exception of the progress callback, stops the work: it ends at its next check
+        // of the flag, and its result is dropped.
+        let mut raised = py.check_signals().err();
+        if let (None, Some(cb)) = (&raised, progress) {
             let now = seen.lock().unwrap_or_else(|e| e.into_inner()).clone();
             if now.is_some() && now != last {
                 if let Some((phase, converged, wanted)) = &now {
-                    cb.call1((phase.as_str(), *converged, *wanted))?;
+                    raised = cb.call1((phase.as_str(), *converged, *wanted)).err();
                 }
                 last = now;
             }
+        }
+        if let Some(e) = raised {
+            stop.store(true, Ordering::SeqCst);
+            let _ = py.allow_threads(|| rx.lock().unwrap_or_else(|e| e.into_inner()).recv());
+            return Err(e);
         }
     }
 }
