@@ -185,6 +185,35 @@ fn every_subcommand_and_flag_is_in_the_cli_reference() {
     assert!(missing.is_empty(), "docs/cli.md is missing (read src/cli/ and document them):\n{}", missing.join("\n"));
 }
 
+/// Every analysis of the registry is a `kac` subcommand (hand-written, or derived from its request), is in the
+/// README's table and has a request schema in the OpenAPI document: the places an analysis follows from.
+#[test]
+fn every_analysis_of_the_registry_is_everywhere_it_follows_to() {
+    let out = Command::new(env!("CARGO_BIN_EXE_kac")).arg("analyses").output().unwrap();
+    let table: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let names: Vec<String> =
+        table["analyses"].as_array().unwrap().iter().map(|a| a["name"].as_str().unwrap().to_string()).collect();
+    assert!(names.len() > 20, "{names:?}");
+    let subs = subcommands();
+    let readme = std::fs::read_to_string(Path::new(ROOT).join("README.md")).unwrap();
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(Path::new(ROOT).join("openapi/openapi.json")).unwrap()).unwrap();
+    let mut missing = vec![];
+    for n in &names {
+        if !subs.contains(n) {
+            missing.push(format!("{n}: no `kac {n}` subcommand"));
+        }
+        if !readme.contains(&format!("| `{n}` |")) {
+            missing.push(format!("{n}: no row in the README's table (`kac analyses --markdown`)"));
+        }
+        let camel: String = n.split('-').map(|w| w[..1].to_uppercase() + &w[1..]).collect();
+        if doc.pointer(&format!("/components/schemas/{camel}Analysis")).is_none() {
+            missing.push(format!("{n}: no schema {camel}Analysis in openapi/openapi.json"));
+        }
+    }
+    assert!(missing.is_empty(), "{}", missing.join("\n"));
+}
+
 #[test]
 fn every_openapi_path_is_in_the_service_reference() {
     let doc: serde_json::Value =

@@ -1,7 +1,7 @@
 //! Command-line parsing and the subcommands. Exit codes: 0 success, 2 unreadable input or bad arguments,
 //! 1 any other failure.
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use kac_core::geometry::validate::Weld;
 use kac_core::{Format, ReadOptions, ValidateOptions, Validated};
 use std::path::PathBuf;
@@ -9,6 +9,7 @@ use std::path::PathBuf;
 mod analyses;
 mod correspond;
 mod curvature;
+mod derived;
 mod evolution;
 mod generate;
 mod inspect;
@@ -168,8 +169,27 @@ pub fn print_json(value: &impl serde::Serialize) -> Result<(), Failure> {
 }
 
 pub fn run() -> i32 {
-    let cli = match Cli::try_parse() {
-        Ok(c) => c,
+    // The hand-written subcommands, and one derived from the registry for every other analysis.
+    let command = derived::commands().into_iter().fold(Cli::command(), |c, sub| c.subcommand(sub));
+    let parsed = command.try_get_matches().and_then(|m| match m.subcommand() {
+        Some((name, sub))
+            if !derived::HANDWRITTEN.contains(&name) && crate::analysis::registry::entry(name).is_some() =>
+        {
+            Ok(Err((name.to_string(), sub.clone())))
+        }
+        _ => Cli::from_arg_matches(&m).map(Ok),
+    });
+    let cli = match parsed {
+        Ok(Ok(c)) => c,
+        Ok(Err((name, sub))) => {
+            return match derived::run(&name, &sub) {
+                Ok(()) => 0,
+                Err(f) => {
+                    eprintln!("kac: {}", f.message.replace('\n', " "));
+                    f.code
+                }
+            }
+        }
         Err(e) => {
             let _ = e.print();
             return if e.use_stderr() { 2 } else { 0 };
