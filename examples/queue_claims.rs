@@ -4,8 +4,8 @@
 //! Run by `bench/replicas.py`; by hand: `cargo run --release --example queue_claims -- --store URL`.
 
 use clap::Parser;
-use kac::service::config::Config;
 use kac::service::jobs::{JobProgress, JobView, Status};
+use kac_engine::EngineConfig as Config;
 use std::time::{Duration, Instant};
 
 #[derive(Parser)]
