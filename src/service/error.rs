@@ -317,6 +317,12 @@ pub fn problem_response(status: StatusCode, p: &Problem) -> Response {
     r
 }
 
+/// Whether a rejection of axum's (a body, a multipart field) is its body limit: the status `body-too-large` maps
+/// to, which is how axum says it.
+pub fn over_body_limit(status: StatusCode) -> bool {
+    status == status_of(Code::BodyTooLarge)
+}
+
 /// A job's failure as its problem document, with the status of its code.
 pub fn failure_response(f: &Failure) -> Response {
     let p = Problem::from(f);

@@ -75,19 +75,22 @@ pub async fn serve(
     }
 }
 
-/// Answers one connection over the limit with a 503 problem and closes it.
+/// Answers one connection over the limit with its problem (`too-many-connections`, the status its code maps to) and
+/// closes it.
 async fn refuse(mut stream: TcpStream, limit: usize) {
-    let body = serde_json::json!({
-        "type": "/problems/too-many-connections",
-        "title": "Too many connections",
-        "status": 503,
-        "detail": format!("the server holds its limit of {limit} open connections (--max-connections); retry shortly"),
-        "code": "too-many-connections",
-    })
-    .to_string();
+    let code = kac_engine::Code::TooManyConnections;
+    let problem = super::problem::Problem::new(
+        code,
+        "Too many connections",
+        format!("the server holds its limit of {limit} open connections (--max-connections); retry shortly"),
+    );
+    let body = serde_json::to_string(&problem).unwrap_or_default();
+    let status = super::error::status_of(code);
     let head = format!(
-        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/problem+json\r\nretry-after: 1\r\n\
+        "HTTP/1.1 {} {}\r\ncontent-type: application/problem+json\r\nretry-after: 1\r\n\
          connection: close\r\ncontent-length: {}\r\n\r\n",
+        status.as_u16(),
+        status.canonical_reason().unwrap_or(""),
         body.len()
     );
     let _ = tokio::time::timeout(Duration::from_secs(1), async {

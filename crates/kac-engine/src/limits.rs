@@ -7,44 +7,15 @@ use crate::analysis::Analysis;
 use crate::config::EngineConfig;
 use crate::error::{JobError, Limit};
 
-/// The eigenpairs an analysis asks for, by the name of the field that asks (no default arm: a new analysis must
-/// say whether it asks for any).
-fn asked(a: &Analysis) -> Option<(&'static str, usize)> {
-    match a {
-        Analysis::Spectrum { k, .. }
-        | Analysis::Hks { k, .. }
-        | Analysis::SiHks { k, .. }
-        | Analysis::Wks { k, .. }
-        | Analysis::Gps { k, .. }
-        | Analysis::Heat { k, .. }
-        | Analysis::HeatCurvature { k, .. }
-        | Analysis::Wave { k, .. }
-        | Analysis::Schrodinger { k, .. } => Some(("k", *k)),
-        Analysis::Diffuse { k, method, .. } => (*method == crate::analysis::HeatMethod::Spectral).then_some(("k", *k)),
-        Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
-        Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
-        Analysis::Operator { .. }
-        | Analysis::Gradient { .. }
-        | Analysis::Divergence { .. }
-        | Analysis::Geodesic { .. }
-        | Analysis::Trees { .. }
-        | Analysis::MeanCurvature { .. }
-        | Analysis::Poisson { .. }
-        | Analysis::DirichletEnergy { .. }
-        | Analysis::Smooth { .. }
-        | Analysis::Interpolate { .. } => None,
-    }
-}
-
 /// The eigenpairs an analysis asks the sparse solver for, where it asks for any (an embedding of d dimensions
 /// needs d + 1, the first being the constant).
 fn eigenpairs(a: &Analysis) -> Option<usize> {
-    asked(a).map(|(what, k)| if what == "dimensions" { k + 1 } else { k })
+    a.asked().map(|(what, k)| if what == "dimensions" { k + 1 } else { k })
 }
 
 pub fn check_limits(config: &EngineConfig, a: &Analysis) -> Result<(), JobError> {
     a.check_options().map_err(JobError::Analysis)?;
-    let asked = asked(a);
+    let asked = a.asked();
     // Solver settings no solve could honour (a tolerance below double precision, a shift at 0 or ±1e308, a block
     // or subspace out of range) are refused here, naming the setting, rather than holding a worker until its
     // timeout or reaching an assertion of a dependency.
@@ -105,61 +76,8 @@ pub fn check_work(config: &EngineConfig, a: &Analysis, validated: &kac_core::Val
     // points in Rⁿ beyond space, whose intrinsic dimension (estimated when the operator is built) may be above 3.
     let weyl =
         kind.has_weyl_dimension() && !matches!(&validated.report.facts, Facts::Cloud(c) if c.ambient_dimension > 3);
-    let len = |v: &Option<Vec<f64>>| v.as_ref().map(Vec::len);
     // (name of the field, its count) for every list or grid; and the columns of the widest per-vertex array.
-    let (counts, columns): (Vec<(&str, usize)>, usize) = match a {
-        // The k eigenvectors are held (and cached) whether or not they are returned.
-        Analysis::Spectrum { k, .. } => (vec![], *k),
-        // The matrices' non-zeros are counted against --max-output-values once assembled (by the runner).
-        Analysis::Operator { .. } => (vec![], 1),
-        Analysis::Hks { k, options, .. } => {
-            let t = len(&options.times).unwrap_or(options.count);
-            (vec![("options.count", options.count), ("options.times", t)], t.max(*k))
-        }
-        Analysis::SiHks { k, options, .. } => (
-            vec![("options.samples", options.samples), ("options.frequencies", options.frequencies)],
-            options.samples.max(options.frequencies).max(*k),
-        ),
-        Analysis::Wks { k, options, .. } => {
-            let e = len(&options.energies).unwrap_or(options.count);
-            (vec![("options.count", options.count), ("options.energies", e)], e.max(*k))
-        }
-        Analysis::Gps { k, dimensions, .. } => (vec![], dimensions.unwrap_or(*k).max(*k)),
-        Analysis::ShapeDna { options, .. } => (vec![], options.k),
-        Analysis::Heat { k, times, sources, steps, .. } => {
-            let t = len(times).unwrap_or(10);
-            (
-                vec![("times", t), ("sources", sources.len()), ("steps", *steps)],
-                t.saturating_mul(sources.len().max(1)).max(*k),
-            )
-        }
-        Analysis::Geodesic { sources, options } => {
-            (vec![("sources", sources.len()), ("options.varadhan_steps", options.varadhan_steps)], 2)
-        }
-        Analysis::Trees {} => (vec![], 1),
-        // Per-element arrays: as many rows as elements, about 2 (triangles) to 6 (tets) per vertex.
-        Analysis::Gradient { function } => (vec![("function", function.len())], 3 * 6),
-        Analysis::Divergence { field, .. } => (vec![("field", field.len())], 2),
-        Analysis::MeanCurvature {} => (vec![], 3),
-        Analysis::Poisson { g, dirichlet_values, .. } => {
-            (vec![("g", g.len()), ("dirichlet_values", dirichlet_values.as_ref().map_or(0, Vec::len))], 1)
-        }
-        Analysis::Diffuse { k, times, steps, method, .. } => {
-            let k = if *method == crate::analysis::HeatMethod::Spectral { *k } else { 0 };
-            (vec![("times", times.len()), ("steps", *steps)], times.len().max(k))
-        }
-        Analysis::DirichletEnergy { function, .. } => (vec![("function", function.as_ref().map_or(0, Vec::len))], 3),
-        Analysis::Wave { k, times, .. } => (vec![("times", times.len())], times.len().max(*k)),
-        // Real and imaginary parts: twice the times.
-        Analysis::Schrodinger { k, times, .. } => (vec![("times", times.len())], times.len().saturating_mul(2).max(*k)),
-        Analysis::HeatCurvature { k, times, .. } => (vec![("times", len(times).unwrap_or(8))], *k),
-        Analysis::Embed { dimensions, .. } => (vec![], dimensions.saturating_add(1)),
-        Analysis::Smooth { .. } => (vec![], 3),
-        Analysis::Interpolate { values, labels, .. } => {
-            let classes = labels.iter().map(|l| l.1 as usize + 1).max().unwrap_or(1);
-            (vec![("values", values.len()), ("labels", labels.len()), ("classes in labels", classes)], classes)
-        }
-    };
+    let (counts, columns) = a.demand();
     let max = config.max_samples;
     if let Some((name, n)) = counts.into_iter().find(|&(_, n)| n > max) {
         return Err(JobError::Limit(Limit::Samples(format!(

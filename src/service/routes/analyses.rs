@@ -185,14 +185,14 @@ async fn job_form(st: &AppState, request: Request) -> Result<(Bytes, Vec<(String
         let field = match mp.next_field().await {
             Ok(Some(f)) => f,
             Ok(None) => break,
-            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+            Err(e) if crate::service::error::over_body_limit(e.status()) => {
                 return Err(ApiError::BodyTooLarge { limit: st.config.max_body_bytes })
             }
             Err(e) => return Err(ApiError::invalid_request(format!("multipart: {}", e.body_text()))),
         };
         let name = field.name().unwrap_or("").to_string();
         let data = field.bytes().await.map_err(|e| {
-            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            if crate::service::error::over_body_limit(e.status()) {
                 ApiError::BodyTooLarge { limit: st.config.max_body_bytes }
             } else {
                 ApiError::invalid_request(format!("multipart: {}", e.body_text()))

@@ -300,7 +300,7 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
 }
 
 fn multipart_error(st: &AppState, e: &axum::extract::multipart::MultipartError) -> ApiError {
-    if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+    if crate::service::error::over_body_limit(e.status()) {
         ApiError::BodyTooLarge { limit: st.config.max_body_bytes }
     } else if let Some(detail) = super::super::bodies::too_slow(e) {
         ApiError::BodyTooSlow { detail }

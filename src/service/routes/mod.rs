@@ -169,7 +169,7 @@ pub(crate) fn timed_out(e: &(dyn std::error::Error + 'static)) -> bool {
 pub(crate) fn body_error(state: &AppState, e: BytesRejection) -> ApiError {
     if let Some(detail) = super::bodies::too_slow(&e) {
         ApiError::BodyTooSlow { detail }
-    } else if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+    } else if crate::service::error::over_body_limit(e.status()) {
         ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
     } else if timed_out(&e) {
         ApiError::BodyTimeout { seconds: state.config.body_read_timeout_s }
@@ -184,7 +184,7 @@ fn json_error(state: &AppState, e: axum::extract::rejection::JsonRejection) -> A
     match e {
         Axum::MissingJsonContentType(_) => not_json(),
         Axum::BytesRejection(b) => body_error(state, b),
-        other if other.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+        other if crate::service::error::over_body_limit(other.status()) => {
             ApiError::BodyTooLarge { limit: state.config.max_body_bytes }
         }
         other => ApiError::invalid_json(other.body_text()),

@@ -96,7 +96,7 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
             let field = match mp.next_field().await {
                 Ok(Some(f)) => f,
                 Ok(None) => break,
-                Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+                Err(e) if crate::service::error::over_body_limit(e.status()) => {
                     return Err(ApiError::BodyTooLarge { limit: st.config.max_body_bytes })
                 }
                 Err(e) if timed_out(&e) => {
@@ -113,7 +113,7 @@ pub(crate) async fn read_upload(st: &AppState, q_format: Option<String>, req: Re
             let filename = field.file_name().map(str::to_string);
             let media = field.content_type().map(str::to_string);
             let data = field.bytes().await.map_err(|e| {
-                if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                if crate::service::error::over_body_limit(e.status()) {
                     ApiError::BodyTooLarge { limit: st.config.max_body_bytes }
                 } else if timed_out(&e) {
                     ApiError::BodyTimeout { seconds: st.config.body_read_timeout_s }

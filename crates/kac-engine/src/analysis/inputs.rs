@@ -27,7 +27,7 @@ fn shown(x: f64) -> String {
 
 /// A value given for `name` at position `at` (an element of a list, or a vertex), refused unless finite and within
 /// ±[`MAX_INPUT_MAGNITUDE`].
-fn check_value(name: &str, at: &str, x: f64) -> Result<(), AnalysisError> {
+pub(super) fn check_value(name: &str, at: &str, x: f64) -> Result<(), AnalysisError> {
     if x.is_finite() && x.abs() <= MAX_INPUT_MAGNITUDE {
         return Ok(());
     }
@@ -63,7 +63,7 @@ pub fn check_vertices(v: &Validated, name: &str, list: &[u32]) -> Result<(), Ana
 
 /// `[vertex, value]` pairs: each vertex kept by validation, each value bounded (`value` says whether the values
 /// are numbers to bound), and no vertex (after welding) given two different values.
-fn check_pairs(v: &Validated, name: &str, pairs: &[(u32, f64)], value: bool) -> Result<(), AnalysisError> {
+pub(super) fn check_pairs(v: &Validated, name: &str, pairs: &[(u32, f64)], value: bool) -> Result<(), AnalysisError> {
     let ids: Vec<u32> = pairs.iter().map(|p| p.0).collect();
     let at = map_vertices(v, &ids, name)?;
     let mut seen: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
@@ -96,7 +96,7 @@ pub const MIN_WIDTH: f64 = 1e-100;
 
 /// Initial data: a function per vertex, or a source vertex (with a width within [[`MIN_WIDTH`],
 /// [`MAX_INPUT_MAGNITUDE`]]).
-fn check_initial(v: &Validated, start: &InitialData) -> Result<(), AnalysisError> {
+pub(super) fn check_initial(v: &Validated, start: &InitialData) -> Result<(), AnalysisError> {
     if let Some(f) = &start.initial {
         check_per_vertex(v, "initial", f)?;
     }
@@ -115,73 +115,11 @@ fn check_initial(v: &Validated, start: &InitialData) -> Result<(), AnalysisError
 }
 
 /// The elements of a mesh (triangles or tetrahedra), for per-element inputs.
-fn elements(shape: &Shape) -> Option<usize> {
+pub(super) fn elements(shape: &Shape) -> Option<usize> {
     match shape {
         Shape::TriangleMesh(m) => Some(m.faces.len()),
         Shape::TetMesh(m) => Some(m.tets.len()),
         _ => None,
-    }
-}
-
-impl Analysis {
-    /// Every per-vertex and per-element array and every vertex index of the request, against the shape it is for
-    /// (see the module's documentation). No default arm: a new analysis must say what it takes.
-    pub fn check_inputs(&self, v: &Validated) -> Result<(), AnalysisError> {
-        if let Some(list) = self.operator_spec().and_then(|o| o.dirichlet_vertices.as_ref()) {
-            check_vertices(v, "operator.dirichlet_vertices", list)?;
-        }
-        match self {
-            Analysis::Heat { sources, .. } | Analysis::Geodesic { sources, .. } => {
-                check_vertices(v, "sources", sources)
-            }
-            Analysis::Wave { start, velocity, .. } => {
-                check_initial(v, start)?;
-                velocity.as_ref().map_or(Ok(()), |f| check_per_vertex(v, "velocity", f))
-            }
-            Analysis::Schrodinger { start, initial_imag, .. } => {
-                check_initial(v, start)?;
-                initial_imag.as_ref().map_or(Ok(()), |f| check_per_vertex(v, "initial_imag", f))
-            }
-            Analysis::Diffuse { start, .. } => check_initial(v, start),
-            Analysis::Poisson { g, dirichlet_values, .. } => {
-                check_per_vertex(v, "g", g)?;
-                dirichlet_values.as_ref().map_or(Ok(()), |d| check_pairs(v, "dirichlet_values", d, true))
-            }
-            Analysis::DirichletEnergy { function, .. } | Analysis::Smooth { function, .. } => {
-                function.as_ref().map_or(Ok(()), |f| check_per_vertex(v, "function", f))
-            }
-            Analysis::Gradient { function } => check_per_vertex(v, "function", function),
-            Analysis::Divergence { field, .. } => {
-                if let Some(n) = elements(&v.shape) {
-                    if field.len() != n {
-                        return Err(AnalysisError::invalid_parameter(format!(
-                            "field: {} vectors for {n} elements (one per triangle or tetrahedron, in the validated \
-                             mesh's order)",
-                            field.len()
-                        )));
-                    }
-                }
-                field.iter().enumerate().try_for_each(|(e, x)| {
-                    x.iter().enumerate().try_for_each(|(c, &y)| check_value("field", &format!("element {e}[{c}]"), y))
-                })
-            }
-            Analysis::Interpolate { values, labels, .. } => {
-                check_pairs(v, "values", values, true)?;
-                let as_values: Vec<(u32, f64)> = labels.iter().map(|&(i, c)| (i, f64::from(c))).collect();
-                check_pairs(v, "labels", &as_values, false)
-            }
-            Analysis::Spectrum { .. }
-            | Analysis::Operator { .. }
-            | Analysis::Hks { .. }
-            | Analysis::SiHks { .. }
-            | Analysis::Wks { .. }
-            | Analysis::Gps { .. }
-            | Analysis::ShapeDna { .. }
-            | Analysis::Trees { .. }
-            | Analysis::MeanCurvature { .. }
-            | Analysis::HeatCurvature { .. }
-            | Analysis::Embed { .. } => Ok(()),
-        }
     }
 }
 

@@ -1,9 +1,12 @@
 //! The analysis requests: what a client can ask of a stored shape, one serde type shared by the CLI and the
-//! service (the operator and solver specs, each analysis with its parameters and defaults).
+//! service (each analysis with its parameters and defaults), and beside each what follows from it alone: the
+//! eigenpairs it asks for, what it holds (the service's limits), the inputs it takes (checked against the shape),
+//! and its entry in the registry (where it is valid). With its core call (`dispatch.rs`) and its result type
+//! (`results.rs`), that is all an analysis is written as; see docs/layout.md.
 
+use super::inputs::{check_initial, check_pairs, check_per_vertex, check_value, check_vertices, elements};
+use super::registry::{Entry, ShapeClass, CLASSES};
 use super::*;
-use kac_core::operators::manifold::CloudNormalization;
-use kac_core::operators::p2::Midpoints;
 
 /// Bumped whenever an analysis' numbers could change for the same request (part of job ids).
 pub const ALGORITHM_VERSION: u32 = 10;
@@ -13,293 +16,6 @@ pub const ALGORITHM_VERSION: u32 = 10;
 /// only). Version 10 of the analyses changed Weyl estimates, heat curvature's window and result fields, not
 /// shape-DNA's values.
 pub const FINGERPRINT_VERSION: u32 = 9;
-
-/// Which operator to build (see `kac_core::operators`): one type for the service's `operator` object and the
-/// CLI's operator flags (`--operator`, `--mass`, `--boundary`, `--dirichlet-vertices`, `--neighbours`, `--time`,
-/// `--neighbourhood`), so both take the same options with the same defaults.
-#[derive(utoipa::ToSchema, clap::Args, Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(remote = "Self")]
-#[serde(default, deny_unknown_fields)]
-pub struct OperatorSpec {
-    /// cotan, intrinsic-delaunay, robust, graph, graph-normalized, graph-random-walk, point-cloud, tet, string, polygon
-    /// (default: by shape kind).
-    #[arg(long = "operator", value_parser = parse_operator)]
-    pub operator: Option<OperatorKind>,
-    /// consistent, lumped, voronoi (default: consistent for FEM operators, lumped for robust and point-cloud).
-    #[arg(long, value_parser = parse_mass)]
-    pub mass: Option<Mass>,
-    /// neumann (default) or dirichlet (the shape's boundary).
-    #[arg(long, value_enum, default_value_t = BoundarySpec::Neumann)]
-    pub boundary: BoundarySpec,
-    /// Dirichlet on these vertices instead of the shape's boundary (indices in the input file's numbering; the
-    /// CLI takes them comma-separated).
-    #[arg(long, value_delimiter = ',')]
-    pub dirichlet_vertices: Option<Vec<u32>>,
-    /// Point clouds: neighbours per point.
-    #[arg(long, default_value_t = kac_core::operators::DEFAULT_NEIGHBOURS)]
-    pub neighbours: usize,
-    /// Point clouds: heat-kernel time t for every pair (default: surfaces in R³ a time per point following the
-    /// local spacing, about 5h² on a uniform sample, h the mean nearest-neighbour distance; in Rⁿ one (2h)²).
-    #[arg(long)]
-    pub time: Option<f64>,
-    /// Point clouds: sum the heat kernel over `radius` (ε-ball, default) or `knn` (k nearest) neighbourhoods.
-    #[arg(long, default_value = "radius", value_parser = parse_neighbourhood)]
-    pub neighbourhood: Neighbourhood,
-    /// Point clouds: the kernel's radius ε (default 3√t; 6√t with the chapter's normalization).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    #[arg(long)]
-    pub radius: Option<f64>,
-    /// Point clouds: the intrinsic dimension m of the sampled manifold (default 2 for points in R³, in either
-    /// normalization; estimated from the neighbourhoods (Levina–Bickel) for points in Rⁿ, n ≥ 4, and refused when
-    /// the estimate is not within 0.2 of an integer).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    #[arg(long)]
-    pub intrinsic_dimension: Option<usize>,
-    /// Point clouds: `symmetric` (local volumes as quadrature weights, truncation corrected; default) or
-    /// `chapter` (eq. 9.39: uniform weights vol/K). The CLI's flag is `--cloud-normalization`.
-    #[serde(skip_serializing_if = "is_symmetric")]
-    #[arg(id = "cloud_normalization", long = "cloud-normalization", default_value = "symmetric", value_parser = parse_normalization)]
-    pub normalization: CloudNormalization,
-    /// Finite elements of degree 1 (default) or 2: quadratic (P2) elements for `cotan` on triangle meshes and
-    /// `tet`, with an unknown at every edge's midpoint (consistent mass only); eigenvalues converge as O(h⁴) on
-    /// flat domains. Per-vertex outputs are the values at the vertices.
-    #[serde(skip_serializing_if = "is_one")]
-    #[arg(long, default_value_t = 1)]
-    pub order: u8,
-    /// Where order 2 puts its edge nodes: `input` (default: a second-order file's middle nodes where it gives them,
-    /// curving the elements, else the straight edges' midpoints), `straight` (always the straight edges: flat
-    /// elements, the polyhedron's spectrum, whatever the file gives) or, on a triangle mesh whose file gives no
-    /// edge nodes, edges curved by the vertex `normals` (a smooth surface's estimate; not for meshes with sharp
-    /// creases, whose averaged normals would round them). Only `normals` is refused with order 1.
-    #[serde(skip_serializing_if = "is_input")]
-    #[arg(long, default_value = "input", value_parser = parse_midpoints)]
-    pub midpoints: Midpoints,
-    /// Point clouds in R³: project the points onto a moving-least-squares surface before building the operator
-    /// where their neighbourhoods show noise (default true; the CLI's `--no-denoise` turns it off). The scale,
-    /// the noise level and how far points moved are reported under `parameters.denoise`.
-    #[serde(skip_serializing_if = "is_true")]
-    #[arg(long = "no-denoise", action = clap::ArgAction::SetFalse)]
-    pub denoise: bool,
-}
-
-fn is_one(o: &u8) -> bool {
-    *o == 1
-}
-
-fn is_symmetric(n: &CloudNormalization) -> bool {
-    *n == CloudNormalization::Symmetric
-}
-
-fn is_input(m: &Midpoints) -> bool {
-    *m == Midpoints::Input
-}
-
-fn parse_midpoints(s: &str) -> Result<Midpoints, String> {
-    match s {
-        "input" => Ok(Midpoints::Input),
-        "straight" => Ok(Midpoints::Straight),
-        "normals" => Ok(Midpoints::Normals),
-        _ => Err(format!("unknown midpoints '{s}'; one of: input, straight, normals")),
-    }
-}
-
-fn parse_normalization(s: &str) -> Result<CloudNormalization, String> {
-    match s {
-        "symmetric" => Ok(CloudNormalization::Symmetric),
-        "chapter" => Ok(CloudNormalization::Chapter),
-        _ => Err(format!("unknown point-cloud normalization '{s}'; one of: symmetric, chapter")),
-    }
-}
-
-fn parse_operator(s: &str) -> Result<OperatorKind, String> {
-    OperatorKind::from_name(s)
-        .ok_or_else(|| format!("unknown operator '{s}'; one of: {}", OperatorKind::ALL.map(|k| k.name()).join(", ")))
-}
-
-pub fn parse_mass(s: &str) -> Result<Mass, String> {
-    match Mass::from_name(s) {
-        Some(m @ (Mass::Consistent | Mass::Lumped | Mass::Voronoi)) => Ok(m),
-        _ => Err(format!("unknown mass '{s}'; one of: consistent, lumped, voronoi")),
-    }
-}
-
-fn parse_neighbourhood(s: &str) -> Result<Neighbourhood, String> {
-    match s {
-        "radius" => Ok(Neighbourhood::Radius),
-        "knn" => Ok(Neighbourhood::Knn),
-        _ => Err(format!("unknown neighbourhood '{s}'; one of: radius, knn")),
-    }
-}
-
-impl Default for OperatorSpec {
-    fn default() -> Self {
-        OperatorSpec {
-            operator: None,
-            mass: None,
-            boundary: BoundarySpec::Neumann,
-            dirichlet_vertices: None,
-            neighbours: kac_core::operators::DEFAULT_NEIGHBOURS,
-            time: None,
-            neighbourhood: Neighbourhood::Radius,
-            radius: None,
-            intrinsic_dimension: None,
-            normalization: CloudNormalization::Symmetric,
-            order: 1,
-            midpoints: Midpoints::Input,
-            denoise: true,
-        }
-    }
-}
-
-#[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum BoundarySpec {
-    #[default]
-    Neumann,
-    Dirichlet,
-}
-
-/// Eigensolver parameters shared by every spectral analysis: one type for the service's `solver` object and the
-/// CLI's solver flags (`--tol`, `--no-verify`, `--method`, `--sigma`, `--block`, `--subspace`). Only `tol` and
-/// `verify` can change the numbers beyond the tolerance; the rest choose how they are computed.
-#[derive(utoipa::ToSchema, clap::Args, Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(remote = "Self")]
-#[serde(default, deny_unknown_fields)]
-pub struct SolverSpec {
-    /// Relative residual tolerance (default 1e-10).
-    #[arg(long, default_value_t = kac_core::spectrum::DEFAULT_TOL)]
-    pub tol: f64,
-    /// Request field `verify` (default true): confirm by Sylvester's inertia (one LDLᵀ of L − τM) that no
-    /// eigenvalue below the returned ones was missed, and solve again for any that were (the result's
-    /// `solver.completeness`).
-    #[serde(skip_serializing_if = "is_true")]
-    #[arg(
-        long = "no-verify",
-        action = clap::ArgAction::SetFalse,
-        help = "Skip the completeness check by Sylvester's inertia (one LDLᵀ factorization fewer); the result then \
-                says completeness: null and may miss eigenvalues"
-    )]
-    pub verify: bool,
-    /// auto (default), dense (every eigenpair of the dense pencil; the service takes it while unknowns² is within
-    /// --max-output-values) or sparse (shift-invert block Lanczos). The CLI's flag is `--solver-method`
-    /// (`kac spectrum` also takes `--method`; `kac heat --method` chooses spectral or implicit).
-    #[serde(skip_serializing_if = "is_auto")]
-    #[arg(id = "solver_method", long = "solver-method", value_enum, default_value_t = SolverMethod::Auto)]
-    pub method: SolverMethod,
-    /// Shift σ of the shift-invert solver: below the spectrum (σ < 0) L − σM is factored by Cholesky, inside it
-    /// by LDLᵀ (default: inside, at 0.7 × Weyl's estimate of λ_k, for meshes, curves and point clouds with k ≥ 8;
-    /// −mean(L_ii/M_ii)/n for graphs and small k).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    #[arg(long, allow_hyphen_values = true)]
-    pub sigma: Option<f64>,
-    /// Tuning of the sparse solver: right-hand sides per block solve (default 8; 1 to 64).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    #[arg(long)]
-    pub block: Option<usize>,
-    /// Tuning of the sparse solver: Krylov basis columns kept between restarts (default max(2w, w + 6b,
-    /// min(3w, w + 100)) for w = k + max(b/2, 2); at least w + 2b). The service counts the basis, unknowns ×
-    /// columns, against --max-output-values.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    #[arg(long)]
-    pub subspace: Option<usize>,
-    /// Spectrum slicing: the interval [0, λ_k] cut into this many slices by Weyl's law, each solved around its own
-    /// shift with its own factorization, the slices in parallel on the threads given (default: one run below 400
-    /// pairs, then one slice per 125 pairs; 1 solves in one run; 1 to 64). The result's `solver.slices` says what
-    /// each did.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    #[arg(long)]
-    pub slices: Option<usize>,
-}
-
-pub(crate) fn is_true(b: &bool) -> bool {
-    *b
-}
-
-fn is_auto(m: &SolverMethod) -> bool {
-    *m == SolverMethod::Auto
-}
-
-impl Default for SolverSpec {
-    fn default() -> Self {
-        SolverSpec {
-            tol: kac_core::spectrum::DEFAULT_TOL,
-            verify: true,
-            method: SolverMethod::Auto,
-            sigma: None,
-            block: None,
-            subspace: None,
-            slices: None,
-        }
-    }
-}
-
-impl SolverSpec {
-    /// The core's options for k pairs (threads from the caller).
-    pub fn eigen_options(&self, k: usize, threads: usize) -> EigenOptions {
-        EigenOptions {
-            k,
-            tol: self.tol,
-            threads,
-            verify: self.verify,
-            method: match self.method {
-                SolverMethod::Auto => spectrum::Method::Auto,
-                SolverMethod::Dense => spectrum::Method::Dense,
-                SolverMethod::Sparse => spectrum::Method::Sparse,
-            },
-            sigma: self.sigma,
-            block: self.block,
-            subspace: self.subspace,
-            slices: self.slices,
-            ..Default::default()
-        }
-    }
-}
-
-/// Initial data of an evolution: a function per vertex (the upload's numbering), or a Gaussian bump
-/// exp(−d²/(2w²)) of width w around a source vertex (d the straight-line distance to its position).
-#[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-pub struct InitialData {
-    /// u₀ (or Re ψ₀) per vertex, in the upload's numbering.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub initial: Option<Vec<f64>>,
-    /// Or a bump at this vertex (upload numbering).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub source: Option<u32>,
-    /// The bump's width w (default: 5 % of the bounding box's diagonal).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub width: Option<f64>,
-}
-
-/// Which eigensolver runs.
-#[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum SolverMethod {
-    /// Dense for small problems (or components), sparse otherwise.
-    #[default]
-    Auto,
-    Dense,
-    Sparse,
-}
-
-#[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum HeatMethod {
-    /// Σ e^{−λt} over the computed eigenpairs (with a truncation bound).
-    #[default]
-    Spectral,
-    /// Backward Euler, (M + τL) u_{j+1} = M u_j, no eigenpairs.
-    Implicit,
-}
-
-#[derive(utoipa::ToSchema, clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum EmbedScaling {
-    /// Laplacian eigenmap: the eigenvectors themselves.
-    #[default]
-    None,
-    /// Global point signature: φ/√λ.
-    Gps,
-}
 
 /// One analysis of a shape. JSON: `{"analysis": "hks", "k": 100, "count": 50, ...}`.
 #[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -720,3 +436,348 @@ impl Analysis {
         }
     }
 }
+
+impl Analysis {
+    /// The eigenpairs an analysis asks for, by the name of the field that asks (no default arm: a new analysis must
+    /// say whether it asks for any).
+    pub fn asked(&self) -> Option<(&'static str, usize)> {
+        match self {
+            Analysis::Spectrum { k, .. }
+            | Analysis::Hks { k, .. }
+            | Analysis::SiHks { k, .. }
+            | Analysis::Wks { k, .. }
+            | Analysis::Gps { k, .. }
+            | Analysis::Heat { k, .. }
+            | Analysis::HeatCurvature { k, .. }
+            | Analysis::Wave { k, .. }
+            | Analysis::Schrodinger { k, .. } => Some(("k", *k)),
+            Analysis::Diffuse { k, method, .. } => (*method == HeatMethod::Spectral).then_some(("k", *k)),
+            Analysis::ShapeDna { options, .. } => Some(("options.k", options.k)),
+            Analysis::Embed { dimensions, .. } => Some(("dimensions", *dimensions)),
+            Analysis::Operator { .. }
+            | Analysis::Gradient { .. }
+            | Analysis::Divergence { .. }
+            | Analysis::Geodesic { .. }
+            | Analysis::Trees { .. }
+            | Analysis::MeanCurvature { .. }
+            | Analysis::Poisson { .. }
+            | Analysis::DirichletEnergy { .. }
+            | Analysis::Smooth { .. }
+            | Analysis::Interpolate { .. } => None,
+        }
+    }
+
+    /// What the request asks to hold: every list or grid, by the name of its field (checked against
+    /// --max-samples), and the columns of the widest per-vertex array the analysis holds, eigenvectors included
+    /// (against --max-output-values). No default arm: a new analysis must say what it holds.
+    pub fn demand(&self) -> (Vec<(&'static str, usize)>, usize) {
+        let len = |v: &Option<Vec<f64>>| v.as_ref().map(Vec::len);
+        match self {
+            // The k eigenvectors are held (and cached) whether or not they are returned.
+            Analysis::Spectrum { k, .. } => (vec![], *k),
+            // The matrices' non-zeros are counted against --max-output-values once assembled (by the runner).
+            Analysis::Operator { .. } => (vec![], 1),
+            Analysis::Hks { k, options, .. } => {
+                let t = len(&options.times).unwrap_or(options.count);
+                (vec![("options.count", options.count), ("options.times", t)], t.max(*k))
+            }
+            Analysis::SiHks { k, options, .. } => (
+                vec![("options.samples", options.samples), ("options.frequencies", options.frequencies)],
+                options.samples.max(options.frequencies).max(*k),
+            ),
+            Analysis::Wks { k, options, .. } => {
+                let e = len(&options.energies).unwrap_or(options.count);
+                (vec![("options.count", options.count), ("options.energies", e)], e.max(*k))
+            }
+            Analysis::Gps { k, dimensions, .. } => (vec![], dimensions.unwrap_or(*k).max(*k)),
+            Analysis::ShapeDna { options, .. } => (vec![], options.k),
+            Analysis::Heat { k, times, sources, steps, .. } => {
+                let t = len(times).unwrap_or(10);
+                (
+                    vec![("times", t), ("sources", sources.len()), ("steps", *steps)],
+                    t.saturating_mul(sources.len().max(1)).max(*k),
+                )
+            }
+            Analysis::Geodesic { sources, options } => {
+                (vec![("sources", sources.len()), ("options.varadhan_steps", options.varadhan_steps)], 2)
+            }
+            Analysis::Trees {} => (vec![], 1),
+            // Per-element arrays: as many rows as elements, about 2 (triangles) to 6 (tets) per vertex.
+            Analysis::Gradient { function } => (vec![("function", function.len())], 3 * 6),
+            Analysis::Divergence { field, .. } => (vec![("field", field.len())], 2),
+            Analysis::MeanCurvature {} => (vec![], 3),
+            Analysis::Poisson { g, dirichlet_values, .. } => {
+                (vec![("g", g.len()), ("dirichlet_values", dirichlet_values.as_ref().map_or(0, Vec::len))], 1)
+            }
+            Analysis::Diffuse { k, times, steps, method, .. } => {
+                let k = if *method == HeatMethod::Spectral { *k } else { 0 };
+                (vec![("times", times.len()), ("steps", *steps)], times.len().max(k))
+            }
+            Analysis::DirichletEnergy { function, .. } => {
+                (vec![("function", function.as_ref().map_or(0, Vec::len))], 3)
+            }
+            Analysis::Wave { k, times, .. } => (vec![("times", times.len())], times.len().max(*k)),
+            // Real and imaginary parts: twice the times.
+            Analysis::Schrodinger { k, times, .. } => {
+                (vec![("times", times.len())], times.len().saturating_mul(2).max(*k))
+            }
+            Analysis::HeatCurvature { k, times, .. } => (vec![("times", len(times).unwrap_or(8))], *k),
+            Analysis::Embed { dimensions, .. } => (vec![], dimensions.saturating_add(1)),
+            Analysis::Smooth { .. } => (vec![], 3),
+            Analysis::Interpolate { values, labels, .. } => {
+                let classes = labels.iter().map(|l| l.1 as usize + 1).max().unwrap_or(1);
+                (vec![("values", values.len()), ("labels", labels.len()), ("classes in labels", classes)], classes)
+            }
+        }
+    }
+
+    /// Every per-vertex and per-element array and every vertex index of the request, against the shape it is for
+    /// (see the module's documentation). No default arm: a new analysis must say what it takes.
+    pub fn check_inputs(&self, v: &Validated) -> Result<(), AnalysisError> {
+        if let Some(list) = self.operator_spec().and_then(|o| o.dirichlet_vertices.as_ref()) {
+            check_vertices(v, "operator.dirichlet_vertices", list)?;
+        }
+        match self {
+            Analysis::Heat { sources, .. } | Analysis::Geodesic { sources, .. } => {
+                check_vertices(v, "sources", sources)
+            }
+            Analysis::Wave { start, velocity, .. } => {
+                check_initial(v, start)?;
+                velocity.as_ref().map_or(Ok(()), |f| check_per_vertex(v, "velocity", f))
+            }
+            Analysis::Schrodinger { start, initial_imag, .. } => {
+                check_initial(v, start)?;
+                initial_imag.as_ref().map_or(Ok(()), |f| check_per_vertex(v, "initial_imag", f))
+            }
+            Analysis::Diffuse { start, .. } => check_initial(v, start),
+            Analysis::Poisson { g, dirichlet_values, .. } => {
+                check_per_vertex(v, "g", g)?;
+                dirichlet_values.as_ref().map_or(Ok(()), |d| check_pairs(v, "dirichlet_values", d, true))
+            }
+            Analysis::DirichletEnergy { function, .. } | Analysis::Smooth { function, .. } => {
+                function.as_ref().map_or(Ok(()), |f| check_per_vertex(v, "function", f))
+            }
+            Analysis::Gradient { function } => check_per_vertex(v, "function", function),
+            Analysis::Divergence { field, .. } => {
+                if let Some(n) = elements(&v.shape) {
+                    if field.len() != n {
+                        return Err(AnalysisError::invalid_parameter(format!(
+                            "field: {} vectors for {n} elements (one per triangle or tetrahedron, in the validated \
+                             mesh's order)",
+                            field.len()
+                        )));
+                    }
+                }
+                field.iter().enumerate().try_for_each(|(e, x)| {
+                    x.iter().enumerate().try_for_each(|(c, &y)| check_value("field", &format!("element {e}[{c}]"), y))
+                })
+            }
+            Analysis::Interpolate { values, labels, .. } => {
+                check_pairs(v, "values", values, true)?;
+                let as_values: Vec<(u32, f64)> = labels.iter().map(|&(i, c)| (i, f64::from(c))).collect();
+                check_pairs(v, "labels", &as_values, false)
+            }
+            Analysis::Spectrum { .. }
+            | Analysis::Operator { .. }
+            | Analysis::Hks { .. }
+            | Analysis::SiHks { .. }
+            | Analysis::Wks { .. }
+            | Analysis::Gps { .. }
+            | Analysis::ShapeDna { .. }
+            | Analysis::Trees { .. }
+            | Analysis::MeanCurvature { .. }
+            | Analysis::HeatCurvature { .. }
+            | Analysis::Embed { .. } => Ok(()),
+        }
+    }
+}
+
+// The registry entries, one per analysis, beside the requests: where each analysis is valid
+// (see `super::registry` for what the table means and how it is read).
+use ShapeClass::{Graph, Polyline, TetMesh, TriangleMesh};
+
+const ALL: &[ShapeClass] = &CLASSES;
+const MESHES: &[ShapeClass] = &[TriangleMesh, TetMesh];
+/// Where homogeneous Dirichlet conditions mean a Dirichlet problem: a mesh's or a curve's boundary, a graph's
+/// given vertices. A point cloud's kernel Laplacian has no boundary term: fixing points does not discretize one.
+const BOUNDED: &[ShapeClass] = &[TriangleMesh, TetMesh, Graph, Polyline];
+const CLOUD_DIRICHLET: &str = "a point cloud's kernel Laplacian has no boundary term, so fixing points does not \
+                               discretize a Dirichlet problem (mesh the cloud, or give values to `poisson`)";
+const P2: &[ShapeClass] = &[TriangleMesh, TetMesh];
+const NONE: &[ShapeClass] = &[];
+
+/// An analysis over eigenpairs of the operator: every class, Dirichlet where it has a meaning, P2 on meshes.
+const fn spectral(name: &'static str, summary: &'static str, accuracy: &'static str) -> Entry {
+    Entry {
+        name,
+        summary,
+        classes: ALL,
+        classes_why: "",
+        takes_operator: true,
+        dirichlet: BOUNDED,
+        dirichlet_why: CLOUD_DIRICHLET,
+        takes_values: false,
+        values: NONE,
+        order2: P2,
+        takes_extrapolate: false,
+        extrapolate: NONE,
+        methods: &[],
+        accuracy,
+    }
+}
+
+/// An analysis without an operator in its request (no boundary condition, no order).
+const fn geometric(
+    name: &'static str,
+    summary: &'static str,
+    classes: &'static [ShapeClass],
+    classes_why: &'static str,
+    accuracy: &'static str,
+) -> Entry {
+    Entry {
+        name,
+        summary,
+        classes,
+        classes_why,
+        takes_operator: false,
+        dirichlet: NONE,
+        dirichlet_why: "",
+        takes_values: false,
+        values: NONE,
+        order2: NONE,
+        takes_extrapolate: false,
+        extrapolate: NONE,
+        methods: &[],
+        accuracy,
+    }
+}
+
+const TRUNCATED: &str = "exact for the k pairs computed; times or energies the k pairs cannot resolve are outside \
+                         the default grids";
+
+/// The registry, in the order of the `Analysis` type.
+pub static REGISTRY: &[Entry] = &[
+    Entry {
+        takes_extrapolate: true,
+        extrapolate: MESHES,
+        ..spectral(
+            "spectrum",
+            "the k smallest eigenpairs of L φ = λ M φ (or every pair in a band), completeness proven",
+            "residuals per pair; with `extrapolate` an error estimate per eigenvalue; `counting` clusters within \
+             the solver's accuracy",
+        )
+    },
+    spectral(
+        "operator",
+        "L and M as matrices, the unknowns' vertices, the \"no free lunch\" property report",
+        "exact (the discrete operator itself)",
+    ),
+    spectral("hks", "heat kernel signature k_t(x, x) over a time grid", TRUNCATED),
+    spectral("si-hks", "scale-invariant HKS: Fourier moduli of the HKS on a log-time grid", TRUNCATED),
+    spectral("wks", "wave kernel signature over a log-energy grid", TRUNCATED),
+    spectral("gps", "global point signature φ_i / √λ_i", "exact for the k pairs computed"),
+    spectral(
+        "shape-dna",
+        "shape-DNA (normalized, reweighted eigenvalues) and Weyl's-law estimates",
+        "Weyl estimates with calibrated uncertainties, omitted where unresolved (`weyl-estimate-omitted`) or \
+         meaningless; `weyl-underresolved` warning",
+    ),
+    Entry {
+        methods: &["spectral", "implicit"],
+        ..spectral(
+            "heat",
+            "heat trace and heat kernel rows k_t(source, ·), spectral or backward Euler",
+            "the heat trace's truncation bound per time",
+        )
+    },
+    geometric(
+        "geodesic",
+        "geodesic distance from sources by the heat method, Varadhan's estimate beside it",
+        &[TriangleMesh],
+        "the heat method takes gradients on a surface's triangles",
+        "Varadhan's discrepancy reported",
+    ),
+    geometric(
+        "trees",
+        "spanning trees of the edge graph (Kirchhoff), exact where it fits in 128 bits",
+        &[TriangleMesh, TetMesh, Graph, Polyline],
+        "a point cloud has no edges; build a graph first",
+        "exact count when integer weights allow, else its logarithm",
+    ),
+    geometric(
+        "mean-curvature",
+        "mean curvature and normals from M⁻¹LX = 2Hn, angle-defect Gaussian curvature",
+        &[TriangleMesh],
+        "H is read from the cotan Laplacian of a surface's coordinates",
+        "boundary vertices flagged",
+    ),
+    Entry {
+        classes: &[TriangleMesh],
+        classes_why: "the expansion 4πt·k_t(x,x) = 1 + tK/3 + O(t²) holds on surfaces: a graph or a curve has no \
+                      Gaussian curvature, a tet mesh's kernel has a solid's expansion, and a point cloud's \
+                      operator smooths at its own kernel time, which biases every time the window can use",
+        dirichlet: NONE,
+        dirichlet_why: "the expansion is the natural kernel's; a Dirichlet kernel loses heat through the boundary",
+        ..spectral(
+            "heat-curvature",
+            "Gaussian curvature heard from the heat kernel's small-time expansion",
+            "the fit's residual per vertex; the window kept below the shape's curvature scale 1/κ_max² \
+             (`curvature_scale`: expansion bias ≤ 3 % on a sphere and a torus), `curvature-window-too-coarse` \
+             warning when the mesh's resolution or the pairs do not allow that, `curvature-window-unresolved` \
+             when the window's times are below the mesh's resolution",
+        )
+    },
+    spectral("wave", "the wave equation by modal superposition, with its conserved energy", "energy drift"),
+    spectral("schrodinger", "the Schrödinger equation, unitary in the eigenbasis, its conserved norm", "norm drift"),
+    Entry {
+        takes_values: true,
+        values: ALL,
+        ..spectral(
+            "poisson",
+            "Poisson's equation Δf = g, Neumann (compatible part) or Dirichlet (homogeneous or given values)",
+            "the mean of g removed per component (Neumann) reported",
+        )
+    },
+    Entry {
+        methods: &["spectral", "implicit"],
+        ..spectral(
+            "diffuse",
+            "heat diffusion of a function, spectral (with its truncation bound) or backward Euler",
+            "truncation bound (spectral)",
+        )
+    },
+    spectral("dirichlet-energy", "½ uᵀLu, uᵀMu and the Rayleigh quotient of a function", "exact (discrete)"),
+    geometric(
+        "gradient",
+        "the gradient of a per-vertex function on each triangle or tetrahedron",
+        MESHES,
+        "P1 gradients live on a mesh's triangles or tetrahedra",
+        "exact for linear functions",
+    ),
+    geometric(
+        "divergence",
+        "the divergence of a per-element vector field per vertex (integrated and pointwise)",
+        MESHES,
+        "P1 gradients live on a mesh's triangles or tetrahedra",
+        "exact (discrete)",
+    ),
+    Entry {
+        dirichlet: NONE,
+        dirichlet_why: "a Laplacian eigenmap and the Fiedler vector are defined with natural conditions",
+        ..spectral("embed", "Laplacian eigenmap / GPS coordinates, Fiedler vector and bisection", "exact (discrete)")
+    },
+    Entry {
+        dirichlet: NONE,
+        dirichlet_why: "smoothing takes a Neumann operator; give `fixed_boundary` to clamp the boundary",
+        ..spectral(
+            "smooth",
+            "(M + αL) u = M ū: implicit fairing of the coordinates or of a function",
+            "exact (discrete)",
+        )
+    },
+    Entry {
+        dirichlet: NONE,
+        dirichlet_why: "interpolation fixes its own vertices (the given values); use a Neumann operator",
+        ..spectral("interpolate", "harmonic interpolation of values, or semi-supervised labels", "exact (discrete)")
+    },
+];

@@ -686,3 +686,35 @@ pub struct CompareSummary {
     /// Always empty: a comparison's numbers are the shape-DNA's.
     pub warnings: Vec<Warning>,
 }
+
+impl Summary {
+    /// The parameters of the operator a result used, where it names one.
+    pub(crate) fn operator_parameters(&self) -> Option<&serde_json::Map<String, Value>> {
+        Some(match self {
+            Summary::Spectrum(s) => &s.operator.parameters,
+            Summary::Operator(s) => &s.operator.parameters,
+            Summary::Hks(s) => &s.operator.parameters,
+            Summary::SiHks(s) => &s.operator.parameters,
+            Summary::Wks(s) => &s.operator.parameters,
+            Summary::Gps(s) => &s.operator.parameters,
+            Summary::ShapeDna(s) => &s.operator.parameters,
+            Summary::Heat(s) => &s.operator.parameters,
+            Summary::HeatCurvature(s) => &s.operator.parameters,
+            Summary::Wave(s) => &s.operator.parameters,
+            Summary::Schrodinger(s) => &s.operator.parameters,
+            Summary::Poisson(s) => &s.parameters,
+            Summary::Diffuse(s) => &s.operator.parameters,
+            Summary::DirichletEnergy(s) => &s.operator.parameters,
+            Summary::Embed(s) => &s.operator.parameters,
+            Summary::Smooth(s) => &s.operator.parameters,
+            Summary::Interpolate(s) => &s.operator.parameters,
+            Summary::Geodesic(_)
+            | Summary::Gradient(_)
+            | Summary::Divergence(_)
+            | Summary::Trees(_)
+            | Summary::MeanCurvature(_)
+            | Summary::Compare(_) => return None,
+            Summary::Correspondence(s) => &s.operator.parameters,
+        })
+    }
+}

@@ -296,7 +296,7 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
             format!("the eigensolver planned {} but solved by {}: {}", p.planned, p.taken, p.reason),
         ));
     }
-    if let Some(parameters) = parameters_of(&part.body) {
+    if let Some(parameters) = part.body.operator_parameters() {
         warnings.extend(operator_warnings(parameters));
     }
     let head = ResultHead {
@@ -307,8 +307,11 @@ fn run_here(v: &Validated, analysis: &Analysis, hooks: Hooks<'_>) -> Result<Outp
     };
     // Every number checked before the result is returned (and so before the service stores it); per-vertex rows
     // without a value are those validation dropped and the points the operator left out (a cloud's outliers).
-    let left_out =
-        parameters_of(&part.body).and_then(|p| p.get("outliers")?.get("dropped")?.as_u64()).map_or(0, |n| n as usize);
+    let left_out = part
+        .body
+        .operator_parameters()
+        .and_then(|p| p.get("outliers")?.get("dropped")?.as_u64())
+        .map_or(0, |n| n as usize);
     let typed = Typed { head, body: part.body };
     finite::checked_output(&typed, part.arrays, part.fingerprints, |a| is_per_vertex(a.name).then_some(v), left_out)
 }
@@ -320,35 +323,6 @@ pub(crate) const HEAT_TRACE_ERROR: &str =
     the unit sphere of 2,562 vertices the trace at t = 0.1 is 0.8 % low) is not included: `spectrum` with \
     `extrapolate` estimates each eigenvalue's";
 
-/// The parameters of the operator a result used, where it names one.
-fn parameters_of(body: &Summary) -> Option<&serde_json::Map<String, Value>> {
-    Some(match body {
-        Summary::Spectrum(s) => &s.operator.parameters,
-        Summary::Operator(s) => &s.operator.parameters,
-        Summary::Hks(s) => &s.operator.parameters,
-        Summary::SiHks(s) => &s.operator.parameters,
-        Summary::Wks(s) => &s.operator.parameters,
-        Summary::Gps(s) => &s.operator.parameters,
-        Summary::ShapeDna(s) => &s.operator.parameters,
-        Summary::Heat(s) => &s.operator.parameters,
-        Summary::HeatCurvature(s) => &s.operator.parameters,
-        Summary::Wave(s) => &s.operator.parameters,
-        Summary::Schrodinger(s) => &s.operator.parameters,
-        Summary::Poisson(s) => &s.parameters,
-        Summary::Diffuse(s) => &s.operator.parameters,
-        Summary::DirichletEnergy(s) => &s.operator.parameters,
-        Summary::Embed(s) => &s.operator.parameters,
-        Summary::Smooth(s) => &s.operator.parameters,
-        Summary::Interpolate(s) => &s.operator.parameters,
-        Summary::Geodesic(_)
-        | Summary::Gradient(_)
-        | Summary::Divergence(_)
-        | Summary::Trees(_)
-        | Summary::MeanCurvature(_)
-        | Summary::Compare(_) => return None,
-        Summary::Correspondence(s) => &s.operator.parameters,
-    })
-}
 /// How far a point cloud's noise level (after denoising) may reach relative to its spacing before the operator is
 /// built on points still off their surface.
 pub const NOISE_WARN_SPACINGS: f64 = 1.0;
