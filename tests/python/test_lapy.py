@@ -121,3 +121,16 @@ def test_what_kac_refuses_that_lapy_takes():
     assert e.value.code == "degenerate-element"
     with pytest.raises(NotImplementedError):
         klapy.Solver(klapy.TriaMesh(v[[0, 1, 3]], [[0, 1, 2]]), aniso=0.5)
+
+
+def test_the_shape_dna_recipe_on_a_solid_matches_lapys(meshes):
+    # A box of volume 3 (so the normalization is not 1), its tetrahedra in both orientations.
+    s = kac.read(meshes["cube"], weld="none")
+    v = s.vertices * np.array([2.0, 1.5, 1.0])
+    for t in (s.tets, s.tets[:, [0, 2, 1, 3]]):
+        ours = klapy.shapedna.compute_shapedna(klapy.TetMesh(v, t), k=12)
+        theirs = lapy.shapedna.compute_shapedna(lapy.TetMesh(v, t), k=12)
+        ev_o = klapy.shapedna.reweight_ev(klapy.shapedna.normalize_ev(klapy.TetMesh(v, t), ours["Eigenvalues"]))
+        ev_t = lapy.shapedna.reweight_ev(lapy.shapedna.normalize_ev(lapy.TetMesh(v, t), theirs["Eigenvalues"]))
+        assert rel(ev_o, ev_t) < 1e-8
+        assert ours["Dimension"] == theirs["Dimension"] == 3
