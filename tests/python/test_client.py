@@ -56,7 +56,8 @@ def test_bulk_search_compare_and_correspondence(server, meshes):
     found = c.search(shape_id=ids[0], neighbours=2)
     assert found["searched"] >= 2 and len(found["neighbours"]) == 2
     cmp = c.compare(ids[:2], k=20)
-    assert "distances" in cmp or "summary" in cmp or "id" in cmp
+    d = np.array(cmp["distances"])
+    assert d.shape == (2, 2) and d[0, 0] == 0 and d[0, 1] > 0
     corr = c.correspondence(ids[0], ids[0], fit_k=20, refine_k=30)
     m = corr["arrays"]["source_to_target"]
     assert m.shape[0] == 642 and (m[:, 0] == np.arange(642)).mean() > 0.95
@@ -69,4 +70,5 @@ def test_problems_are_kac_errors_with_codes(server):
     assert e.value.code == "not-found" and e.value.status == 404
     with pytest.raises(kac.KacError) as e:
         c.submit("0" * 64, "hks", cout=3)
-    assert e.value.code in ("invalid-request", "not-found")
+    # The body is checked before the shape is looked up: the unknown field, named.
+    assert e.value.code == "invalid-request" and e.value.status == 422 and e.value.extra["field"] == "cout"

@@ -43,12 +43,20 @@ def test_spectrum_is_the_clis_and_the_spheres(meshes):
 
 
 def test_operator_matches_the_clis_matrices(meshes, tmp_path):
+    import scipy.io
+
     s = kac.read(meshes["torus"])
-    L, M = kac.operator(s)
-    cli = run_cli("operator", meshes["torus"])
-    assert L.shape == (len(s.vertices),) * 2
-    assert abs(L - L.T).max() == 0 and abs(L @ np.ones(L.shape[0])).max() < 1e-10
-    assert close(M.sum(), cli["area"] if "area" in cli else M.sum())
+    for mass in ("consistent", "lumped"):
+        L, M = kac.operator(s, mass=mass)
+        out = tmp_path / mass
+        run_cli("operator", meshes["torus"], "--mass", mass, "--out-dir", str(out))
+        L_cli, M_cli = (scipy.io.mmread(str(out / f"{m}.mtx")).tocsr() for m in ("L", "M"))
+        assert L.shape == L_cli.shape == (len(s.vertices),) * 2
+        assert abs(L - L_cli).max() == 0 and abs(M - M_cli).max() == 0
+        assert abs(L - L.T).max() == 0 and abs(L @ np.ones(L.shape[0])).max() < 1e-10
+    # The lumped mass is diagonal, the consistent one is not; both sum to the area.
+    assert kac.operator(s, mass="lumped")[1].nnz == len(s.vertices)
+    assert np.isclose(kac.operator(s)[1].sum(), kac.operator(s, mass="lumped")[1].sum(), rtol=1e-12)
 
 
 @pytest.mark.parametrize(
