@@ -219,8 +219,8 @@ def operator(s: ShapeLike, faces: Any = None, *, threads: int = 0, **options: An
         import scipy.sparse as sp
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise ImportError("kac.operator returns SciPy matrices: pip install scipy") from e
-    r = analyze("operator", s, faces, threads=threads, matrices=True, report=False, **options)
     shape_ = _as_shape(s, faces)
+    r = analyze("operator", shape_, threads=threads, matrices=True, report=False, **options)
     unknowns = r.arrays["unknown_vertices"].astype(np.int64)
     order1 = unknowns.shape[1] == 1
     n = shape_.input_vertices if order1 else len(unknowns)
@@ -262,7 +262,12 @@ def compare(shapes: list, *, threads: int = 0, progress: Progress = None, **opti
     request = _route("CompareRequest", options, {})
     request.pop("shape_ids", None)
     built = [_as_shape(s) for s in shapes]
-    return _result(_kac.compare(built, json.dumps(request), threads, progress))
+    r = _result(_kac.compare(built, json.dumps(request), threads, progress))
+    # A failure's `status` is the service's HTTP status for its code; in process there is none, and its `code`
+    # says what happened.
+    for f in r.get("failures", []):
+        f.pop("status", None)
+    return r
 
 
 def analyses() -> list:
