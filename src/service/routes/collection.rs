@@ -6,7 +6,6 @@ use super::shapes::{ingest, shape_resource, ShapeResource, Upload};
 use super::*;
 use crate::service::search::MAX_TAGS;
 use crate::service::store::{TagEdit, TagsOutcome};
-use kac_core::descriptors::shape_dna::ShapeDnaOptions;
 
 /// A shape's tags.
 #[derive(Serialize, utoipa::ToSchema)]
@@ -77,13 +76,14 @@ pub(crate) fn add_tags(st: &AppState, id: &str, tags: &[Tag]) -> Result<Vec<Stri
     edit_tags(st, id, TagEdit::Add { tags, max: MAX_TAGS })
 }
 
-/// The fingerprint a bulk upload computes for each shape.
+/// The fingerprint a bulk upload computes for each shape: a `fingerprint` job (every family a search reads).
 #[derive(Deserialize, Serialize, utoipa::ToSchema, Clone, Default)]
 #[serde(remote = "Self")]
 pub struct BulkFingerprint {
-    /// The shape-DNA's options (k, normalization, reweighting, include_zero), as `/v1/search` takes them.
+    /// The fingerprint's options (k, normalization, reweighting, include_zero), as `/v1/search` takes them, with
+    /// the same defaults.
     #[serde(flatten)]
-    pub dna: ShapeDnaOptions,
+    pub options: analysis::FingerprintOptions,
     #[serde(default)]
     pub operator: analysis::OperatorSpec,
 }
@@ -96,8 +96,8 @@ pub struct BulkOptions {
     /// Tags added to every shape.
     #[serde(default)]
     pub tags: Vec<String>,
-    /// The fingerprint job started for each shape (default: shape-DNA with its default options, the family a
-    /// search with default options looks in); `null` starts none.
+    /// The fingerprint job started for each shape (default: a `fingerprint` job with the default options, whose
+    /// families a search with default options looks in); `null` starts none.
     #[serde(default = "default_fingerprint")]
     pub fingerprint: Option<BulkFingerprint>,
 }
@@ -234,10 +234,10 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
     let options = options.unwrap_or(BulkOptions { fingerprint: default_fingerprint(), ..Default::default() });
     let tags = Tag::parse_all(&options.tags).map_err(ApiError::invalid_request)?;
     if let Some(fp) = &options.fingerprint {
-        if fp.dna.k == 0 || fp.dna.k > st.engine.config.max_k {
+        if fp.options.k == 0 || fp.options.k > st.engine.config.max_k {
             return Err(ApiError::invalid_request(format!(
                 "fingerprint k = {}: 1 to --max-k {}",
-                fp.dna.k, st.engine.config.max_k
+                fp.options.k, st.engine.config.max_k
             )));
         }
     }
@@ -271,8 +271,8 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         }
         let started = (|| -> Result<Option<JobResource>, ApiError> {
             let Some(fp) = &options.fingerprint else { return Ok(None) };
-            let analysis = Analysis::ShapeDna {
-                options: fp.dna.clone(),
+            let analysis = Analysis::Fingerprint {
+                options: fp.options.clone(),
                 operator: fp.operator.clone(),
                 solver: analysis::SolverSpec::default(),
             };

@@ -4,7 +4,6 @@
 
 use super::*;
 use crate::analysis::OperatorSpec;
-use kac_core::descriptors::shape_dna::ShapeDnaOptions;
 
 /// `GET /livez`.
 #[derive(Serialize, utoipa::ToSchema)]
@@ -57,31 +56,57 @@ pub struct ShapePage {
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct Neighbour {
     pub shape_id: String,
+    /// The distance searched by: within the family, or fused (Σ weight · distance / spread over the families).
     pub distance: f64,
+    /// A fused search: each family's own distance, by descriptor (before its division by the spread).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distances: Option<std::collections::BTreeMap<String, f64>>,
+}
+
+/// A family a search read.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct FamilyUsed {
+    /// shape-dna, heat-distribution or gps-d2.
+    pub descriptor: &'static str,
+    pub family: String,
+    /// Its weight in the fused distance (1 alone).
+    pub weight: f64,
+    /// Its spread over the collection: the root-mean-square distance between its fingerprints (a fused search
+    /// divides the family's distances by it; absent for an empty family).
+    pub spread: Option<f64>,
+    /// The query's fingerprint in this family.
+    pub fingerprint: Vec<f64>,
 }
 
 /// The stored shapes nearest to the query (`POST /v1/search`).
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct SearchResult {
-    /// `shape-dna`.
+    /// `fused`, `shape-dna`, `heat-distribution` or `gps-d2`.
     pub descriptor: &'static str,
-    /// The fingerprint family searched: every parameter that changes the values.
+    /// The fingerprint family searched (every parameter that changes the values, hashed); a fused search's
+    /// families joined by `+`.
     pub family: String,
-    pub options: ShapeDnaOptions,
+    /// Each family searched, with its weight, spread and the query's fingerprint in it.
+    pub families: Vec<FamilyUsed>,
+    pub options: crate::analysis::FingerprintOptions,
     pub metric: &'static str,
     #[schema(value_type = OperatorSpec)]
     pub operator: Value,
     /// The query shape, when the query was one (it is left out of the neighbours).
     pub shape_id: Option<String>,
-    /// The query's fingerprint.
+    /// The query's fingerprint (one family; empty for a fused search, whose fingerprints are in `families`).
     pub fingerprint: Vec<f64>,
-    /// Fingerprints of this family held.
+    /// Fingerprints of this family held (fused: shapes holding every family).
     pub searched: usize,
     /// Fingerprints whose distance was computed: all of them for a scan, fewer through the index.
     pub probed: usize,
     /// Whether the neighbours are proven to be the exact nearest ones: always for a scan; through the index, when
     /// every cell not probed lies farther from the query than the last neighbour. Distances are exact either way.
     pub exact: bool,
+    /// A fused search: shapes holding some of the families but not all (not compared: their fingerprint jobs have
+    /// not finished, or they were fingerprinted by shape-DNA alone).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub incomplete: Option<usize>,
     /// `scan` (every fingerprint of the family, or of the shapes carrying the tags) or `index`.
     pub method: crate::service::search::Method,
     /// The tags the search was limited to (sorted, repeats dropped).

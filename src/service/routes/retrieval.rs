@@ -1,22 +1,28 @@
 //! `/v1/compare` and `/v1/search`: shape-DNA comparisons as jobs, and the nearest stored shapes by fingerprint.
 
 use super::*;
-use crate::analysis::OperatorSpec;
-use kac_core::descriptors::shape_dna::{Metric, ShapeDnaOptions};
+use crate::analysis::{Descriptor, FingerprintOptions, OperatorSpec};
+use kac_core::descriptors::shape_dna::Metric;
 
-/// The nearest stored shapes to a shape or a fingerprint, by shape-DNA.
+/// The nearest stored shapes to a shape or a fingerprint, by one fingerprint family or by their fusion.
 #[derive(Deserialize, Serialize, utoipa::ToSchema)]
 #[serde(remote = "Self")]
 pub struct SearchRequest {
-    /// A stored shape to search from (its fingerprint is computed first, as a `shape-dna` job, when the store has
-    /// none of this family); the shape itself is left out of the answer.
+    /// A stored shape to search from (its fingerprints are computed first, as a `fingerprint` job, when the store
+    /// lacks one of the families searched); the shape itself is left out of the answer.
     pub shape_id: Option<String>,
-    /// Or a fingerprint of `k` values computed elsewhere (with the same parameters).
+    /// Or a fingerprint computed elsewhere, of the family `descriptor` names (with the same options).
     pub fingerprint: Option<Vec<f64>>,
-    /// The shape-DNA's options (k, normalization, reweighting, include_zero) at the top level: one type and one
-    /// set of defaults for every request and flag that fingerprints.
+    /// `fused` (the default from a `shape_id`: every family, each distance divided by its spread over the
+    /// collection, weighted), or one family: `shape-dna` (the default with a `fingerprint`), `heat-distribution`,
+    /// `gps-d2`. See docs/retrieval.md for the families, the weights and the benchmark that chose them.
+    pub descriptor: Option<Descriptor>,
+    /// The fingerprint's options (k, normalization, reweighting, include_zero) at the top level, with retrieval's
+    /// defaults (k 50, `geometry`, `index`: invariant to the shape's scale). Fingerprints stored under other
+    /// options (the earlier default was `none`, `none`) are searched by giving those options.
     #[serde(flatten)]
-    pub dna: ShapeDnaOptions,
+    pub options: FingerprintOptions,
+    /// Distances within a family (default euclidean; a fused search is euclidean only).
     #[serde(default)]
     pub metric: Metric,
     /// Nearest shapes returned (default 10, at most 1000).
@@ -26,7 +32,7 @@ pub struct SearchRequest {
     #[serde(default)]
     pub tags: Vec<String>,
     /// Compare every fingerprint of the family instead of probing the index's nearest cells (slower on large
-    /// collections; the answer is then exact by construction).
+    /// collections; the answer is then exact by construction). A fused search always compares every shape.
     #[serde(default)]
     pub exact: bool,
     #[serde(default)]
@@ -40,11 +46,24 @@ fn default_neighbours() -> usize {
 kac_core::object_only_serde!(SearchRequest);
 
 impl SearchRequest {
-    pub fn options(&self) -> ShapeDnaOptions {
-        self.dna.clone()
+    /// The descriptor searched: as given, else fused from a shape and shape-DNA from a fingerprint.
+    pub fn descriptor(&self) -> Descriptor {
+        self.descriptor.unwrap_or(if self.fingerprint.is_some() { Descriptor::ShapeDna } else { Descriptor::Fused })
     }
-    pub fn family(&self) -> String {
-        crate::analysis::fingerprint_family(&self.options(), &self.operator)
+    /// The families searched, in the order of [`Descriptor::FAMILIES`].
+    pub fn families(&self) -> Vec<(Descriptor, String)> {
+        let d = self.descriptor();
+        d.members().iter().map(|&m| (m, analysis::descriptor_family(m, &self.options, &self.operator))).collect()
+    }
+}
+
+/// The number of values a fingerprint of a family holds with these options.
+pub(crate) fn family_length(d: Descriptor, options: &FingerprintOptions) -> usize {
+    use kac_core::descriptors::global;
+    match d {
+        Descriptor::ShapeDna | Descriptor::Fused => options.k,
+        Descriptor::HeatDistribution => global::HEAT_TIMES.2 * global::HEAT_QUANTILES,
+        Descriptor::GpsD2 => global::GPS_QUANTILES,
     }
 }
 
@@ -157,103 +176,146 @@ pub(crate) async fn search(
     let req: SearchRequest = strict_body(&st, body, "SearchRequest")?;
     // What other replicas computed or removed since the last search.
     st.index.sync(&*st.fingerprints).map_err(store_error)?;
-    if req.dna.k == 0 {
+    if req.options.k == 0 {
         return Err(ApiError::Analysis(analysis::AnalysisError::invalid_k(
             "k = 0: a fingerprint has at least one value",
         )));
     }
-    if req.dna.k > st.engine.config.max_k {
+    if req.options.k > st.engine.config.max_k {
         return Err(ApiError::KTooLarge {
-            detail: format!("k = {} is above --max-k {}", req.dna.k, st.engine.config.max_k),
+            detail: format!("k = {} is above --max-k {}", req.options.k, st.engine.config.max_k),
         });
     }
     if req.neighbours > 1000 {
         return Err(ApiError::invalid_request(format!("neighbours = {}: at most 1000", req.neighbours)));
     }
+    let descriptor = req.descriptor();
+    if descriptor == Descriptor::Fused && req.metric != Metric::Euclidean {
+        return Err(ApiError::invalid_request(format!(
+            "metric {}: a fused search sums Euclidean distances (give one family as `descriptor` for another metric)",
+            req.metric.name()
+        )));
+    }
     let tags = Tag::parse_all(&req.tags).map_err(ApiError::invalid_request)?;
-    let family = req.family();
-    let query = match (&req.shape_id, &req.fingerprint) {
-        (Some(_), Some(_)) | (None, None) => {
-            return Err(ApiError::invalid_request("give either shape_id or fingerprint (one of them)"))
-        }
-        (None, Some(f)) => {
-            // The family's length is the request's k, whether or not the family holds rows yet.
-            if f.len() != req.dna.k {
-                return Err(ApiError::invalid_request(format!(
-                    "fingerprint: {} values, but k = {} (a fingerprint of this family has k values)",
-                    f.len(),
-                    req.dna.k
-                )));
+    let families = req.families();
+    let query: Vec<Vec<f64>> =
+        match (&req.shape_id, &req.fingerprint) {
+            (Some(_), Some(_)) | (None, None) => {
+                return Err(ApiError::invalid_request("give either shape_id or fingerprint (one of them)"))
             }
-            if let Some(i) = f.iter().position(|x| !x.is_finite()) {
-                return Err(ApiError::invalid_request(format!("fingerprint value {i} is not a finite number")));
+            (None, Some(_)) if descriptor == Descriptor::Fused => return Err(ApiError::invalid_request(
+                "descriptor fused: a fused search starts from a stored shape (shape_id), whose fingerprint is one per \
+                 family; to search by a fingerprint, name its family as `descriptor`",
+            )),
+            (None, Some(f)) => {
+                // The family's length follows from the request, whether or not the family holds rows yet.
+                let want = family_length(descriptor, &req.options);
+                if f.len() != want {
+                    return Err(ApiError::invalid_request(format!(
+                        "fingerprint: {} values, but a {} fingerprint with these options has {want}",
+                        f.len(),
+                        descriptor.name()
+                    )));
+                }
+                if let Some(i) = f.iter().position(|x| !x.is_finite()) {
+                    return Err(ApiError::invalid_request(format!("fingerprint value {i} is not a finite number")));
+                }
+                // Distances are sums of squares of differences: values this large would overflow them to infinity.
+                if let Some(i) = f.iter().position(|x| x.abs() > MAX_FINGERPRINT_VALUE) {
+                    return Err(ApiError::invalid_request(format!(
+                        "fingerprint value {i} = {:e} is outside ±{MAX_FINGERPRINT_VALUE:e} (distances to it would \
+                     overflow)",
+                        f[i]
+                    )));
+                }
+                vec![f.clone()]
             }
-            // Distances are sums of squares of differences: values this large would overflow them to infinity.
-            if let Some(i) = f.iter().position(|x| x.abs() > MAX_FINGERPRINT_VALUE) {
-                return Err(ApiError::invalid_request(format!(
-                    "fingerprint value {i} = {:e} is outside ±{MAX_FINGERPRINT_VALUE:e} (a shape-DNA value is a \
-                     normalized eigenvalue; distances to it would overflow)",
-                    f[i]
-                )));
-            }
-            f.clone()
-        }
-        // The id parses before any store sees it (404 for what is not an id).
-        (Some(id), None) => match stored_fingerprint(&st, &family, &crate::service::ids::shape_id(id)?.hex())? {
-            Some(f) => f,
-            None => {
-                let shape = stored_shape(&st, id)?;
-                let dna = Analysis::ShapeDna {
-                    options: req.options(),
-                    operator: req.operator.clone(),
-                    solver: analysis::SolverSpec::default(),
-                };
-                let (job, _) = jobs::submit(&st.jobs, &st.engine.config, shape, dna)?;
-                let view = wait_for(&st, &job, q.wait).await?;
-                match (stored_fingerprint(&st, &family, id)?, view.status) {
-                    (Some(f), _) => f,
-                    (None, Status::Succeeded) => {
-                        // A shape-dna job that finished before fingerprints were kept (or whose fingerprint could
-                        // not be kept): its stored result holds the values.
-                        let r = st
-                            .results
-                            .get(&id_of(&view)?)
-                            .map_err(store_error)?
-                            .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
-                        let values: Vec<f64> = serde_json::from_value(r.summary["shape_dna"]["values"].clone())
-                            .map_err(|e| ApiError::Internal {
-                                detail: format!("the shape-dna result has no values: {e}"),
-                            })?;
-                        let f = analysis::Fingerprint { family: family.clone(), shape_id: id.clone(), values };
-                        st.index.record(&*st.fingerprints, &f).map_err(|e| ApiError::Internal {
-                            detail: format!("the fingerprint could not be stored: {e}"),
-                        })?;
-                        f.values
-                    }
-                    (None, Status::Failed | Status::Canceled) => {
-                        let f = view
-                            .error
-                            .as_ref()
-                            .ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
-                        return Ok(with_location(failure_response(f), &format!("/v1/jobs/{}", view.id)));
-                    }
-                    (None, _) => return Ok(job_response(StatusCode::ACCEPTED, &view)),
+            // The id parses before any store sees it (404 for what is not an id).
+            (Some(id), None) => {
+                let hex = crate::service::ids::shape_id(id)?.hex();
+                match stored_fingerprints(&st, &families, &hex)? {
+                    Some(f) => f,
+                    None => match fingerprint_shape(&st, &req, id, &families, q.wait).await? {
+                        Ok(f) => f,
+                        Err(response) => return Ok(response),
+                    },
                 }
             }
-        },
-    };
+        };
     let exclude = match &req.shape_id {
         Some(id) => Some(crate::service::ids::shape_id(id)?),
         None => None,
     };
     let store = st.fingerprints.clone();
     let fetch = move |family: &str, ids: &[String]| store.fingerprints_of(family, ids);
+    let search_error = |e| match e {
+        SearchError::Length(m) => ApiError::invalid_request(m),
+        SearchError::Store(e) => store_error(e),
+    };
+    let operator = serde_json::to_value(&req.operator).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
+    let mut result = SearchResult {
+        descriptor: descriptor.name(),
+        family: families.iter().map(|f| f.1.as_str()).collect::<Vec<_>>().join("+"),
+        families: vec![],
+        options: req.options.clone(),
+        metric: req.metric.name(),
+        operator,
+        shape_id: req.shape_id.clone(),
+        fingerprint: vec![],
+        searched: 0,
+        probed: 0,
+        incomplete: None,
+        exact: true,
+        method: crate::service::search::Method::Scan,
+        tags: tags.iter().map(|t| t.as_str().to_string()).collect(),
+        neighbours: vec![],
+    };
+    if descriptor == Descriptor::Fused {
+        let members: Vec<crate::service::search::Member> = families
+            .iter()
+            .zip(&query)
+            .map(|((d, family), values)| crate::service::search::Member { family, values, weight: d.weight() })
+            .collect();
+        let found = st
+            .index
+            .nearest_fused(
+                &crate::service::search::FusedQuery { members: &members, count: req.neighbours, exclude, tags: &tags },
+                &fetch,
+            )
+            .map_err(search_error)?;
+        result.families = families
+            .iter()
+            .zip(query)
+            .enumerate()
+            .map(|(i, ((d, family), values))| FamilyUsed {
+                descriptor: d.name(),
+                family: family.clone(),
+                weight: d.weight(),
+                spread: found.spreads.get(i).copied(),
+                fingerprint: values,
+            })
+            .collect();
+        result.neighbours = found
+            .neighbours
+            .into_iter()
+            .map(|(shape_id, distance, each)| Neighbour {
+                shape_id,
+                distance,
+                distances: Some(families.iter().zip(each).map(|((d, _), x)| (d.name().to_string(), x)).collect()),
+            })
+            .collect();
+        (result.searched, result.probed, result.exact) = (found.searched, found.probed, found.exact);
+        result.incomplete = Some(found.incomplete);
+        return Ok(Json(result).into_response());
+    }
+    let (d, family) = &families[0];
+    let values = &query[0];
     let found = st
         .index
         .nearest(
             &crate::service::search::Query {
-                family: &family,
-                values: &query,
+                family,
+                values,
                 metric: req.metric,
                 count: req.neighbours,
                 exclude,
@@ -263,29 +325,93 @@ pub(crate) async fn search(
             },
             &fetch,
         )
-        .map_err(|e| match e {
-            SearchError::Length(m) => ApiError::invalid_request(m),
-            SearchError::Store(e) => store_error(e),
-        })?;
-    let neighbours: Vec<Neighbour> =
-        found.neighbours.into_iter().map(|(shape_id, distance)| Neighbour { shape_id, distance }).collect();
-    let operator = serde_json::to_value(&req.operator).map_err(|e| ApiError::Internal { detail: e.to_string() })?;
-    Ok(Json(SearchResult {
-        descriptor: "shape-dna",
-        family,
-        options: req.options(),
-        metric: req.metric.name(),
-        operator,
-        shape_id: req.shape_id.clone(),
-        fingerprint: query,
-        searched: found.searched,
-        probed: found.probed,
-        exact: found.exact,
-        method: found.method,
-        tags: tags.into_iter().map(|t| t.as_str().to_string()).collect(),
-        neighbours,
-    })
-    .into_response())
+        .map_err(search_error)?;
+    result.neighbours = found
+        .neighbours
+        .into_iter()
+        .map(|(shape_id, distance)| Neighbour { shape_id, distance, distances: None })
+        .collect();
+    result.families = vec![FamilyUsed {
+        descriptor: d.name(),
+        family: family.clone(),
+        weight: 1.0,
+        spread: st.index.spread(family),
+        fingerprint: values.clone(),
+    }];
+    result.fingerprint = values.clone();
+    (result.searched, result.probed, result.exact, result.method) =
+        (found.searched, found.probed, found.exact, found.method);
+    Ok(Json(result).into_response())
+}
+
+/// A stored shape's fingerprints in every family asked, exact, from the store (None: one is missing).
+fn stored_fingerprints(
+    st: &AppState,
+    families: &[(Descriptor, String)],
+    id: &str,
+) -> Result<Option<Vec<Vec<f64>>>, ApiError> {
+    let mut out = Vec::with_capacity(families.len());
+    for (_, family) in families {
+        match stored_fingerprint(st, family, id)? {
+            Some(f) => out.push(f),
+            None => return Ok(None),
+        }
+    }
+    Ok(Some(out))
+}
+
+/// Computes a stored shape's fingerprints as a `fingerprint` job and waits for it (`wait`): the fingerprints of the
+/// families asked, or the answer to give instead (202 with the job, or the job's failure).
+async fn fingerprint_shape(
+    st: &AppState,
+    req: &SearchRequest,
+    id: &str,
+    families: &[(Descriptor, String)],
+    wait: Option<f64>,
+) -> Result<Result<Vec<Vec<f64>>, Response>, ApiError> {
+    let shape = stored_shape(st, id)?;
+    let job = Analysis::Fingerprint {
+        options: req.options.clone(),
+        operator: req.operator.clone(),
+        solver: analysis::SolverSpec::default(),
+    };
+    let (job, _) = jobs::submit(&st.jobs, &st.engine.config, shape, job)?;
+    let view = wait_for(st, &job, wait).await?;
+    if let Some(f) = stored_fingerprints(st, families, id)? {
+        return Ok(Ok(f));
+    }
+    match view.status {
+        Status::Succeeded => {
+            // A job that finished before fingerprints were kept (or whose fingerprints could not be kept): its
+            // stored result holds the values.
+            let r = st
+                .results
+                .get(&id_of(&view)?)
+                .map_err(store_error)?
+                .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
+            let mut out = vec![];
+            for (d, family) in families {
+                let values: Vec<f64> = r.summary["families"]
+                    .as_array()
+                    .and_then(|fs| fs.iter().find(|f| f["descriptor"] == d.name()))
+                    .and_then(|f| serde_json::from_value(f["values"].clone()).ok())
+                    .ok_or_else(|| ApiError::Internal {
+                        detail: format!("the fingerprint result has no {} values", d.name()),
+                    })?;
+                let f = analysis::Fingerprint { family: family.clone(), shape_id: id.to_string(), values };
+                st.index
+                    .record(&*st.fingerprints, &f)
+                    .map_err(|e| ApiError::Internal { detail: format!("the fingerprint could not be stored: {e}") })?;
+                out.push(f.values);
+            }
+            Ok(Ok(out))
+        }
+        Status::Failed | Status::Canceled => {
+            let f = view.error.as_ref().ok_or(ApiError::Internal { detail: "a failed job without an error".into() })?;
+            Ok(Err(with_location(failure_response(f), &format!("/v1/jobs/{}", view.id))))
+        }
+        _ => Ok(Err(job_response(StatusCode::ACCEPTED, &view))),
+    }
 }
 
 /// A stored shape's fingerprint in a family, exact, from the store (None: there is none yet).
@@ -333,6 +459,7 @@ mod tests {
     #[test]
     fn unknown_fields_are_refused_by_the_type_too() {
         let search = serde_json::json!({ "fingerprint": [1.0], "k": 1, "reweightin": "index" });
+        assert!(serde_json::from_value::<SearchRequest>(serde_json::json!({ "fingerprint": [1.0], "k": 1 })).is_ok());
         assert!(serde_json::from_value::<SearchRequest>(search).is_err());
     }
 }

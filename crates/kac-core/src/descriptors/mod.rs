@@ -12,6 +12,7 @@
 //! - Every parameter a descriptor used, chosen or defaulted, is returned beside the values.
 
 pub mod curvature;
+pub mod global;
 pub mod graph;
 pub mod heat;
 pub mod shape_dna;

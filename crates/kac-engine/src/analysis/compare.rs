@@ -37,6 +37,33 @@ pub fn fingerprint_eigenvalues(
     Ok(Fingerprinted { id: id.to_string(), dna, operator: None })
 }
 
+/// Each input's `neighbours` nearest by a distance matrix (ties by order).
+pub fn nearest_of(ids: &[String], distances: &[Vec<f64>], neighbours: usize) -> Vec<CompareNearest> {
+    (0..ids.len())
+        .map(|i| CompareNearest {
+            shape_id: ids[i].clone(),
+            nearest: shape_dna::nearest(distances, i, neighbours)
+                .into_iter()
+                .map(|(j, d)| CompareNeighbour { shape_id: ids[j].clone(), distance: d })
+                .collect(),
+        })
+        .collect()
+}
+
+/// The spread of fingerprints: their root-mean-square Euclidean distance over all ordered pairs (a pair with itself
+/// included), √(2 Σⱼ Var(xⱼ)); the search index computes the same over a family ([`crate::search`]).
+pub fn spread(rows: &[Vec<f64>]) -> f64 {
+    let n = rows.len() as f64;
+    let k = rows.first().map_or(0, Vec::len);
+    let var: f64 = (0..k)
+        .map(|j| {
+            let mean = rows.iter().map(|r| r[j]).sum::<f64>() / n;
+            rows.iter().map(|r| (r[j] - mean).powi(2)).sum::<f64>() / n
+        })
+        .sum();
+    (2.0 * var).sqrt()
+}
+
 /// The comparison of the fingerprinted inputs, in their order: distances, each one's `neighbours` nearest
 /// (ties by order), and the inputs that could not be fingerprinted with their problems.
 pub fn comparison(
@@ -50,15 +77,7 @@ pub fn comparison(
     let ids: Vec<String> = found.iter().map(|f| f.id.clone()).collect();
     let fingerprints: Vec<Vec<f64>> = found.iter().map(|f| f.dna.values.clone()).collect();
     let distances = shape_dna::distance_matrix(&fingerprints, metric)?;
-    let nearest = (0..ids.len())
-        .map(|i| CompareNearest {
-            shape_id: ids[i].clone(),
-            nearest: shape_dna::nearest(&distances, i, neighbours)
-                .into_iter()
-                .map(|(j, d)| CompareNeighbour { shape_id: ids[j].clone(), distance: d })
-                .collect(),
-        })
-        .collect();
+    let nearest = nearest_of(&ids, &distances, neighbours);
     let summary = CompareSummary {
         descriptor: "shape-dna",
         options: options.clone(),
@@ -68,6 +87,7 @@ pub fn comparison(
         fingerprints,
         distances,
         nearest,
+        families: vec![],
         failures,
         algorithm_version: ALGORITHM_VERSION,
         warnings: vec![],

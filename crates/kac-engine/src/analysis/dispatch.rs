@@ -101,6 +101,23 @@ pub(crate) fn compute(
             };
             Part { body: Summary::ShapeDna(body), arrays: vec![], fingerprints, warnings }
         }
+        Analysis::Fingerprint { options, operator, solver } => {
+            let f = fingerprint_families(v, options, operator, solver, hooks, reused)?;
+            let id = v.id.hex();
+            let fingerprints = f
+                .families
+                .iter()
+                .map(|x| Fingerprint { family: x.family.clone(), shape_id: id.clone(), values: x.values.clone() })
+                .collect();
+            let body = FingerprintSummary {
+                options: options.clone(),
+                shape_dna: f.shape_dna,
+                families: f.families,
+                measure: f.measure,
+                operator: f.operator,
+            };
+            Part { body: Summary::Fingerprint(body), arrays: vec![], fingerprints, warnings: vec![] }
+        }
         Analysis::Heat { k, times, sources, method, steps, operator, solver } => {
             let src = map_vertices(v, sources, "sources")?;
             match method {

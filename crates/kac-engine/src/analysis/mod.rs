@@ -26,6 +26,7 @@ pub mod compare;
 pub mod correspond;
 mod dispatch;
 mod eigen;
+mod entries;
 mod error;
 mod extrapolate;
 mod finite;

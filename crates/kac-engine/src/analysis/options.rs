@@ -2,6 +2,7 @@
 //! the CLI's flags), the initial data of the evolution equations, and their choices.
 
 use super::*;
+use kac_core::descriptors::shape_dna::{Normalization, Reweighting};
 use kac_core::operators::manifold::CloudNormalization;
 use kac_core::operators::p2::Midpoints;
 
@@ -290,4 +291,109 @@ pub enum EmbedScaling {
     None,
     /// Global point signature: φ/√λ.
     Gps,
+}
+
+/// A family of retrieval fingerprints (each a fixed-length vector the search index holds), or their fusion.
+#[derive(utoipa::ToSchema, Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Descriptor {
+    /// The families' distances, each divided by its spread over the collection, weighted and summed
+    /// ([`FUSION_WEIGHTS`]); the default, measured best on the retrieval benchmark (docs/retrieval.md).
+    #[default]
+    Fused,
+    /// Shape-DNA: the normalized, reweighted eigenvalues.
+    ShapeDna,
+    /// The distribution of the heat kernel signature over the shape at fixed times of the shape scaled to unit
+    /// measure (`kac_core::descriptors::global::heat_distribution`).
+    HeatDistribution,
+    /// The distribution of distances between points in the global point signature embedding (GPS D2,
+    /// `kac_core::descriptors::global::gps_d2`).
+    GpsD2,
+}
+
+impl Descriptor {
+    /// The families a fingerprint job computes, in this order everywhere (results, weights, compare).
+    pub const FAMILIES: [Descriptor; 3] = [Descriptor::ShapeDna, Descriptor::HeatDistribution, Descriptor::GpsD2];
+    pub fn name(self) -> &'static str {
+        match self {
+            Descriptor::Fused => "fused",
+            Descriptor::ShapeDna => "shape-dna",
+            Descriptor::HeatDistribution => "heat-distribution",
+            Descriptor::GpsD2 => "gps-d2",
+        }
+    }
+    /// The families a search or comparison by this descriptor reads.
+    pub fn members(self) -> &'static [Descriptor] {
+        match self {
+            Descriptor::Fused => &Self::FAMILIES,
+            Descriptor::ShapeDna => &Self::FAMILIES[0..1],
+            Descriptor::HeatDistribution => &Self::FAMILIES[1..2],
+            Descriptor::GpsD2 => &Self::FAMILIES[2..3],
+        }
+    }
+    /// A family's weight in the fused distance ([`FUSION_WEIGHTS`]); 1 alone.
+    pub fn weight(self) -> f64 {
+        match self {
+            Descriptor::Fused => 1.0,
+            Descriptor::ShapeDna => FUSION_WEIGHTS[0],
+            Descriptor::HeatDistribution => FUSION_WEIGHTS[1],
+            Descriptor::GpsD2 => FUSION_WEIGHTS[2],
+        }
+    }
+}
+
+/// The weights of shape-DNA, the heat distribution and GPS D2 in the fused distance (each family's distance first
+/// divided by its spread over the collection), chosen on the retrieval benchmark (`bench/retrieval.py`; the
+/// figures and how the weights were chosen are in docs/retrieval.md).
+pub const FUSION_WEIGHTS: [f64; 3] = [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0];
+
+/// The fingerprint a retrieval request computes or looks up, with retrieval's defaults: 50 non-zero eigenpairs,
+/// shape-DNA normalized by the shape's measure (`geometry`) and reweighted by index, so that every family is
+/// invariant to the shape's scale (the defaults that measure best on the retrieval benchmark; shape-DNA's own
+/// analysis keeps its defaults, the raw eigenvalues).
+#[derive(utoipa::ToSchema, Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(remote = "Self")]
+#[serde(default, deny_unknown_fields)]
+pub struct FingerprintOptions {
+    /// Shape-DNA's values, and the non-zero eigenpairs the other families are computed from (default 50).
+    pub k: usize,
+    /// Shape-DNA reports the zero modes too (default false).
+    pub include_zero: bool,
+    /// Shape-DNA's normalization (default geometry: by the area of a surface, the volume of a solid).
+    pub normalization: Normalization,
+    /// Shape-DNA's reweighting (default index).
+    pub reweighting: Reweighting,
+}
+kac_core::object_only_serde!(FingerprintOptions);
+
+impl Default for FingerprintOptions {
+    fn default() -> Self {
+        FingerprintOptions {
+            k: 50,
+            include_zero: false,
+            normalization: Normalization::Geometry,
+            reweighting: Reweighting::Index,
+        }
+    }
+}
+
+impl FingerprintOptions {
+    /// The shape-DNA these options ask for.
+    pub fn dna(&self) -> ShapeDnaOptions {
+        ShapeDnaOptions {
+            k: self.k,
+            include_zero: self.include_zero,
+            normalization: self.normalization,
+            reweighting: self.reweighting,
+        }
+    }
+    /// Options asking for the given shape-DNA.
+    pub fn of_dna(dna: &ShapeDnaOptions) -> Self {
+        FingerprintOptions {
+            k: dna.k,
+            include_zero: dna.include_zero,
+            normalization: dna.normalization,
+            reweighting: dna.reweighting,
+        }
+    }
 }

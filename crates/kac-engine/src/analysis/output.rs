@@ -83,6 +83,32 @@ pub struct Fingerprint {
     pub values: Vec<f64>,
 }
 
+/// The family of one descriptor's fingerprints computed with `options` on `operator`: shape-DNA's is
+/// [`fingerprint_family`] of the shape-DNA the options ask for (the same family a `shape-dna` job fills); the
+/// other families depend on the eigenpairs (`k`, zero modes aside), the operator and the descriptor's own fixed
+/// parameters (its version).
+pub fn descriptor_family(descriptor: Descriptor, options: &FingerprintOptions, operator: &OperatorSpec) -> String {
+    use kac_core::descriptors::global;
+    use sha2::Digest;
+    let params = match descriptor {
+        Descriptor::ShapeDna | Descriptor::Fused => return fingerprint_family(&options.dna(), operator),
+        Descriptor::HeatDistribution => json!({ "times": global::HEAT_TIMES, "quantiles": global::HEAT_QUANTILES }),
+        Descriptor::GpsD2 => json!({
+            "dimensions": global::GPS_DIMENSIONS, "points": global::GPS_POINTS, "quantiles": global::GPS_QUANTILES
+        }),
+    };
+    let canonical = serde_json::to_vec(&json!({
+        "descriptor": descriptor.name(), "k": options.k, "params": params, "operator": operator,
+        "version": GLOBAL_DESCRIPTOR_VERSION
+    }))
+    .unwrap_or_default();
+    sha2::Sha256::digest(&canonical).iter().take(8).map(|b| format!("{b:02x}")).collect()
+}
+
+/// Bumped whenever the heat distribution's or GPS D2's values could change for the same eigenpairs (part of their
+/// families).
+pub const GLOBAL_DESCRIPTOR_VERSION: u32 = 1;
+
 /// The family of a fingerprint: every parameter that changes its values (the shape-DNA options and the
 /// operator), canonical JSON hashed to 16 hex digits. Fingerprints are compared only within a family.
 pub fn fingerprint_family(options: &ShapeDnaOptions, operator: &OperatorSpec) -> String {

@@ -9,7 +9,7 @@
 //! supports) and the README's table all read this one table.
 
 /// The registry table lives beside the requests (`request.rs`); it is read here, and named here as before.
-pub use super::request::REGISTRY;
+pub use super::entries::REGISTRY;
 use super::*;
 
 /// The classes of shape the truth table distinguishes: a point cloud's class depends on its ambient dimension.

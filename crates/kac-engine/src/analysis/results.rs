@@ -92,6 +92,7 @@ pub enum Summary {
     Wks(WksSummary),
     Gps(GpsSummary),
     ShapeDna(ShapeDnaSummary),
+    Fingerprint(FingerprintSummary),
     Heat(HeatSummary),
     Geodesic(GeodesicSummary),
     Gradient(GradientSummary),
@@ -357,6 +358,32 @@ pub struct ShapeDnaSummary {
     pub residuals: Vec<f64>,
     #[serde(flatten)]
     pub operator: OperatorUsed,
+}
+
+/// `fingerprint`: each family's values as the search index keeps them.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct FingerprintSummary {
+    pub options: FingerprintOptions,
+    /// Shape-DNA in full (its values are the `shape-dna` family's).
+    pub shape_dna: ShapeDna,
+    /// One entry per family: shape-dna, heat-distribution, gps-d2.
+    pub families: Vec<FamilyValues>,
+    /// The shape's measure (area, volume or length: the mass matrix's total) the families were scaled by.
+    pub measure: f64,
+    #[serde(flatten)]
+    pub operator: OperatorUsed,
+}
+
+/// One family's fingerprint of a shape.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct FamilyValues {
+    /// shape-dna, heat-distribution or gps-d2.
+    pub descriptor: &'static str,
+    /// The family: a search by these options looks in it.
+    pub family: String,
+    /// Non-zero eigenpairs it was computed from (GPS: its dimensions).
+    pub eigenpairs: usize,
+    pub values: Vec<f64>,
 }
 
 /// A source of the spectral heat kernel and what truncation can miss of its flow.
@@ -671,7 +698,7 @@ pub struct CompareNearest {
 /// `compare`: distances between shapes by shape-DNA and each shape's nearest neighbours.
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct CompareSummary {
-    /// `shape-dna`.
+    /// What `distances` and `nearest` are by: `fused`, `shape-dna`, `heat-distribution` or `gps-d2`.
     pub descriptor: &'static str,
     pub options: ShapeDnaOptions,
     pub metric: &'static str,
@@ -679,12 +706,31 @@ pub struct CompareSummary {
     /// The shapes compared (those fingerprinted), in the order of `fingerprints` and `distances`.
     pub shape_ids: Vec<String>,
     pub fingerprints: Vec<Vec<f64>>,
+    /// By `descriptor`.
     pub distances: Vec<Vec<f64>>,
     pub nearest: Vec<CompareNearest>,
+    /// Each family's distances (a comparison by `fused` or by a family other than shape-DNA computes every
+    /// family; empty for a comparison by shape-DNA, whose distances are `distances`).
+    pub families: Vec<CompareFamily>,
     pub failures: Vec<CompareFailure>,
     pub algorithm_version: u32,
     /// Always empty: a comparison's numbers are the shape-DNA's.
     pub warnings: Vec<Warning>,
+}
+
+/// One family's distances in a comparison.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct CompareFamily {
+    /// shape-dna, heat-distribution or gps-d2.
+    pub descriptor: &'static str,
+    pub family: String,
+    /// Its weight in the fused distance.
+    pub weight: f64,
+    /// Its spread over the shapes compared (the root-mean-square distance between their fingerprints), which the
+    /// fused distance divides its distances by.
+    pub spread: f64,
+    /// Between the shapes compared, in the order of `shape_ids`.
+    pub distances: Vec<Vec<f64>>,
 }
 
 impl Summary {
@@ -698,6 +744,7 @@ impl Summary {
             Summary::Wks(s) => &s.operator.parameters,
             Summary::Gps(s) => &s.operator.parameters,
             Summary::ShapeDna(s) => &s.operator.parameters,
+            Summary::Fingerprint(s) => &s.operator.parameters,
             Summary::Heat(s) => &s.operator.parameters,
             Summary::HeatCurvature(s) => &s.operator.parameters,
             Summary::Wave(s) => &s.operator.parameters,

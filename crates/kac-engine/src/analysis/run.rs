@@ -242,6 +242,57 @@ pub fn shape_dna_of(
     Ok((e, dna, want))
 }
 
+/// A shape's retrieval fingerprint in every family ([`Descriptor::FAMILIES`]), from one eigensolve.
+pub struct Families {
+    pub shape_dna: shape_dna::ShapeDna,
+    pub families: Vec<FamilyValues>,
+    pub measure: f64,
+    pub operator: OperatorUsed,
+}
+
+/// The `fingerprint` analysis: shape-DNA with the options' normalization, then the heat distribution and GPS D2
+/// from the same eigenpairs, scaled by the measure the mass matrix sums to.
+pub fn fingerprint_families(
+    v: &Validated,
+    options: &FingerprintOptions,
+    operator: &OperatorSpec,
+    solver: &SolverSpec,
+    hooks: Hooks<'_>,
+    reused: &std::cell::Cell<bool>,
+) -> Result<Families, AnalysisError> {
+    use kac_core::descriptors::global;
+    let (e, dna, want) = shape_dna_of(v, &options.dna(), operator, solver, hooks, reused)?;
+    hooks.control.phase("descriptor", 0, 0)?;
+    let b = basis_of(&e, want);
+    let pair = &e.operator.pair;
+    let weights = global::lumped_weights(pair);
+    let measure: f64 = weights.iter().sum();
+    let dimension = pair.dimension.filter(|d| (1..=3).contains(d)).ok_or_else(|| {
+        AnalysisError::from(DescriptorError::NotApplicable {
+            message: "the fingerprint's families scale the shape to unit measure: its operator has no dimension from \
+                      1 to 3"
+                .into(),
+        })
+    })?;
+    let heat = global::heat_distribution(&b, &weights, measure, dimension)?;
+    hooks.control.check()?;
+    let gps = global::gps_d2(&b, &weights, measure, dimension)?;
+    let families = [
+        (Descriptor::ShapeDna, dna.values.clone(), dna.k),
+        (Descriptor::HeatDistribution, heat.values, heat.eigenpairs),
+        (Descriptor::GpsD2, gps.values, gps.eigenpairs),
+    ]
+    .into_iter()
+    .map(|(d, values, eigenpairs)| FamilyValues {
+        descriptor: d.name(),
+        family: descriptor_family(d, options, operator),
+        eigenpairs,
+        values,
+    })
+    .collect();
+    Ok(Families { shape_dna: dna, families, measure, operator: OperatorUsed::of(&e.operator) })
+}
+
 use kac_core::spectrum::factor;
 
 /// Shapes from this many vertices (or with P2 elements) have their analyses without an eigensolve run where a

@@ -311,19 +311,31 @@ pub fn submit_compare(
     mut request: super::compare::CompareRequest,
     shapes: Vec<Arc<StoredShape>>,
 ) -> Result<(JobView, bool), JobError> {
-    if request.dna.k == 0 {
+    request.check().map_err(JobError::Analysis)?;
+    if request.options.k == 0 {
         return Err(JobError::Analysis(crate::analysis::AnalysisError::invalid_k(
             "k = 0: ask for at least one eigenpair",
         )));
     }
-    if request.dna.k > config.max_k {
-        return Err(JobError::Limit(Limit::Pairs(format!("k = {} is above --max-k {}", request.dna.k, config.max_k))));
+    if request.options.k > config.max_k {
+        return Err(JobError::Limit(Limit::Pairs(format!(
+            "k = {} is above --max-k {}",
+            request.options.k, config.max_k
+        ))));
     }
-    // Each shape's shape-DNA within the limits a shape-dna job of it would have.
-    let dna = Analysis::ShapeDna {
-        options: request.options(),
-        operator: request.operator.clone(),
-        solver: crate::analysis::SolverSpec::default(),
+    // Each shape's fingerprint within the limits a job of it would have (its eigenvectors too, unless shape-DNA
+    // alone is asked).
+    let dna = match request.descriptor {
+        crate::analysis::Descriptor::ShapeDna => Analysis::ShapeDna {
+            options: request.options(),
+            operator: request.operator.clone(),
+            solver: crate::analysis::SolverSpec::default(),
+        },
+        _ => Analysis::Fingerprint {
+            options: request.options.clone(),
+            operator: request.operator.clone(),
+            solver: crate::analysis::SolverSpec::default(),
+        },
     };
     for s in &shapes {
         super::limits::check_work(config, &dna, &s.validated)?;

@@ -29,6 +29,10 @@ pub(crate) struct Family {
     /// The family grew or shrank fourfold since its cells were trained, and is too large to train them again under
     /// its lock: [`retrain`] does it on a thread of its own.
     pub(crate) wants_training: bool,
+    /// Bumped by every change of a row (a put or a removal): the key of `spread`.
+    pub(crate) generation: u64,
+    /// The family's spread ([`Family::spread`]) at a generation.
+    pub(crate) spread: std::sync::Mutex<Option<(u64, f64)>>,
 }
 
 /// Families up to this many rows train their cells again at once, under the lock (a fraction of a second); larger
@@ -36,6 +40,34 @@ pub(crate) struct Family {
 pub const INLINE_TRAINING: usize = 1 << 17;
 
 impl Family {
+    /// The root-mean-square Euclidean distance between two fingerprints of the family drawn at random (with
+    /// replacement): √(2 Σⱼ Var(xⱼ)) over its rows, computed from the single-precision rows in one pass and kept
+    /// until a row changes. The fused distance divides each family's distance by it, so that families of
+    /// different units and lengths weigh as the weights say. None for an empty family.
+    pub(crate) fn spread(&self) -> Option<f64> {
+        let n = self.len();
+        if n == 0 {
+            return None;
+        }
+        let mut cached = self.spread.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((g, s)) = *cached {
+            if g == self.generation {
+                return Some(s);
+            }
+        }
+        let k = self.k;
+        let (mut sum, mut sq) = (vec![0.0f64; k], vec![0.0f64; k]);
+        for r in 0..n {
+            for (j, &x) in self.row_of(r).iter().enumerate() {
+                sum[j] += x as f64;
+                sq[j] += x as f64 * x as f64;
+            }
+        }
+        let var: f64 = (0..k).map(|j| (sq[j] / n as f64 - (sum[j] / n as f64).powi(2)).max(0.0)).sum();
+        let s = (2.0 * var).sqrt();
+        *cached = Some((self.generation, s));
+        Some(s)
+    }
     pub(crate) fn len(&self) -> usize {
         self.ids.len()
     }
@@ -59,6 +91,7 @@ impl Family {
             return;
         }
         self.err_max = self.err_max.max(err);
+        self.generation += 1;
         match self.row.get(&id) {
             Some(&r) => {
                 let r = r as usize;
@@ -199,6 +232,7 @@ impl Family {
             self.tag_remove(t, id);
         }
         let Some(r) = self.row.remove(id) else { return };
+        self.generation += 1;
         let (r, k) = (r as usize, self.k);
         // The last row moves into the hole.
         let last = self.ids.len() - 1;
