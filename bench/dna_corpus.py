@@ -1,8 +1,7 @@
-"""Real shape-DNA fingerprints, and synthetic collections of any size that follow their distribution
-(for bench/search.py). Needs numpy.
+"""Real fingerprints of every retrieval family, and synthetic collections of any size that follow their
+distributions (for bench/search.py). Needs numpy.
 
-Real set (`real_fingerprints`): `kac shape-dna FILE --k 50 --normalization area` (the JSON's
-`shape_dna.values`: the 50 smallest non-zero eigenvalues times the surface area) on
+Shapes. The real sets are computed on
   * every file under /work/shared/data (see its README.md) that the CLI accepts: triangle and polygon meshes
     (OFF, OBJ, PLY, STL, glTF/GLB), the two point clouds and the two tet meshes; files it refuses (fewer than
     51 eigenpairs on a tiny mesh) or that take over 20 s are skipped;
@@ -15,14 +14,30 @@ the same shape again under
   * uniform scaling by 0.5 and 3 (area normalization makes these near-duplicates of the original: a real
     collection holds such duplicates);
   * for the generated shapes only, a stretch of one axis by 1.25 and 2 (other shapes between the few kinds).
-The variants are written to a temporary directory, never into the repository. The result is cached in
-bench/out/real_dna.json (ignored by git) with the recipe's version; a rerun reuses it.
+The variants are written to a temporary directory, never into the repository.
 
-Synthetic expansion (`synthetic`): each row is exp((1 − t)·log a + t·log b) for a real fingerprint a drawn
-uniformly and b one of a's 10 nearest real fingerprints (Euclidean, the service's default metric), t uniform in
-[0, 1]; times a per-component multiplicative noise exp(ε_j + s(j)), ε_j ~ N(0, 0.3 %) independent and s a smooth
-low-frequency term (Legendre degrees 1 and 2 over the index, coefficients ~ N(0, 0.5 %)); sorted ascending, as
-eigenvalues are. It is produced in chunks, so 10^7 × 50 never needs more than a chunk in memory.
+Real shape-DNA (`real_fingerprints`): `kac shape-dna FILE --k 50 --normalization area --reweighting none` (the
+JSON's `shape_dna.values`: the 50 smallest non-zero eigenvalues times the surface area), cached in
+bench/out/real_dna.json. Real families (`real_families`): `kac fingerprint FILE -k 50` (retrieval's defaults;
+without `-k` where the CLI has no such flag, its default being 50), once per shape and variant, every family it
+reports kept (`shape-dna`: 50 values, `heat-distribution`: 96, 6 blocks of 16 quantiles, `gps-d2`: 32
+quantiles; `FAMILIES`), with the family id the CLI gives each, cached in bench/out/real_families.json;
+`family_rows` picks one family's rows out of it. Each cache (ignored by git) holds its recipe's version; a rerun
+reuses it.
+
+Synthetic expansion of shape-DNA (`synthetic`): each row is exp((1 − t)·log a + t·log b) for a real fingerprint a
+drawn uniformly and b one of a's 10 nearest real fingerprints (Euclidean, the service's default metric), t uniform
+in [0, 1]; times a per-component multiplicative noise exp(ε_j + s(j)), ε_j ~ N(0, 0.3 %) independent and s a
+smooth low-frequency term (Legendre degrees 1 and 2 over the index, coefficients ~ N(0, 0.5 %)); sorted
+ascending, as eigenvalues are.
+
+Synthetic expansion of the quantile families (`synthetic_linear`; their values may be negative, so no logarithm):
+each row is (1 − t)·a + t·b for a and b drawn as above, plus a per-component additive noise σ_j·(ε_j + s(j)),
+σ_j the component's standard deviation over the real set, ε_j ~ N(0, 0.3 %) and s the same smooth term
+(coefficients ~ N(0, 0.5 %)) taken over the index within each block of quantiles; then sorted within each block
+(heat distribution: 6 blocks of 16, one per time; GPS D2: one block of 32), as quantile functions are ascending.
+
+Both are produced in chunks, so 10^7 rows never need more than a chunk in memory.
 """
 import json, math, os, subprocess, tempfile, time, zlib
 
@@ -31,8 +46,13 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 SHARED = "/work/shared/data"
 CACHE = os.path.join(HERE, "out", "real_dna.json")
+FAMILIES_CACHE = os.path.join(HERE, "out", "real_families.json")
 K = 50
-RECIPE = 1  # bump when the list of shapes or variants changes: the cache is then rebuilt
+RECIPE = 1  # bump when the list of shapes or variants changes: the caches are then rebuilt
+FAMILIES_RECIPE = 1  # bump as RECIPE, or when `kac fingerprint`'s call changes
+# Each family `kac fingerprint -k 50` reports: its values per fingerprint, as blocks of ascending quantiles (None:
+# shape-DNA, eigenvalues).
+FAMILIES = {"shape-dna": (K, None), "heat-distribution": (96, 16), "gps-d2": (32, 32)}
 
 GENERATED = [("icosphere", "--level", [2, 3, 4]), ("torus", "--n", [8, 16, 32]), ("disk", "--n", [8, 16, 32]),
              ("square", "--n", [8, 16, 32]), ("gww1", "--n", [4, 8, 16]), ("gww2", "--n", [4, 8, 16])]
@@ -178,14 +198,48 @@ def write_shape(path, v, faces):
 def shape_dna(kac, path, timeout=20):
     """The CLI's shape-DNA values (k = 50, area normalization), or None where it refuses or takes too long."""
     try:
-        r = subprocess.run([kac, "shape-dna", path, "--k", str(K), "--normalization", "area", "--threads", "1"],
-                           capture_output=True, timeout=timeout)
+        r = subprocess.run([kac, "shape-dna", path, "--k", str(K), "--normalization", "area", "--reweighting", "none",
+                            "--threads", "1"], capture_output=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return None
     if r.returncode != 0:
         return None
     v = json.loads(r.stdout)["shape_dna"]["values"]
     return v if len(v) == K and all(math.isfinite(x) and x > 0 for x in v) else None
+
+
+_K_FLAG = {}
+
+
+def fingerprint_command(kac):
+    """`kac fingerprint`'s arguments before the file: with `-k 50` where its help lists the flag (without it,
+    the CLI's default k, 50, which `fingerprint` checks in the answer's options)."""
+    if kac not in _K_FLAG:
+        h = subprocess.run([kac, "fingerprint", "--help"], capture_output=True, text=True).stdout
+        _K_FLAG[kac] = any(t.strip(",") == "-k" for t in h.split())
+    return [kac, "fingerprint", "--threads", "1"] + (["-k", str(K)] if _K_FLAG[kac] else [])
+
+
+def fingerprint(kac, path, timeout=20):
+    """The CLI's retrieval fingerprint (k = 50, its defaults): {descriptor: {"family", "eigenpairs", "values"}}
+    of the families in FAMILIES with their full length of finite values; None where it refuses, takes too long
+    or gives none of them."""
+    try:
+        r = subprocess.run(fingerprint_command(kac) + [path], capture_output=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None
+    if r.returncode != 0:
+        return None
+    answer = json.loads(r.stdout)
+    if answer.get("options", {}).get("k", K) != K:
+        return None
+    out = {}
+    for f in answer.get("families", []):
+        v = f.get("values") or []
+        if f.get("descriptor") in FAMILIES and len(v) == FAMILIES[f["descriptor"]][0] \
+                and all(math.isfinite(x) for x in v):
+            out[f["descriptor"]] = {"family": f.get("family"), "eigenpairs": f.get("eigenpairs"), "values": v}
+    return out or None
 
 
 def _variants(name, v, faces, generated):
@@ -206,12 +260,8 @@ def _variants(name, v, faces, generated):
             yield "stretch-x%g" % s, moved(xyz * np.array([s, 1.0, 1.0]))
 
 
-def real_fingerprints(kac, cache=CACHE, rebuild=False, log=print):
-    """[(name, values)] of the real set described above; from the cache where it holds this recipe."""
-    if not rebuild and os.path.exists(cache):
-        c = json.load(open(cache))
-        if c.get("recipe") == RECIPE and c.get("k") == K:
-            return [(r["name"], r["values"]) for r in c["fingerprints"]]
+def _real_set(kac, compute):
+    """(name, result, skipped, seconds): `compute(kac, path)` (None: skipped) on every shape and variant above."""
     t0 = time.perf_counter()
     out, skipped = [], []
     with tempfile.TemporaryDirectory(prefix="kac-dna-") as tmp:
@@ -227,7 +277,7 @@ def real_fingerprints(kac, cache=CACHE, rebuild=False, log=print):
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                 sources.append(("generate/%s%s%d" % (shape, flag[1:], x), p, True))
         for name, path, generated in sources:
-            base = shape_dna(kac, path)
+            base = compute(kac, path)
             if base is None:
                 skipped.append(name)
                 continue
@@ -240,19 +290,56 @@ def real_fingerprints(kac, cache=CACHE, rebuild=False, log=print):
             for label, w in _variants(name, v, faces, generated):
                 p = os.path.join(tmp, "variant" + ext)
                 write_shape(p, w, faces)
-                dna = shape_dna(kac, p)
-                if dna is None:
+                r = compute(kac, p)
+                if r is None:
                     skipped.append(name + "+" + label)
                 else:
-                    out.append((name + "+" + label, dna))
-    secs = time.perf_counter() - t0
+                    out.append((name + "+" + label, r))
+    return out, skipped, time.perf_counter() - t0
+
+
+def real_fingerprints(kac, cache=CACHE, rebuild=False, log=print):
+    """[(name, values)] of the real shape-DNA set described above; from the cache where it holds this recipe."""
+    if not rebuild and os.path.exists(cache):
+        c = json.load(open(cache))
+        if c.get("recipe") == RECIPE and c.get("k") == K:
+            return [(r["name"], r["values"]) for r in c["fingerprints"]]
+    out, skipped, secs = _real_set(kac, shape_dna)
     log("real shape-DNA: %d fingerprints in %.1f s; skipped %d: %s" % (len(out), secs, len(skipped),
                                                                          ", ".join(skipped)))
     os.makedirs(os.path.dirname(cache), exist_ok=True)
     with open(cache, "w") as f:
-        json.dump({"recipe": RECIPE, "k": K, "normalization": "area", "seconds": round(secs, 1),
-                   "skipped": skipped, "fingerprints": [{"name": n, "values": v} for n, v in out]}, f)
+        json.dump({"recipe": RECIPE, "k": K, "normalization": "area", "reweighting": "none",
+                   "seconds": round(secs, 1), "skipped": skipped,
+                   "fingerprints": [{"name": n, "values": v} for n, v in out]}, f)
     return out
+
+
+def real_families(kac, cache=FAMILIES_CACHE, rebuild=False, log=print):
+    """[(name, {descriptor: {"family", "eigenpairs", "values"}})] of every shape and variant above, by
+    `kac fingerprint -k 50`; from the cache where it holds this recipe."""
+    if not rebuild and os.path.exists(cache):
+        c = json.load(open(cache))
+        if c.get("recipe") == RECIPE and c.get("families_recipe") == FAMILIES_RECIPE and c.get("k") == K:
+            return [(r["name"], r["families"]) for r in c["shapes"]]
+    out, skipped, secs = _real_set(kac, fingerprint)
+    counts = {d: sum(d in fs for _, fs in out) for d in FAMILIES}
+    log("real families: %d shapes in %.1f s (%s); skipped %d: %s" % (
+        len(out), secs, ", ".join("%s %d" % kv for kv in counts.items()), len(skipped), ", ".join(skipped)))
+    os.makedirs(os.path.dirname(cache), exist_ok=True)
+    with open(cache, "w") as f:
+        json.dump({"recipe": RECIPE, "families_recipe": FAMILIES_RECIPE, "k": K,
+                   "command": " ".join(["kac"] + fingerprint_command(kac)[1:] + ["FILE"]),
+                   "seconds": round(secs, 1), "skipped": skipped,
+                   "shapes": [{"name": n, "families": fs} for n, fs in out]}, f)
+    return out
+
+
+def family_rows(shapes, descriptor):
+    """[(name, values)] of one family out of `real_families`' answer, and the family ids the CLI gave them."""
+    rows = [(n, fs[descriptor]["values"]) for n, fs in shapes if descriptor in fs]
+    ids = sorted({fs[descriptor]["family"] for _, fs in shapes if descriptor in fs})
+    return rows, ids
 
 
 # ---- synthetic expansion ----------------------------------------------------------------------------------------
@@ -301,16 +388,57 @@ def synthetic(real, n, seed=0, chunk=250_000, near=10, sigma=0.003, smooth=0.005
         done += m
 
 
-def summary(values):
-    """A few numbers on the spread of a set of fingerprints (rows)."""
+def _smooth(rng, m, width, smooth):
+    """(m, width) low-frequency terms: Legendre P1 and P2 over the index, coefficients ~ N(0, smooth)."""
+    u = np.linspace(-1.0, 1.0, width)
+    return rng.normal(0.0, smooth, (m, 2)) @ np.stack([u, 1.5 * u * u - 0.5])
+
+
+def perturb_linear(x, rng, spread, block, sigma=0.003, smooth=0.005):
+    """x (rows, k) plus spread_j·(ε_j + s(j)): white Gaussian noise and, per block of `block` quantiles, a smooth
+    low-frequency term; re-sorted within each block."""
+    m, k = x.shape
+    noise = rng.normal(0.0, sigma, (m, k))
+    for b in range(0, k, block):
+        noise[:, b:b + block] += _smooth(rng, m, block, smooth)
+    y = x + noise * spread
+    y.reshape(m, k // block, block).sort(axis=2)
+    return y
+
+
+def synthetic_linear(real, n, block, spread=None, seed=0, chunk=250_000, near=10, sigma=0.003, smooth=0.005):
+    """Yields float64 chunks (rows, k), n rows in all, that follow the real rows of a quantile family (blocks of
+    `block` ascending values); `spread`: each component's standard deviation over the real set (default: over
+    `real`)."""
+    real = np.asarray(real, float)
+    if real.shape[1] % block:
+        raise ValueError("%d values are not blocks of %d" % (real.shape[1], block))
+    spread = real.std(axis=0) if spread is None else np.asarray(spread, float)
+    nb = neighbours(real, near)
+    rng = np.random.default_rng(seed)
+    done = 0
+    while done < n:
+        m = min(chunk, n - done)
+        a = rng.integers(0, len(real), m)
+        b = nb[a, rng.integers(0, nb.shape[1], m)]
+        t = rng.random((m, 1))
+        x = real[a]
+        x *= 1.0 - t
+        x += t * real[b]
+        yield perturb_linear(x, rng, spread, block, sigma, smooth)
+        done += m
+
+
+def summary(values, ends=("lambda1", "lambda50")):
+    """A few numbers on the spread of a set of fingerprints (rows); `ends` names the first and last component."""
     x = np.asarray(values, float)
     nb = neighbours(x, 1)[:, 0]
     nn = np.linalg.norm(x - x[nb], axis=1)
     d = np.sqrt(sq_distances(x)[np.triu_indices(len(x), 1)])
     q = lambda a, p: float(np.round(np.percentile(a, p), 4))
     return {"count": len(x),
-            "lambda1": [q(x[:, 0], p) for p in (0, 50, 100)],
-            "lambda50": [q(x[:, -1], p) for p in (0, 50, 100)],
+            ends[0]: [q(x[:, 0], p) for p in (0, 50, 100)],
+            ends[1]: [q(x[:, -1], p) for p in (0, 50, 100)],
             "nearest_distance_p10_p50_p90": [q(nn, p) for p in (10, 50, 90)],
             "nearest_relative_p50": q(nn / np.linalg.norm(x, axis=1), 50),
             "pair_distance_p10_p50_p90": [q(d, p) for p in (10, 50, 90)]}
@@ -318,21 +446,28 @@ def summary(values):
 
 if __name__ == "__main__":
     import argparse, resource, sys
-    ap = argparse.ArgumentParser(description="Build (or read) the real set and time a synthetic expansion.")
+    ap = argparse.ArgumentParser(description="Build (or read) a real set and time a synthetic expansion.")
     ap.add_argument("--kac", default=os.path.join(os.path.dirname(HERE), "target", "release", "kac"))
     ap.add_argument("--rebuild", action="store_true")
     ap.add_argument("--n", type=int, default=100_000)
+    ap.add_argument("--descriptor", default="shape-dna", choices=list(FAMILIES),
+                    help="shape-dna: `kac shape-dna` (area); the others: `kac fingerprint`")
     a = ap.parse_args()
-    real = real_fingerprints(a.kac, rebuild=a.rebuild, log=lambda s: print(s, file=sys.stderr))
-    r = np.array([v for _, v in real])
-    print(json.dumps({"real": summary(r)}))
+    err = lambda s: print(s, file=sys.stderr)
+    if a.descriptor == "shape-dna":
+        r = np.array([v for _, v in real_fingerprints(a.kac, rebuild=a.rebuild, log=err)])
+        expand, ends = lambda: synthetic(r, a.n), ("lambda1", "lambda50")
+    else:
+        r = np.array([v for _, v in family_rows(real_families(a.kac, rebuild=a.rebuild, log=err), a.descriptor)[0]])
+        expand, ends = lambda: synthetic_linear(r, a.n, FAMILIES[a.descriptor][1]), ("first", "last")
+    print(json.dumps({"descriptor": a.descriptor, "real": summary(r, ends)}))
     t = time.perf_counter()
     rows = 0
     sample = None
-    for c in synthetic(r, a.n):
+    for c in expand():
         rows += len(c)
         if sample is None:
             sample = c[:2000].copy()
     print(json.dumps({"synthetic_rows": rows, "seconds": round(time.perf_counter() - t, 2),
                       "max_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
-                      "sample": summary(sample)}))
+                      "sample": summary(sample, ends)}))

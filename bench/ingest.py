@@ -20,9 +20,9 @@ Eigensolver-bound rate, two ways:
       `timings.assembly_s` (symbolic + numeric factorization, Lanczos iteration, Sylvester verification);
       solve_only_rate = workers / mean(eigensolve seconds). Only reused samples count (a sample evicted from the
       cache is solved again, after the ingest, and is left out; `solve_sample.reused` says how many counted).
-  `job_worker_s` is the mean time a shape-DNA job spent on a worker (the server's
-  kac_job_duration_seconds{analysis="shape-dna"} sum / count): the solve plus loading the shape, assembling,
-  the descriptor and storing the result.
+  `job_worker_s` is the mean time a bulk upload's fingerprint job spent on a worker (the server's
+  kac_job_duration_seconds{analysis="fingerprint"} sum / count): the solve plus loading the shape, assembling,
+  the descriptors and storing the result.
 
 Ingest. A fresh `kac serve` (throwaway data directory, default settings unless --workers / --queue-capacity);
 --uploaders threads send POST /v1/shapes/bulk with --batch files each plus the `options` part
@@ -372,7 +372,7 @@ def main():
         ends = [iso(v["finished_at"]) for v in views if v.get("finished_at")]
         ingest_s = max(ends) - t0_wall if ends else None
         m1 = metrics(base)
-        key = '{analysis="shape-dna",status="succeeded"}'
+        key = '{analysis="fingerprint",status="succeeded"}'
         n_done = m1.get("kac_job_duration_seconds_count" + key, 0)
         job_worker_s = m1.get("kac_job_duration_seconds_sum" + key, 0) / n_done if n_done else None
 

@@ -121,7 +121,9 @@ async fn until(c: &Client, condition: &str, what: &str) {
         if t.elapsed() > Duration::from_secs(90) {
             let err = js(
                 c,
-                "return document.getElementById('error').textContent + ' | ' + JSON.stringify(window.kac.errors)",
+                "const search = document.getElementById('search-status');
+                 return document.getElementById('error').textContent + ' | ' + (search ? search.textContent : '')
+                   + ' | ' + JSON.stringify(window.kac.errors)",
             )
             .await;
             panic!("timed out waiting for {what}: {err}");
@@ -335,6 +337,123 @@ async fn two_shapes_side_by_side_show_which_point_is_which() {
     let marked = js(&c, "return [window.kac.viewer.marker, window.kac.viewer2.marker]").await;
     assert!(marked[0].is_u64() && marked[1].is_u64(), "both sides carry a mark: {marked}");
     no_errors(&c, "pick").await;
+    c.close().await.unwrap();
+}
+
+/// The search panel: three closed surfaces go in through a bulk upload, which starts each one's fingerprint job
+/// (every family a search reads): an icosphere of level 3 (642 vertices), the same sphere coarser (level 2, 162
+/// vertices) and an ellipsoid (level 3 stretched 3× along x), each with more vertices than the 50 eigenpairs a
+/// fingerprint takes. Once the other two hold their fingerprints, the panel searches from the fine sphere by the fused
+/// distance (the query's own job, if still running, is the panel's 202 to follow): both others are listed, nearest
+/// first, each with a finite distance per family; choosing a row shows that shape.
+#[tokio::test]
+#[ignore = "needs chromium and chromium-driver (scripts/test-all.sh installs and runs it)"]
+async fn the_search_panel_lists_the_nearest_shapes_with_a_distance_per_family() {
+    use kac_core::geometry::generate;
+    let fine = generate::icosphere(3);
+    let coarse = generate::icosphere(2);
+    let mut ellipsoid = generate::icosphere(3);
+    for p in &mut ellipsoid.vertices {
+        p[0] *= 3.0;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let (_server, base) = serve(dir.path());
+    let (_driver, c) = browser().await;
+    c.goto(&format!("{base}/")).await.unwrap();
+    until(&c, "window.kac && window.kac.ready", "the page to load").await;
+    let files = json!([
+        ["fine-sphere.off", kac_core::io::write::off(&fine)],
+        ["coarse-sphere.off", kac_core::io::write::off(&coarse)],
+        ["ellipsoid.off", kac_core::io::write::off(&ellipsoid)],
+    ]);
+    let up = format!(
+        "const form = new FormData();
+         for (const [name, text] of {files}) form.append('file', new Blob([text]), name);
+         return fetch('/v1/shapes/bulk', {{ method: 'POST', body: form }}).then(r => r.json())"
+    );
+    let bulk = js(&c, &up).await;
+    assert_eq!(bulk["created"], json!(3), "the three shapes are stored: {bulk}");
+    assert_eq!(bulk["unstarted"], json!(0), "every fingerprint job started: {bulk}");
+    let stored = bulk["files"].as_array().unwrap();
+    let ids: Vec<String> = stored.iter().map(|f| f["shape"]["id"].as_str().unwrap().to_string()).collect();
+    let jobs: Vec<String> = stored.iter().map(|f| f["job"]["id"].as_str().unwrap().to_string()).collect();
+    // A search finds only shapes that hold a fingerprint: the neighbours' jobs end first.
+    for job in &jobs[1..] {
+        let t = Instant::now();
+        loop {
+            let status =
+                js(&c, &format!("return fetch('/v1/jobs/{job}').then(r => r.json()).then(j => j.status)")).await;
+            if status == json!("succeeded") {
+                break;
+            }
+            assert!(status != json!("failed") && status != json!("canceled"), "fingerprint job {job}: {status}");
+            assert!(t.elapsed() < Duration::from_secs(90), "fingerprint job {job} is still {status}");
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    }
+
+    // The viewer on the fine sphere; search by the fused distance.
+    c.goto(&format!("{base}/#shape={}", ids[0])).await.unwrap();
+    c.refresh().await.unwrap();
+    until(&c, "window.kac && window.kac.ready && window.kac.viewer.frames > 0", "the shape").await;
+    until(&c, "!document.getElementById('search-run').disabled", "the search control").await;
+    js(
+        &c,
+        "const d = document.getElementById('search-descriptor'); d.value = 'fused';
+         d.dispatchEvent(new Event('change')); document.getElementById('search-count').value = '10'; return 0",
+    )
+    .await;
+    c.find(Locator::Id("search-run")).await.unwrap().click().await.unwrap();
+    until(&c, "document.querySelectorAll('#search-table tbody tr').length === 2", "the two neighbours").await;
+    let rows = js(
+        &c,
+        r#"return [...document.querySelectorAll('#search-table tbody tr')].map(tr => ({
+             id: tr.dataset.shapeId,
+             distance: Number(tr.querySelector('[data-col="distance"]').dataset.value),
+             families: Object.fromEntries([...tr.querySelectorAll('[data-family]')]
+               .map(td => [td.dataset.family, Number(td.textContent)])),
+           }))"#,
+    )
+    .await;
+    let rows = rows.as_array().unwrap();
+    let mut listed: Vec<&str> = rows.iter().map(|r| r["id"].as_str().unwrap()).collect();
+    listed.sort();
+    let mut others = vec![ids[1].as_str(), ids[2].as_str()];
+    others.sort();
+    assert_eq!(listed, others, "the neighbours are the two other shapes (the query left out)");
+    for r in rows {
+        for family in ["shape-dna", "heat-distribution", "gps-d2"] {
+            // NaN (a cell that is no number) comes back as null.
+            let x = r["families"][family].as_f64();
+            assert!(x.is_some_and(f64::is_finite), "{family} distance of {}: {}", r["id"], r["families"]);
+        }
+    }
+    let distances: Vec<f64> = rows.iter().map(|r| r["distance"].as_f64().unwrap_or(f64::NAN)).collect();
+    assert!(distances.iter().all(|d| d.is_finite()), "fused distances: {distances:?}");
+    assert!(distances.windows(2).all(|w| w[0] <= w[1]), "nearest first: {distances:?}");
+    let facts = js(&c, "return document.getElementById('search-facts').textContent").await;
+    assert!(facts.as_str().unwrap().contains("searched"), "what was searched is shown: {facts}");
+    no_errors(&c, "search").await;
+
+    // Choosing the nearest shows it (its geometry, the shape list and the link follow).
+    let first = rows[0]["id"].as_str().unwrap().to_string();
+    let neighbour = stored.iter().find(|f| f["shape"]["id"] == json!(first)).unwrap();
+    let vertices = neighbour["shape"]["summary"]["vertices"].clone();
+    c.find(Locator::Css("#search-table tbody tr")).await.unwrap().click().await.unwrap();
+    until(
+        &c,
+        &format!(
+            "window.kac.state.shape === '{first}' && document.getElementById('shapes').value === '{first}' \
+             && location.hash.includes('shape={first}')"
+        ),
+        "the neighbour shown",
+    )
+    .await;
+    let shown = js(&c, "return window.kac.state.summary.vertices").await;
+    assert_eq!(shown, vertices, "the viewer holds the neighbour's geometry");
+    let current = js(&c, "return document.querySelector('#search-table tbody tr.current').dataset.shapeId").await;
+    assert_eq!(current, json!(first), "the row of the shape shown is marked");
+    no_errors(&c, "neighbour").await;
     c.close().await.unwrap();
 }
 

@@ -96,6 +96,20 @@ fn shape_dna_ev_files_and_compare() {
     let c = run_json(&["compare", s.to_str().unwrap(), t.to_str().unwrap(), "-k", "8", "--normalization", "area"]);
     assert!(c["distance"].as_f64().unwrap() > 1.0);
     assert_eq!(c["metric"], "euclidean");
+    // By another family: the shapes' own values, shown per side; a shape with itself is at 0; an .ev file holds
+    // eigenvalues only and is refused for it.
+    for family in ["heat-distribution", "gps-d2"] {
+        let c = run_json(&["compare", s.to_str().unwrap(), t.to_str().unwrap(), "-k", "8", "--descriptor", family]);
+        let own = c["a"][family.replace('-', "_")].as_array().map_or(0, Vec::len);
+        assert!(own > 0 && c["distance"].as_f64().unwrap() > 0.0, "{c}");
+        let same = run_json(&["compare", s.to_str().unwrap(), s.to_str().unwrap(), "-k", "8", "--descriptor", family]);
+        assert_eq!(same["distance"].as_f64(), Some(0.0), "{same}");
+        let out = kac()
+            .args(["compare", s.to_str().unwrap(), ev.to_str().unwrap(), "-k", "8", "--descriptor", family])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    }
     // A bad normalization is refused by clap with exit 2; a missing measure is refused by the analysis.
     let out = kac().args(["shape-dna", s.to_str().unwrap(), "--normalization", "size"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2));

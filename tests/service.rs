@@ -1043,11 +1043,17 @@ fn search_finds_the_nearest_stored_shapes_by_shape_dna() {
     let cmp = reply(
         agent()
             .post(&s.url("/v1/compare?wait=60"))
-            .send_json(json!({ "shape_ids": [a, b, c], "k": 8, "normalization": "area" })),
+            .send_json(json!({ "shape_ids": [a, b, c], "descriptor": "shape-dna", "k": 8, "normalization": "area", "reweighting": "none" })),
     );
     assert_eq!(cmp.status, 200, "{}", cmp.body);
     let search = |s: &Server, body: Value| reply(agent().post(&s.url("/v1/search")).send_json(body));
-    let r = search(&s, json!({ "shape_id": a, "k": 8, "normalization": "area" }));
+    let dna = json!({ "descriptor": "shape-dna", "k": 8, "normalization": "area", "reweighting": "none" });
+    let with = |extra: Value| {
+        let mut q = dna.clone();
+        q.as_object_mut().unwrap().extend(extra.as_object().unwrap().clone());
+        q
+    };
+    let r = search(&s, with(json!({ "shape_id": a })));
     assert_eq!(r.status, 200, "{}", r.body);
     assert_eq!(r.body["searched"], 3);
     let order: Vec<&str> =
@@ -1055,16 +1061,19 @@ fn search_finds_the_nearest_stored_shapes_by_shape_dna() {
     assert_eq!(order, [b.as_str(), c.as_str()], "the finer sphere before the ellipsoid, the query left out");
     // The same answer from the fingerprint itself (the query shape is then its own nearest, at distance 0).
     let fp = r.body["fingerprint"].clone();
-    let f = search(&s, json!({ "fingerprint": fp, "k": 8, "normalization": "area", "neighbours": 2 }));
+    let f = search(
+        &s,
+        json!({ "fingerprint": fp, "k": 8, "normalization": "area", "reweighting": "none", "neighbours": 2 }),
+    );
     assert_eq!(
         (f.body["neighbours"][0]["shape_id"].as_str(), f.body["neighbours"][0]["distance"].as_f64()),
         (Some(a.as_str()), Some(0.0))
     );
     assert_eq!(f.body["neighbours"].as_array().unwrap().len(), 2);
-    // Another family (k = 6): the query shape's fingerprint is computed first, as a shape-dna job.
-    let n = search(&s, json!({ "shape_id": b, "k": 6, "normalization": "area" }));
+    // Another family (k = 6): the query shape's fingerprints are computed first, as a fingerprint job.
+    let n = search(&s, json!({ "descriptor": "shape-dna", "shape_id": b, "k": 6, "normalization": "area" }));
     assert_eq!((n.status, n.body["searched"].as_u64()), (200, Some(1)), "{}", n.body);
-    let jobs = reply(agent().get(&s.url(&format!("/v1/jobs?shape_id={b}&analysis=shape-dna"))).call());
+    let jobs = reply(agent().get(&s.url(&format!("/v1/jobs?shape_id={b}&analysis=fingerprint"))).call());
     assert_eq!(jobs.body["total"], 1, "{}", jobs.body);
     // Bad queries.
     assert_problem(
@@ -1078,7 +1087,7 @@ fn search_finds_the_nearest_stored_shapes_by_shape_dna() {
     let (dir, _) = s.stop(false);
     let (s, _) = Server::start_in(dir, &[]);
     assert_eq!(reply(agent().delete(&s.url(&format!("/v1/shapes/{c}"))).call()).status, 204);
-    let r = search(&s, json!({ "shape_id": a, "k": 8, "normalization": "area" }));
+    let r = search(&s, with(json!({ "shape_id": a })));
     assert_eq!(
         (r.body["searched"].as_u64(), r.body["neighbours"][0]["shape_id"].as_str()),
         (Some(2), Some(b.as_str())),
@@ -1089,19 +1098,19 @@ fn search_finds_the_nearest_stored_shapes_by_shape_dna() {
 }
 
 /// A shape whose file was lost while its record stayed is stored again by the next upload of it (was 500: the
-/// record's UNIQUE id), and a shape-dna job that finished without a kept fingerprint still serves a search from
-/// its stored result (was 202 forever).
+/// record's UNIQUE id), and a fingerprint job that finished without its kept fingerprints still serves a search
+/// from its stored result (was 202 forever).
 #[test]
 fn a_lost_upload_and_a_lost_fingerprint_are_recovered() {
     let (s, _) = Server::start_in(tempfile::tempdir().unwrap(), &[]);
     let off = icosphere_off(2);
     let id = upload(&s, &off, "?format=off").body["id"].as_str().unwrap().to_string();
-    let j = submit(&s, json!({ "shape_id": id, "analysis": "shape-dna", "options": { "k": 6 } }));
+    let j = submit(&s, json!({ "shape_id": id, "analysis": "fingerprint", "options": { "k": 6 } }));
     assert_eq!(wait_done(&s, j.body["id"].as_str().unwrap())["status"], "succeeded");
     let (dir, _) = s.stop(false);
     std::fs::remove_file(dir.path().join("shapes").join(&id)).unwrap();
     let db = rusqlite::Connection::open(dir.path().join("kac.sqlite3")).unwrap();
-    assert_eq!(db.execute("DELETE FROM fingerprints", []).unwrap(), 1, "the job kept its fingerprint");
+    assert_eq!(db.execute("DELETE FROM fingerprints", []).unwrap(), 3, "the job kept a fingerprint per family");
     drop(db);
     let (s, _) = Server::start_in(dir, &[]);
     let again = upload(&s, &off, "?format=off");
@@ -1109,6 +1118,77 @@ fn a_lost_upload_and_a_lost_fingerprint_are_recovered() {
     assert_eq!(reply(agent().get(&s.url(&format!("/v1/shapes/{id}"))).call()).status, 200);
     let r = reply(agent().post(&s.url("/v1/search")).send_json(json!({ "shape_id": id, "k": 6 })));
     assert_eq!((r.status, r.body["searched"].as_u64()), (200, Some(1)), "{}", r.body);
+    let jobs = reply(agent().get(&s.url(&format!("/v1/jobs?shape_id={id}"))).call());
+    assert_eq!(jobs.body["total"], 1, "no second job: {}", jobs.body);
+}
+
+/// Issue 50: the default search is fused over every family, each distance divided by its spread over the
+/// collection: the fused distance is the weighted sum the response's own weights and spreads give, equals the
+/// comparison's (whose spreads are over the same three shapes), and a uniformly scaled copy of a shape is at
+/// distance 0 from it in every family (each is scale-invariant). A fused search by a raw fingerprint, or by
+/// another metric, is refused.
+#[test]
+fn the_default_search_is_fused_over_every_family() {
+    let (s, _) = Server::start_in(tempfile::tempdir().unwrap(), &[]);
+    let coarse = kac_core::geometry::generate::icosphere(2);
+    let mut scaled = coarse.clone();
+    scaled.vertices.iter_mut().for_each(|p| p.iter_mut().for_each(|x| *x *= 3.0));
+    let mut stretched = coarse.clone();
+    stretched.vertices.iter_mut().for_each(|p| p[0] *= 2.0);
+    let id = |m: &kac_core::geometry::TriangleMesh| {
+        upload(&s, &off_of(m), "?format=off").body["id"].as_str().unwrap().to_string()
+    };
+    let (a, b, c) = (id(&coarse), id(&scaled), id(&stretched));
+    let search = |body: Value| reply(agent().post(&s.url("/v1/search?wait=60")).send_json(body));
+    // Each shape's fingerprints (the query's are computed by the search itself).
+    for x in [&b, &c] {
+        assert_eq!(search(json!({ "shape_id": x, "k": 12 })).status, 200);
+    }
+    let r = search(json!({ "shape_id": a, "k": 12 }));
+    assert_eq!(r.status, 200, "{}", r.body);
+    assert_eq!((r.body["descriptor"].as_str(), r.body["exact"].as_bool()), (Some("fused"), Some(true)));
+    assert_eq!((r.body["searched"].as_u64(), r.body["incomplete"].as_u64()), (Some(3), Some(0)), "{}", r.body);
+    let fams = r.body["families"].as_array().unwrap();
+    let names: Vec<&str> = fams.iter().map(|f| f["descriptor"].as_str().unwrap()).collect();
+    assert_eq!(names, ["shape-dna", "heat-distribution", "gps-d2"]);
+    let near = r.body["neighbours"].as_array().unwrap();
+    assert_eq!(near[0]["shape_id"].as_str(), Some(b.as_str()), "the scaled copy first: {}", r.body);
+    for n in near {
+        let each = &n["distances"];
+        let fused: f64 = fams
+            .iter()
+            .map(|f| {
+                let d = each[f["descriptor"].as_str().unwrap()].as_f64().unwrap();
+                f["weight"].as_f64().unwrap() * d / f["spread"].as_f64().unwrap()
+            })
+            .sum();
+        let got = n["distance"].as_f64().unwrap();
+        assert!((got - fused).abs() <= 1e-9 * fused.max(1.0), "{got} vs {fused}");
+    }
+    // Scale-invariant: the copy three times larger is at (numerically) no distance in any family, the ellipsoid
+    // clearly farther. (GPS D2 sums over whole clusters of eigenvalues; within a cluster, eigenvalues a fraction of
+    // a percent apart weigh its eigenvectors, which the two solves may choose differently, almost equally.)
+    let (copy, other) = (near[0]["distance"].as_f64().unwrap(), near[1]["distance"].as_f64().unwrap());
+    for (family, tol) in [("shape-dna", 1e-6), ("heat-distribution", 1e-6), ("gps-d2", 1e-3)] {
+        let (d0, d1) = (near[0]["distances"][family].as_f64().unwrap(), near[1]["distances"][family].as_f64().unwrap());
+        assert!(d0 <= tol * d1, "{family}: scaled copy at {d0}, ellipsoid at {d1}");
+    }
+    assert!(copy < 1e-3 * other, "scaled copy at {copy}, ellipsoid at {other}");
+    // The comparison of the same three shapes: the same fused distances, and each family's matrix.
+    let cmp = reply(agent().post(&s.url("/v1/compare?wait=60")).send_json(json!({ "shape_ids": [a, b, c], "k": 12 })));
+    assert_eq!(cmp.status, 200, "{}", cmp.body);
+    assert_eq!(cmp.body["descriptor"], "fused");
+    assert_eq!(cmp.body["families"].as_array().unwrap().len(), 3);
+    let d_ac = cmp.body["distances"][0][2].as_f64().unwrap();
+    assert!((d_ac - other).abs() <= 1e-9 * other, "compare {d_ac} vs search {other}");
+    // Refusals.
+    let fp = fams[0]["fingerprint"].clone();
+    assert_problem(&search(json!({ "fingerprint": fp, "k": 12, "descriptor": "fused" })), 400, "invalid-request");
+    assert_problem(&search(json!({ "shape_id": a, "k": 12, "metric": "manhattan" })), 400, "invalid-request");
+    // A single family by its fingerprint: the query itself first, at distance 0.
+    let one = search(json!({ "fingerprint": fams[1]["fingerprint"], "k": 12, "descriptor": "heat-distribution" }));
+    assert_eq!(one.status, 200, "{}", one.body);
+    assert_eq!(one.body["neighbours"][0]["distance"].as_f64(), Some(0.0), "{}", one.body);
 }
 
 #[test]

@@ -764,6 +764,46 @@ fn check(name: &str, f: &Fixture, cache: &Cache) -> Result<String, String> {
             }
             Ok(dna)
         }
+        "fingerprint" => {
+            // Shape-DNA's family: the non-zero eigenvalues (normalization and reweighting off), as shape-dna's
+            // cell. The heat distribution: what kac_core::descriptors::global computes from the continuum's pairs
+            // (φ² at the vertices, whole clusters) with the discrete operator's lumped mass. GPS D2 needs signed
+            // eigenfunctions: it is checked in closed form on the circle (kac-core's unit tests).
+            let k = cluster_cut(f, f.zeros + 10.min(nonzero.len())) - f.zeros;
+            let options = json!({"k": k, "normalization": "none", "reweighting": "none"});
+            let out = run(v, cache, with_operator(f, json!({"analysis": "fingerprint", "options": options})))?;
+            let family = |name: &str| -> Result<Vec<f64>, String> {
+                let fams = out.summary["families"].as_array().ok_or("no families")?;
+                let x = fams.iter().find(|x| x["descriptor"] == name).ok_or(format!("no {name} family"))?;
+                Ok(numbers(&x["values"]))
+            };
+            let dna = family("shape-dna")?;
+            if dna.len() != k || family("gps-d2")?.len() != kac_core::descriptors::global::GPS_QUANTILES {
+                return Err(format!("{} shape-DNA values for k = {k}", dna.len()));
+            }
+            let e1 = dna.iter().zip(&nonzero).map(|(g, w)| (g - w).abs() / w).fold(0.0, f64::max);
+            // The pairs the result used (its whole clusters of the discrete spectrum), from the continuum.
+            let fams = out.summary["families"].as_array().ok_or("no families")?;
+            let used = fams.iter().find(|x| x["descriptor"] == "heat-distribution").ok_or("no heat family")?
+                ["eigenpairs"]
+                .as_u64()
+                .ok_or("no eigenpairs")? as usize;
+            let (values, vectors) = analytic_basis(f, used + f.zeros);
+            let spec: analysis::OperatorSpec = serde_json::from_value(f.operator.clone()).map_err(|e| e.to_string())?;
+            let op = analysis::build_operator(v, &spec).map_err(|e| e.to_string())?;
+            let w = kac_core::descriptors::global::lumped_weights(&op.pair);
+            let b = kac_core::descriptors::Basis::new(&values, vectors.as_ref(), 1e-9);
+            let d = op.pair.dimension.ok_or("no dimension")?;
+            let want = kac_core::descriptors::global::heat_distribution_of_pairs(&b, &w, w.iter().sum(), d)
+                .map_err(|e| e.to_string())?;
+            let heat = family("heat-distribution")?;
+            let e2 = heat.iter().zip(&want.values).map(|(g, w)| (g - w).abs()).fold(0.0, f64::max);
+            Ok(format!(
+                "{}; {}",
+                within("shape-DNA", e1, f.tol)?,
+                within("heat distribution (log ratio)", e2, 4.0 * (f.tol + f.fn_tol))?
+            ))
+        }
         "heat" => {
             let times = resolved_times(f, f.k);
             let s = source(f);

@@ -128,6 +128,11 @@ async function restore() {
 
 // ---- shapes ----------------------------------------------------------------------------------------------------
 
+// The stored shapes by id, as the list gave them; and the file names of the shapes uploaded from this page (the
+// service keeps no file name).
+const shapeIndex = new Map();
+const fileNames = new Map();
+
 async function loadShapes() {
   const list = await guarded(() => api('GET', '/v1/shapes?limit=1000'));
   if (!list) return;
@@ -136,7 +141,9 @@ async function loadShapes() {
   const keep = target.value;
   sel.length = 1;
   target.length = 1;
+  shapeIndex.clear();
   for (const s of list.items) {
+    shapeIndex.set(s.id, s);
     const label = `${s.id.slice(0, 12)} — ${s.summary.kind} ${s.summary.vertices ?? ''} v`;
     sel.add(new Option(label, s.id));
     target.add(new Option(label, s.id));
@@ -155,6 +162,7 @@ async function upload(file) {
     const r = await fetch('/v1/shapes', { method: 'POST', headers: auth(), body: form });
     const s = await r.json();
     if (!r.ok) throw new Problem(s);
+    fileNames.set(s.id, file.name);
     await loadShapes();
     await selectShape(s.id);
   });
@@ -215,6 +223,8 @@ async function selectShape(id) {
     state.geometry = g;
     viewer.setGeometry(g);
     $('run').disabled = false;
+    $('search-run').disabled = false;
+    markNeighbour();
     $('match').disabled = !$('target').value;
     leavePair();
     $('controls').hidden = true;
@@ -354,6 +364,7 @@ async function loadAnalyses() {
   $('formats').textContent = (fmt.enum || []).join(', ');
   $('analysis').addEventListener('change', () => renderForm($('analysis').value));
   renderForm($('analysis').value);
+  searchDescriptors();
 }
 
 // ---- jobs --------------------------------------------------------------------------------------------------------
@@ -661,6 +672,198 @@ function markMatch(side, v) {
 }
 
 viewer2.onpick = (v) => window.kac.pair && markMatch('target', v);
+
+// ---- search: the stored shapes nearest to this one ----------------------------------------------------------------
+
+// POST /v1/search from the shape shown, by one fingerprint family or their fusion. A 202 means the shape's
+// fingerprint job is still running: the job is polled until it ends, then the search is asked again. The answer is
+// a table of neighbours (each row shows its shape when chosen), with the distance per family of a fused search.
+
+// Each search has a number; an older one (still waiting or polling) stops when a newer starts.
+let searching = 0;
+
+// The descriptors the OpenAPI document lists (an enum, or one single-value enum per variant), in place of the
+// page's own list; the page's list stays when the document has none.
+function searchDescriptors() {
+  const schema = doc?.components?.schemas?.Descriptor;
+  if (!schema) return;
+  const s = resolve(schema);
+  const choices = s.enum
+    ? s.enum.filter((v) => typeof v === 'string').map((v) => ({ value: v, title: '' }))
+    : (s.oneOf || []).flatMap((a) => (a.enum || []).filter((v) => typeof v === 'string').map((v) => ({ value: v, title: a.description || '' })));
+  if (!choices.length) return;
+  const sel = $('search-descriptor');
+  const keep = sel.value || 'fused';
+  sel.length = 0;
+  for (const c of choices) {
+    const o = new Option(c.value, c.value);
+    o.title = c.title;
+    sel.add(o);
+  }
+  sel.value = choices.some((c) => c.value === keep) ? keep : choices[0].value;
+}
+
+// A number with 4 significant digits ('—' for none).
+const fourDigits = (x) => (typeof x === 'number' && Number.isFinite(x) ? x.toPrecision(4) : '—');
+
+function problemText(e) {
+  return e && e.problem ? e.problem.detail || e.problem.title || String(e.message) : String((e && e.message) || e);
+}
+
+function searchStatus(text, failed = false) {
+  const box = $('search-status');
+  box.textContent = text;
+  box.classList.toggle('error', failed);
+  box.classList.toggle('muted', !failed);
+}
+
+// One POST /v1/search: { status, body, location } for a 200 or a 202; a Problem for anything else.
+async function postSearch(body) {
+  const r = await fetch('/v1/search?wait=30', {
+    method: 'POST',
+    headers: auth({ 'Content-Type': 'application/json' }),
+    body: JSON.stringify(body),
+  });
+  const type = r.headers.get('content-type') || '';
+  const v = type.includes('json') ? await r.json() : { status: r.status, title: r.statusText, detail: await r.text() };
+  if (!r.ok) throw new Problem(v);
+  return { status: r.status, body: v, location: r.headers.get('Location') };
+}
+
+// Polls a job until it ends (or a newer search starts); its last view.
+async function fingerprintJob(job, location, mine) {
+  const path = location && location.startsWith('/v1/jobs/') ? location : `/v1/jobs/${encodeURIComponent(job.id)}`;
+  let v = job;
+  while (!['succeeded', 'failed', 'canceled'].includes(v.status)) {
+    const p = v.progress || {};
+    searchStatus(`fingerprinting… ${p.phase || v.status || ''}${p.wanted ? ` ${p.converged}/${p.wanted}` : ''}`);
+    await new Promise((done) => setTimeout(done, 500));
+    if (mine !== searching) return v;
+    v = await api('GET', path);
+  }
+  return v;
+}
+
+async function runSearch() {
+  const mine = ++searching;
+  const id = state.shape;
+  if (!id) return;
+  const count = Number($('search-count').value);
+  if (!Number.isInteger(count) || count < 1 || count > 1000) {
+    searchStatus('neighbours: a whole number from 1 to 1000', true);
+    return;
+  }
+  const body = { shape_id: id, descriptor: $('search-descriptor').value || 'fused', neighbours: count };
+  $('search-panel').setAttribute('aria-busy', 'true');
+  try {
+    // A 202, its job succeeded, then the search again: twice is the most expected (a job that finished without
+    // keeping its fingerprints answers 200 the second time).
+    for (let attempt = 0; attempt < 4; attempt++) {
+      searchStatus('searching…');
+      const r = await postSearch(body);
+      if (mine !== searching) return;
+      if (r.status !== 202) {
+        showNeighbours(r.body, id);
+        return;
+      }
+      const job = await fingerprintJob(r.body, r.location, mine);
+      if (mine !== searching) return;
+      if (job.status !== 'succeeded') throw new Problem(job.error || { title: `the fingerprint job ${job.status}`, detail: '' });
+    }
+    throw new Error('the fingerprint job succeeded, but the search still waits for it: search again');
+  } catch (e) {
+    if (mine === searching) searchStatus(problemText(e), true);
+  } finally {
+    if (mine === searching) $('search-panel').removeAttribute('aria-busy');
+  }
+}
+
+function cell(tag, text, data = {}) {
+  const c = document.createElement(tag);
+  c.textContent = text;
+  Object.assign(c.dataset, data);
+  return c;
+}
+
+// A stored shape's file name, when the page knows it (uploaded from here, or named by the list); and its kind and
+// size from the list, for a tooltip.
+function shapeName(id) {
+  const s = shapeIndex.get(id);
+  return fileNames.get(id) || s?.name || s?.file_name || '';
+}
+
+function shapeFacts(id) {
+  const s = shapeIndex.get(id);
+  return s ? `${s.summary.kind}${s.summary.vertices !== undefined ? `, ${s.summary.vertices} vertices` : ''}` : '';
+}
+
+// The search's answer as the table: rank, shape, the distance searched by, one column per family of a fused
+// search; below it what was searched and the families' weights and spreads.
+function showNeighbours(r, query) {
+  const neighbours = r.neighbours || [];
+  const keys = new Set(neighbours.flatMap((n) => Object.keys(n.distances || {})));
+  const order = (r.families || []).map((f) => f.descriptor).filter((d) => keys.has(d));
+  const columns = [...order, ...[...keys].filter((k) => !order.includes(k))];
+  const table = $('search-table');
+  const head = document.createElement('tr');
+  head.append(cell('th', '#'), cell('th', 'shape'), cell('th', `distance (${r.descriptor})`), ...columns.map((d) => cell('th', d)));
+  for (const th of head.children) th.scope = 'col';
+  table.tHead.replaceChildren(head);
+  const rows = neighbours.map((n, i) => {
+    const tr = document.createElement('tr');
+    tr.dataset.shapeId = n.shape_id;
+    tr.tabIndex = 0;
+    tr.title = [`show ${n.shape_id}`, shapeFacts(n.shape_id)].filter(Boolean).join('\n');
+    const who = document.createElement('td');
+    who.append(cell('code', String(n.shape_id).slice(0, 12)));
+    const name = shapeName(n.shape_id);
+    if (name) who.append(Object.assign(cell('div', name), { className: 'name muted' }));
+    const distance = cell('td', fourDigits(n.distance), { col: 'distance' });
+    distance.dataset.value = String(n.distance);
+    tr.append(cell('td', String(i + 1)), who, distance);
+    for (const d of columns) {
+      const x = n.distances?.[d];
+      const c = cell('td', fourDigits(x), { family: d });
+      c.dataset.value = String(x);
+      tr.append(c);
+    }
+    const show = () => selectShape(n.shape_id);
+    tr.addEventListener('click', show);
+    tr.addEventListener('keydown', (e) => {
+      if (e.key === 'Enter' || e.key === ' ') {
+        e.preventDefault();
+        show();
+      }
+    });
+    return tr;
+  });
+  table.tBodies[0].replaceChildren(...rows);
+  table.hidden = false;
+  markNeighbour();
+  searchStatus(
+    neighbours.length
+      ? `${neighbours.length} nearest to ${query.slice(0, 12)} by ${r.descriptor}`
+      : `no other shape has a ${r.descriptor} fingerprint yet (a bulk upload, or a search from a shape, computes one)`,
+  );
+  const facts = [`searched ${r.searched} shapes · exact: ${r.exact ? 'yes' : 'no'}${r.incomplete !== undefined && r.incomplete !== null ? ` · incomplete: ${r.incomplete}` : ''}`];
+  for (const f of r.families || []) {
+    const spread = typeof f.spread === 'number' ? f.spread.toPrecision(3) : '—';
+    facts.push(`${f.descriptor}: weight ${Number(f.weight).toPrecision(3)} · spread ${spread}`);
+  }
+  $('search-facts').replaceChildren(...facts.map((f) => cell('div', f)));
+}
+
+// Marks the neighbour that is the shape shown (after its row was chosen).
+function markNeighbour() {
+  for (const tr of $('search-table').tBodies[0].rows) {
+    const current = tr.dataset.shapeId === state.shape;
+    tr.classList.toggle('current', current);
+    if (current) tr.setAttribute('aria-current', 'true');
+    else tr.removeAttribute('aria-current');
+  }
+}
+
+$('search-run').addEventListener('click', runSearch);
 
 // ---- plots ---------------------------------------------------------------------------------------------------------
 

@@ -339,11 +339,13 @@ pub struct CompareCmd {
     pub a: PathBuf,
     /// Second shape, or a .ev file.
     pub b: PathBuf,
-    /// The descriptor compared (shape-dna).
-    #[arg(long, default_value = "shape-dna", value_parser = ["shape-dna"])]
+    /// The fingerprint family compared: shape-dna (default: it also reads .ev files), heat-distribution or gps-d2
+    /// (shapes only). The fused distance needs a collection's spreads: the service's compare and search have it.
+    #[arg(long, default_value = "shape-dna", value_parser = ["shape-dna", "heat-distribution", "gps-d2"])]
     pub descriptor: String,
+    /// The fingerprint's options, with retrieval's defaults (k 50, geometry, index: invariant to scale).
     #[command(flatten)]
-    pub dna: ShapeDnaOptions,
+    pub fp: analysis::FingerprintOptions,
     #[command(flatten)]
     pub op: OperatorSpec,
     /// euclidean, manhattan or canberra.
@@ -356,11 +358,21 @@ pub struct CompareCmd {
 /// Two shapes (or `.ev` files) compared through the same code as the service's comparisons
 /// ([`analysis::compare`]): each one's fingerprint, then their distance.
 pub fn compare(a: CompareCmd) -> Result<(), Failure> {
+    let dna_options = a.fp.dna();
+    let descriptor: analysis::Descriptor =
+        serde_json::from_value(json!(a.descriptor)).map_err(|e| Failure { code: 2, message: e.to_string() })?;
     let fail =
         |path: &Path, e: &dyn std::fmt::Display| Failure { code: 2, message: format!("{}: {e}", path.display()) };
-    let side = |path: &Path| -> Result<(compare::Fingerprinted, Value), Failure> {
+    // Each side's shape-DNA, its values in the family compared, and what is shown of it.
+    let side = |path: &Path| -> Result<(compare::Fingerprinted, Vec<f64>, Value), Failure> {
         let source = path.display().to_string();
         if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ev")) {
+            if descriptor != analysis::Descriptor::ShapeDna {
+                return Err(fail(
+                    path,
+                    &format!("a .ev file holds eigenvalues only: compare it by shape-dna, not {}", a.descriptor),
+                ));
+            }
             let text = std::fs::read_to_string(path).map_err(|e| fail(path, &e))?;
             let ev = shape_dna::read_ev(&text).map_err(|e| fail(path, &e))?;
             let field = |k: &str| ev.field(k).and_then(|x| x.parse::<f64>().ok());
@@ -373,41 +385,69 @@ pub fn compare(a: CompareCmd) -> Result<(), Failure> {
                 has_boundary: None,
                 condition: None,
             };
-            let f =
-                compare::fingerprint_eigenvalues(&source, &ev.eigenvalues, &m, &a.dna).map_err(|e| fail(path, &e))?;
+            let f = compare::fingerprint_eigenvalues(&source, &ev.eigenvalues, &m, &dna_options)
+                .map_err(|e| fail(path, &e))?;
             let shown = json!({ "source": source, "format": "ev", "shape_dna": f.dna });
-            return Ok((f, shown));
+            let values = f.dna.values.clone();
+            return Ok((f, values, shown));
         }
         let shape =
             ShapeArgs { file: path.to_path_buf(), format: None, weld: kac_core::Weld::Exact, keep_degenerate: false };
         let (v, _) = shape.load()?;
-        an_supported(&v, &a)?;
-        let f = compare::fingerprint(&v.id.hex(), &v, &a.dna, &a.op, &a.solver, Hooks::default())?;
+        an_supported(&v, &a, descriptor)?;
+        let (f, values) = if descriptor == analysis::Descriptor::ShapeDna {
+            let f = compare::fingerprint(&v.id.hex(), &v, &dna_options, &a.op, &a.solver, Hooks::default())?;
+            let values = f.dna.values.clone();
+            (f, values)
+        } else {
+            let fams =
+                analysis::fingerprint_families(&v, &a.fp, &a.op, &a.solver, Hooks::default(), &Default::default())?;
+            let values = fams
+                .families
+                .iter()
+                .find(|x| x.descriptor == descriptor.name())
+                .map(|x| x.values.clone())
+                .unwrap_or_default();
+            (compare::Fingerprinted { id: v.id.hex(), dna: fams.shape_dna, operator: Some(fams.operator) }, values)
+        };
         let (operator, mass) = f.operator.as_ref().map_or(("", ""), |o| (o.operator, o.mass));
-        let shown =
+        let mut shown =
             json!({ "source": source, "shape_id": f.id, "shape_dna": f.dna, "operator": operator, "mass": mass });
-        Ok((f, shown))
+        if descriptor != analysis::Descriptor::ShapeDna {
+            shown[descriptor.name().replace('-', "_")] = json!(values);
+        }
+        Ok((f, values, shown))
     };
     let (x, y) = (side(&a.a)?, side(&a.b)?);
+    let distance =
+        shape_dna::distance(&x.1, &y.1, a.metric).map_err(|e| Failure { code: 2, message: e.to_string() })?;
+    // Every number checked before it is printed, as the comparison's are.
     let found = [x.0, y.0];
-    let c = compare::comparison(&found, vec![], &a.dna, &a.op, a.metric, 1)
+    compare::comparison(&found, vec![], &dna_options, &a.op, a.metric, 1)
         .map_err(|e| Failure { code: 2, message: e.to_string() })?;
+    if !distance.is_finite() {
+        return Err(Failure { code: 2, message: format!("the distance is not finite ({distance})") });
+    }
     print_json(&json!({
         "descriptor": a.descriptor,
         "metric": a.metric.name(),
-        "distance": c.distances[0][1],
-        "k": a.dna.k,
-        "normalization": a.dna.normalization.name(),
-        "reweighting": a.dna.reweighting.name(),
-        "include_zero": a.dna.include_zero,
-        "a": x.1,
-        "b": y.1,
+        "distance": distance,
+        "k": a.fp.k,
+        "normalization": a.fp.normalization.name(),
+        "reweighting": a.fp.reweighting.name(),
+        "include_zero": a.fp.include_zero,
+        "a": x.2,
+        "b": y.2,
     }))
 }
 
-/// A shape-DNA of this shape is one the truth table admits (the same check as a `shape-dna` job).
-fn an_supported(v: &Validated, a: &CompareCmd) -> Result<(), Failure> {
-    let an = Analysis::ShapeDna { options: a.dna.clone(), operator: a.op.clone(), solver: a.solver.clone() };
+/// The fingerprint of this shape is one the truth table admits (the same check as its job).
+fn an_supported(v: &Validated, a: &CompareCmd, descriptor: analysis::Descriptor) -> Result<(), Failure> {
+    let (operator, solver) = (a.op.clone(), a.solver.clone());
+    let an = match descriptor {
+        analysis::Descriptor::ShapeDna => Analysis::ShapeDna { options: a.fp.dna(), operator, solver },
+        _ => Analysis::Fingerprint { options: a.fp.clone(), operator, solver },
+    };
     an.supported(&v.shape)?;
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! Subcommands derived from the registry: every analysis of the registry that has no hand-written subcommand gets
 //! one, built from its request's JSON Schema (the service's OpenAPI document): the shape's flags, `--out` and
 //! `--threads`, the flags of the option types the request holds (the same clap flags the hand-written subcommands
-//! flatten: operator, solver, signature and shape-DNA options), and one flag per other field of the request,
+//! flatten: operator, solver, signature, shape-DNA and fingerprint options), and one flag per other field of the request,
 //! typed by its schema. What the flags give becomes the request's JSON, read by the same `Analysis` type the
 //! service takes, so defaults and checks are the service's.
 //!
@@ -64,6 +64,7 @@ fn option_types() -> Vec<OptionType> {
         option_type::<SiHksOptions>("SiHksOptions"),
         option_type::<WksOptions>("WksOptions"),
         option_type::<ShapeDnaOptions>("ShapeDnaOptions"),
+        option_type::<analysis::FingerprintOptions>("FingerprintOptions"),
         option_type::<HeatMethodOptions>("HeatMethodOptions"),
     ]
 }

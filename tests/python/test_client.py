@@ -55,7 +55,7 @@ def test_bulk_search_compare_and_correspondence(server, meshes):
             c.wait(f["job"])
     found = c.search(shape_id=ids[0], neighbours=2)
     assert found["searched"] >= 2 and len(found["neighbours"]) == 2
-    cmp = c.compare(ids[:2], k=20)
+    cmp = c.compare(ids[:2], k=20, descriptor="shape-dna")
     d = np.array(cmp["distances"])
     assert d.shape == (2, 2) and d[0, 0] == 0 and d[0, 1] > 0
     corr = c.correspondence(ids[0], ids[0], fit_k=20, refine_k=30)

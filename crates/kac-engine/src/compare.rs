@@ -73,9 +73,11 @@ impl CompareRequest {
 pub fn run(
     shapes: &[Arc<StoredShape>],
     req: &CompareRequest,
+    collection: Option<&crate::search::Index>,
     hooks: Hooks<'_>,
     status_of: fn(crate::Code) -> u16,
 ) -> Result<Output, AnalysisError> {
+    req.check()?;
     let options = req.options();
     let solver = SolverSpec::default();
     let every_family = req.descriptor != Descriptor::ShapeDna;
@@ -114,7 +116,7 @@ pub fn run(
     }
     let mut summary = compare::comparison(&found, failures, &options, &req.operator, req.metric, req.neighbours)?;
     let fingerprints = if every_family {
-        by_families(&mut summary, &values, req)?;
+        by_families(&mut summary, &values, req, collection)?;
         found
             .iter()
             .zip(&values)
@@ -138,12 +140,18 @@ pub fn run(
     Ok(Output { fingerprints, summary, arrays: vec![] })
 }
 
+/// The fewest fingerprints a spread is taken over: with two, each family's distance divided by its spread is √2
+/// whatever the shapes, and the fused distance says nothing.
+pub const MIN_SPREAD_ROWS: usize = 3;
+
 /// Each family's distances, and `distances` and `nearest` by the request's descriptor (the fused distance
-/// Σ wᵢ dᵢ / sᵢ with each family's spread sᵢ over the shapes compared).
+/// Σ wᵢ dᵢ / sᵢ with each family's spread sᵢ over the collection: the search index's fingerprints of the family
+/// when it holds at least [`MIN_SPREAD_ROWS`], else the shapes compared; a fused comparison with fewer is refused).
 fn by_families(
     summary: &mut analysis::CompareSummary,
     values: &[Vec<analysis::FamilyValues>],
     req: &CompareRequest,
+    collection: Option<&crate::search::Index>,
 ) -> Result<(), AnalysisError> {
     let n = values.len();
     let mut fused = vec![vec![0.0; n]; n];
@@ -151,7 +159,22 @@ fn by_families(
     for (i, d) in Descriptor::FAMILIES.into_iter().enumerate() {
         let rows: Vec<Vec<f64>> = values.iter().map(|f| f[i].values.clone()).collect();
         let distances = kac_core::descriptors::shape_dna::distance_matrix(&rows, req.metric)?;
-        let spread = compare::spread(&rows);
+        let family = values
+            .first()
+            .map_or_else(|| analysis::descriptor_family(d, &req.options, &req.operator), |f| f[i].family.clone());
+        let spread = match collection.and_then(|c| c.spread_of(&family)) {
+            Some((s, rows)) if rows >= MIN_SPREAD_ROWS => s,
+            _ if n >= MIN_SPREAD_ROWS => compare::spread(&rows),
+            _ if req.descriptor == Descriptor::Fused => {
+                return Err(AnalysisError::invalid_parameter(format!(
+                    "descriptor fused: each family's distance is divided by its spread over at least \
+                     {MIN_SPREAD_ROWS} fingerprints, and the collection holds fewer of family {family} than that \
+                     (two shapes alone are always √2 apart in every family so scaled): compare by one family \
+                     (`descriptor`), or more shapes"
+                )))
+            }
+            _ => compare::spread(&rows),
+        };
         let scale = if spread > 0.0 && spread.is_finite() { d.weight() / spread } else { d.weight() };
         for (row, got) in fused.iter_mut().zip(&distances) {
             row.iter_mut().zip(got).for_each(|(f, x)| *f += scale * x);

@@ -460,7 +460,7 @@ fn compare(
             let control =
                 kac_core::spectrum::Control { stop: Some(stop), progress: Some(report), ..Default::default() };
             // Statuses are the service's; here each failure carries its code only.
-            kac_engine::compare::run(&stored, &req, Hooks { control, threads, ..Default::default() }, |_| 0)
+            kac_engine::compare::run(&stored, &req, None, Hooks { control, threads, ..Default::default() }, |_| 0)
         })
     })?;
     to_python(py, out.map_err(|e| analysis_error(py, &e, Some("compare")))?)

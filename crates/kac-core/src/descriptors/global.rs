@@ -103,9 +103,22 @@ pub fn weighted_quantiles(values: &[f64], weights: &[f64], q: usize) -> Vec<f64>
 /// distribution over the shape (weighted by `weights`, the lumped mass) of log(h(x, t) / Z(t)), where h is the heat
 /// kernel signature Σ e^{-λ'ᵢ t} φ'ᵢ(x)² of the scaled shape and Z(t) = Σ e^{-λ'ᵢ t} its heat trace (the signature's
 /// mean over the scaled shape), sampled at [`HEAT_QUANTILES`] levels: `HEAT_TIMES.2 × HEAT_QUANTILES` values, time
-/// by time. Zero modes enter the sums (one per component: the constant's share). `measure` is the shape's area,
-/// volume or length, `dimension` 2, 3 or 1.
+/// by time. Zero modes enter the sums (one per component: the constant's share); the pairs are cut at a cluster's
+/// end ([`whole_clusters`]). `measure` is the shape's area, volume or length, `dimension` 2, 3 or 1.
 pub fn heat_distribution(
+    basis: &Basis<'_>,
+    weights: &[f64],
+    measure: f64,
+    dimension: u8,
+) -> Result<GlobalDescriptor, DescriptorError> {
+    // Whole eigenspaces only: a sum of φ² over part of one depends on the basis the solver chose in it.
+    let k = whole_clusters(basis.values, basis.k());
+    let cut = Basis::new(&basis.values[..k], basis.vectors.subcols(0, k), basis.zero_tol);
+    heat_distribution_of_pairs(&cut, weights, measure, dimension)
+}
+
+/// [`heat_distribution`] over every pair of `basis`, wherever it ends.
+pub fn heat_distribution_of_pairs(
     basis: &Basis<'_>,
     weights: &[f64],
     measure: f64,
@@ -135,9 +148,37 @@ pub fn heat_distribution(
     Ok(GlobalDescriptor { values, eigenpairs: k - zeros, measure })
 }
 
+/// Eigenvalues closer than this (relatively) are one cluster: a basis of their eigenspace is not determined.
+pub const CLUSTER_GAP: f64 = 0.01;
+
+/// How many of the ascending `values` to keep, about `want`, ending at a cluster's end: the cut is moved up past a
+/// cluster it would split; where the values end (the last cluster may go on beyond them), it goes before the last
+/// cluster unless that is all there is. A sum over whole eigenspaces with equal weights does not depend on the
+/// basis chosen in each.
+pub fn whole_clusters(values: &[f64], want: usize) -> usize {
+    let n = values.len();
+    // Value i belongs to value i − 1's cluster.
+    let joined = |i: usize| values[i] <= values[i - 1] * (1.0 + CLUSTER_GAP);
+    let mut d = want.min(n).max(1);
+    while d < n && joined(d) {
+        d += 1;
+    }
+    if d == n {
+        let mut start = n - 1;
+        while start > 0 && joined(start) {
+            start -= 1;
+        }
+        if start > 0 {
+            d = start;
+        }
+    }
+    d
+}
+
 /// The GPS D2 distribution: the global point signature GPS(x) = (φ'ᵢ(x)/√λ'ᵢ) of the shape scaled to unit
-/// measure, over the first [`GPS_DIMENSIONS`] non-zero eigenpairs (GPS · measure^(1/2 − 1/d): on a surface the
-/// signature is scale-invariant as it stands), the Euclidean distances between all pairs of [`GPS_POINTS`] points chosen by their share of the
+/// measure, over the first [`GPS_DIMENSIONS`] non-zero eigenpairs, or as many more or fewer as end a cluster of
+/// eigenvalues ([`whole_clusters`]) (GPS · measure^(1/2 − 1/d): on a surface the signature is scale-invariant as it
+/// stands), the Euclidean distances between all pairs of [`GPS_POINTS`] points chosen by their share of the
 /// measure, and the distribution of those distances sampled at [`GPS_QUANTILES`] levels.
 pub fn gps_d2(
     basis: &Basis<'_>,
@@ -146,7 +187,7 @@ pub fn gps_d2(
     dimension: u8,
 ) -> Result<GlobalDescriptor, DescriptorError> {
     let (zeros, _) = check(basis, weights, measure, dimension)?;
-    let d = (basis.k() - zeros).min(GPS_DIMENSIONS);
+    let d = whole_clusters(&basis.values[zeros..], GPS_DIMENSIONS);
     let unit = measure.powf(0.5 - 1.0 / dimension as f64);
     let n = basis.n();
     // Points at the levels (j + ½)/P of the cumulative measure, in vertex order: a deterministic sample whose
@@ -200,6 +241,18 @@ mod tests {
         }
         let v = Mat::from_fn(n, cols.len(), |i, j| cols[j][i]);
         (values, v, vec![2.0 * std::f64::consts::PI / n as f64; n])
+    }
+
+    #[test]
+    fn the_cut_never_splits_a_cluster() {
+        let v = [1.0, 2.0, 2.001, 2.002, 5.0, 5.0, 9.0];
+        assert_eq!(whole_clusters(&v, 2), 4, "moved up past the cluster at 2");
+        assert_eq!(whole_clusters(&v, 4), 4);
+        assert_eq!(whole_clusters(&v, 5), 6);
+        // Where the values end, the last cluster may be incomplete: cut before it.
+        assert_eq!(whole_clusters(&v[..6], 5), 4);
+        assert_eq!(whole_clusters(&v, 20), 6);
+        assert_eq!(whole_clusters(&[3.0, 3.0, 3.0], 2), 3, "all of one cluster: all of it");
     }
 
     #[test]

@@ -95,6 +95,12 @@ pub static REGISTRY: &[Entry] = &[
         classes: &[TriangleMesh, TetMesh, ShapeClass::CloudR3, ShapeClass::CloudRn, Polyline],
         classes_why: "its families are distributions over the shape scaled to unit measure, which a graph does not \
                       have (compare graphs by their spectrum)",
+        // Retrieval compares shapes by their free vibrations with linear elements, the operator lapy's recipe uses
+        // and the benchmark measured; a family is only ever compared within itself.
+        dirichlet: NONE,
+        dirichlet_why: "a retrieval fingerprint is of the free (Neumann) shape, whose families the search index \
+                        compares; use shape-dna for Dirichlet spectra",
+        order2: NONE,
         ..spectral(
             "fingerprint",
             "retrieval fingerprint: scale-invariant shape-DNA, heat distribution and GPS D2, each a search family",

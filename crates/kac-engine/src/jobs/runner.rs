@@ -214,7 +214,7 @@ fn run_job(state: &Arc<Engine>, job: &Arc<Job>) -> Option<Status> {
         }
         match &work {
             Work::Analysis(a, shape) => analysis::run(&shape.validated, a, hooks),
-            Work::Compare(req, shapes) => crate::compare::run(shapes, req, hooks, state.status_of),
+            Work::Compare(req, shapes) => crate::compare::run(shapes, req, Some(&state.index), hooks, state.status_of),
             Work::Correspondence(req, s, t) => crate::correspondence::run(&s.validated, &t.validated, req, hooks),
             Work::Slice(req, shape) => slices::run(shape, req, hooks, &state.jobs.replica),
         }

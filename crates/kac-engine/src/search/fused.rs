@@ -35,8 +35,8 @@ pub struct FusedFound {
     pub searched: usize,
     /// Shapes whose fused distance was computed.
     pub probed: usize,
-    /// Shapes holding the smallest member family but not every other (not comparable; their fingerprint jobs have
-    /// not finished, or they were fingerprinted by one family only).
+    /// Shapes holding some of the families but not all (not comparable: their fingerprint jobs have not finished,
+    /// or they were fingerprinted by one family only).
     pub incomplete: usize,
     /// Whether the neighbours are proven exact (every candidate's exact values were found in the store).
     pub exact: bool,
@@ -109,7 +109,7 @@ impl Index {
                             c.offer(d, e, offered.len() as u32);
                             offered.push(*id);
                         }
-                        None => incomplete += usize::from(members[base].row.contains_key(id)),
+                        None => incomplete += usize::from(members.iter().any(|f| f.row.contains_key(id))),
                     }
                 }
             }
@@ -124,9 +124,15 @@ impl Index {
                             c.offer(d, e, offered.len() as u32);
                             offered.push(*id);
                         }
-                        None => incomplete += 1,
+                        None => incomplete += usize::from(admits(id)),
                     }
                 }
+                // Shapes of the other families that the base family lacks (each once).
+                let mut lacking: IdSet = Default::default();
+                for f in members.iter().filter(|f| !std::ptr::eq(**f, fam)) {
+                    lacking.extend(f.ids.iter().filter(|id| !fam.row.contains_key(*id) && admits(id)));
+                }
+                incomplete += lacking.len();
             }
         }
         let probed = c.offered;
@@ -160,8 +166,12 @@ impl Index {
 
     /// A family's spread over the collection (its fingerprints' root-mean-square distance), if it holds any.
     pub fn spread(&self, family: &str) -> Option<f64> {
+        self.spread_of(family).map(|s| s.0)
+    }
+    /// A family's spread and the number of fingerprints it is over, if it holds any.
+    pub fn spread_of(&self, family: &str) -> Option<(f64, usize)> {
         let fams = self.families.read().unwrap_or_else(|e| e.into_inner());
-        fams.get(family).and_then(Family::spread)
+        fams.get(family).and_then(|f| f.spread().map(|s| (s, f.len())))
     }
 }
 

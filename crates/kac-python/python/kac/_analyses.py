@@ -128,6 +128,29 @@ def shape_dna(
     return analyze("shape-dna", s, faces, threads=threads, progress=progress, **options)
 
 
+def fingerprint(
+    s: ShapeLike, faces: Any = None, *, threads: int = 0, progress: Progress = None, **options: Any
+) -> Result:
+    """retrieval fingerprint: scale-invariant shape-DNA, heat distribution and GPS D2, each a search family.
+
+    Applies to: triangle_mesh, tet_mesh, cloud_r3, cloud_rn, polyline. Accuracy: exact for the k pairs computed; the
+    heat distribution's smallest time is resolved to about e^-3 by 50 pairs, GPS D2 samples 400 points
+
+    Sign convention: L = the weak form of Δ = −∇·∇ (positive semidefinite), L φ = λ M φ, eigenvalues
+    ascending, eigenvectors M-orthonormal.
+
+    Options (the service's ``FingerprintAnalysis``, ``kac fingerprint --help``):
+
+    - ``operator``: Its fields may be given directly: boundary, denoise, dirichlet_vertices, intrinsic_dimension,
+      mass, midpoints, neighbourhood, neighbours, normalization, operator, order, radius, time.
+    - ``options``: Its fields may be given directly: include_zero, k, normalization, reweighting.
+    - ``solver``: Its fields may be given directly: block, method, sigma, slices, subspace, tol, verify.
+
+    Returns a :class:`Result`: the summary's fields, and ``arrays`` (rows: the input's vertices).
+    """
+    return analyze("fingerprint", s, faces, threads=threads, progress=progress, **options)
+
+
 def heat(
     s: ShapeLike, faces: Any = None, *, threads: int = 0, progress: Progress = None, **options: Any
 ) -> Result:
@@ -458,4 +481,4 @@ def interpolate(
     return analyze("interpolate", s, faces, threads=threads, progress=progress, **options)
 
 
-__all__ = ["hks", "si_hks", "wks", "gps", "shape_dna", "heat", "geodesic", "trees", "mean_curvature", "heat_curvature", "wave", "schrodinger", "poisson", "diffuse", "dirichlet_energy", "gradient", "divergence", "embed", "smooth", "interpolate"]
+__all__ = ["hks", "si_hks", "wks", "gps", "shape_dna", "fingerprint", "heat", "geodesic", "trees", "mean_curvature", "heat_curvature", "wave", "schrodinger", "poisson", "diffuse", "dirichlet_energy", "gradient", "divergence", "embed", "smooth", "interpolate"]

@@ -257,8 +257,10 @@ def correspondence(
 
 
 def compare(shapes: list, *, threads: int = 0, progress: Progress = None, **options: Any) -> Result:
-    """Shape-DNA distances between shapes (as ``POST /v1/compare``): ``distances`` (a matrix, in the order given),
-    each shape's ``nearest``, and ``failures`` (the shapes that could not be fingerprinted, with their codes)."""
+    """Distances between shapes by their fingerprints (as ``POST /v1/compare``; ``descriptor="fused"`` by default, or
+    one family: ``"shape-dna"``, ``"heat-distribution"``, ``"gps-d2"``): ``distances`` (a matrix, in the order
+    given), each family's in ``families``, each shape's ``nearest``, and ``failures`` (the shapes that could not be
+    fingerprinted, with their codes)."""
     request = _route("CompareRequest", options, {})
     request.pop("shape_ids", None)
     built = [_as_shape(s) for s in shapes]
