@@ -20,8 +20,9 @@ Per collection, in one run:
   * lapy's recipe (lapy.shapedna: k = 50 eigenvalues of the cotangent Laplacian with consistent mass, `geometry`
     normalization, reweighting, Euclidean distance), each mesh read with lapy's own TriaMesh.read_off and solved
     single-threaded: the same measures, and lapy's total solve time;
-  * the fused distance's weights searched on a grid (steps of 0.1) from the families' distances the fused search
-    returned and their spreads: the best weights for mAP on this collection (how the default weights were chosen).
+  * the fused distance's weights on a grid (steps of 0.05), recomputed from the families' distances the fused search
+    returned and their spreads: the best weights for mAP on each collection, and, with both collections, the
+    default weights' rule (the best class-level mAP among the weights whose non-rigid mAP reaches 0.99).
 
 A file whose bytes repeat an earlier file's is left out (the service stores it once; `duplicates_dropped`).
 
@@ -166,16 +167,34 @@ def search_all(base, ids, request, check=True):
     return ranked, fam, spreads, float(np.median(secs))
 
 
-def best_weights(fam, spreads, labels):
-    best = None
-    for a in np.arange(0, 1.0001, 0.1):
-        for b in np.arange(0, 1.0001 - a, 0.1):
-            w = (a, b, max(0.0, 1 - a - b))
-            d = sum(wi * fam[f] / spreads[f] for wi, f in zip(w, FAMILIES))
-            s = scores(rank_matrix(d), labels)
-            if best is None or s["mAP"] > best[0]["mAP"]:
-                best = (s, [round(x, 1) for x in w])
-    return {"weights": dict(zip(FAMILIES, best[1])), "scores": best[0]}
+def grid(step=0.05):
+    n = int(round(1 / step))
+    return [(i * step, j * step, (n - i - j) * step) for i in range(n + 1) for j in range(n + 1 - i)]
+
+
+def grid_scores(fam, spreads, labels):
+    """Each grid point's scores: the fused distance recomputed from the families' distances and spreads."""
+    out = []
+    for w in grid():
+        d = sum(wi * fam[f] / spreads[f] for wi, f in zip(w, FAMILIES))
+        out.append(([round(x, 2) for x in w], scores(rank_matrix(d), labels)))
+    return out
+
+
+def best_weights(points):
+    w, s = max(points, key=lambda p: p[1]["mAP"])
+    return {"weights": dict(zip(FAMILIES, w)), "scores": s}
+
+
+def weights_rule(by_collection):
+    """The default weights' rule: on the grid, the best class-level mAP among the weights whose non-rigid mAP
+    reaches 0.99."""
+    cl, nr = by_collection["classlevel"], by_collection["nonrigid"]
+    ok = [(w, s, t) for (w, s), (_, t) in zip(cl, nr) if t["mAP"] >= 0.99]
+    if not ok:
+        return None
+    w, s, t = max(ok, key=lambda p: p[1]["mAP"])
+    return {"weights": dict(zip(FAMILIES, w)), "classlevel": s, "nonrigid": t}
 
 
 def lapy_recipe(root, entries, labels):
@@ -205,7 +224,7 @@ def main():
     a = ap.parse_args()
     kac = a.kac or release_kac()
     manifest = json.load(open(os.path.join(a.data, "manifest.json")))["collections"]
-    results = []
+    results, by_collection = [], {}
     for name in a.collections.split(","):
         entries, seen, duplicates = [], {}, []
         for e in manifest[name]:
@@ -232,8 +251,10 @@ def main():
                 log("  %-18s %s" % (d, out["kac"][d]))
                 if d == "fused":
                     out["spreads"] = spreads
-                    out["weights_grid"] = best_weights(fam, spreads, labels)
-                    log("  best weights %s" % out["weights_grid"])
+                    points = grid_scores(fam, spreads, labels)
+                    by_collection[name] = points
+                    out["weights_grid"] = best_weights(points)
+                    log("  best weights here %s" % out["weights_grid"])
             # The earlier default's fingerprints are computed by a first search of each shape (each such search sees
             # only the shapes fingerprinted before it), then every shape is searched again.
             search_all(base, ids, OLD_DEFAULT, check=False)
@@ -251,6 +272,11 @@ def main():
             log("  lapy %s; solve %.1f s; kac ingest is %.1fx faster" % (s, t_solve, t_solve / ingest_s))
         print(json.dumps(out), flush=True)
         results.append(out)
+    if {"classlevel", "nonrigid"} <= set(by_collection):
+        rule = weights_rule(by_collection)
+        log("weights by the rule (best class-level mAP with non-rigid mAP >= 0.99): %s" % rule)
+        print(json.dumps({"weights_rule": rule}), flush=True)
+        results.append({"weights_rule": rule})
     if a.out:
         with open(a.out, "w") as f:
             json.dump(results, f, indent=1)
