@@ -49,7 +49,7 @@ def log(*a):
 
 
 def start(kac, data):
-    env = dict(os.environ, KAC_ADDR="127.0.0.1:0", KAC_DATA_DIR=data, RUST_LOG="error", KAC_QUEUE_CAPACITY="100000",
+    env = dict(os.environ, KAC_ADDR="127.0.0.1:0", KAC_DATA_DIR=data, RUST_LOG="error",
                KAC_MAX_BODY_BYTES=str(64 << 20), KAC_MAX_BODY_MEMORY_BYTES=str(256 << 20))
     p = subprocess.Popen([kac, "serve"], env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
     line = p.stdout.readline()

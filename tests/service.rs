@@ -1344,13 +1344,127 @@ fn a_collection_is_uploaded_in_bulk_tagged_and_searched_within_a_tag() {
     let (ct3, bad) = multipart(&[("file", Some("a.off"), &a), ("options", None, br#"{"tags": ["ok"], "colour": 1}"#)]);
     let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct3).send_bytes(&bad));
     assert_eq!((r.status, r.body["field"].as_str()), (422, Some("colour")), "{}", r.body);
-    // A queue too small for the upload's jobs: every file stored, those whose job could not start counted.
+    // A queue too small for the upload's jobs: every file stored and given its job (in the backlog lane).
     let s = Server::start(&["--workers", "1", "--queue-capacity", "1", "--test-job-delay-ms", "1500"]);
     let (ct4, three) =
         multipart(&[("file", Some("a.off"), &a), ("file", Some("b.off"), &b), ("file", Some("c.off"), &c)]);
     let r = reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct4).send_bytes(&three));
-    assert_eq!((r.body["created"].as_u64(), r.body["unstarted"].as_u64()), (Some(3), Some(2)), "{}", r.body);
-    assert_eq!(r.body["files"][2]["problem"]["code"], "queue-full", "{}", r.body);
+    assert_eq!((r.body["created"].as_u64(), r.body["unstarted"].as_u64()), (Some(3), Some(0)), "{}", r.body);
+    assert!(r.body["files"].as_array().unwrap().iter().all(|f| f["job"]["id"].is_string()), "{}", r.body);
+}
+
+/// `count` icospheres (level 2) that differ by one vertex's x coordinate, so that each is a shape of its own.
+fn distinct_spheres(count: usize) -> Vec<(String, Vec<u8>)> {
+    (0..count)
+        .map(|i| {
+            let mut m = kac_core::geometry::generate::icosphere(2);
+            m.vertices[0][0] += 0.01 * (i + 1) as f64;
+            (format!("s{i}.off"), off_of(&m))
+        })
+        .collect()
+}
+
+/// A bulk upload of `files` with small fingerprints (k = 8).
+fn bulk_upload(s: &Server, files: &[(String, Vec<u8>)]) -> Reply {
+    let options = json!({ "fingerprint": { "k": 8 } }).to_string();
+    let mut parts: Vec<(&str, Option<&str>, &[u8])> = vec![("options", None, options.as_bytes())];
+    parts.extend(files.iter().map(|(name, bytes)| ("file", Some(name.as_str()), bytes.as_slice())));
+    let (ct, body) = multipart(&parts);
+    reply(agent().post(&s.url("/v1/shapes/bulk")).set("content-type", &ct).send_bytes(&body))
+}
+
+/// A batch's progress, polled until every job has ended (at most `limit`).
+fn batch_done(s: &Server, progress: &str, limit: Duration) -> Value {
+    let t = Instant::now();
+    loop {
+        let r = reply(agent().get(&s.url(progress)).call());
+        assert_eq!(r.status, 200, "{}", r.body);
+        if r.body["done"] == json!(true) {
+            return r.body;
+        }
+        assert!(t.elapsed() < limit, "batch {progress} not done: {}", r.body);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Issue 50, item 3: a bulk upload larger than the queue's capacity gets a job for every file (in the backlog
+/// lane), none `unstarted`; its batch's progress reaches done with every job succeeded; an interactive job
+/// submitted meanwhile runs before the backlog waiting ahead of it.
+#[test]
+fn a_bulk_upload_beyond_the_queue_s_capacity_starts_every_job_and_interactive_jobs_go_first() {
+    let s = Server::start(&["--workers", "1", "--queue-capacity", "2", "--test-job-delay-ms", "300"]);
+    let lone = upload(&s, &icosphere_off(2), "?format=off").body["id"].as_str().unwrap().to_string();
+    let files = distinct_spheres(20);
+    let r = bulk_upload(&s, &files);
+    assert_eq!(r.status, 200, "{}", r.body);
+    assert_eq!((r.body["created"].as_u64(), r.body["unstarted"].as_u64()), (Some(20), Some(0)), "{}", r.body);
+    let jobs: Vec<&str> =
+        r.body["files"].as_array().unwrap().iter().map(|f| f["job"]["id"].as_str().unwrap()).collect();
+    assert_eq!(jobs.iter().collect::<std::collections::HashSet<_>>().len(), 20, "one job per file");
+    let batch = r.body["batch"].as_str().unwrap();
+    let progress = r.body["progress"].as_str().unwrap();
+    assert_eq!((batch.len(), progress), (32, format!("/v1/shapes/bulk/{batch}").as_str()));
+    // An interactive job, submitted behind 20 backlog jobs of 300 ms or more each on one worker: it runs next.
+    let j = submit(&s, json!({ "shape_id": lone, "analysis": "spectrum", "k": 5 }));
+    assert_eq!(j.status, 202, "{}", j.body);
+    let done = wait_done(&s, j.body["id"].as_str().unwrap());
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let p = reply(agent().get(&s.url(progress)).call()).body;
+    assert!(p["enqueued"].as_u64().unwrap() >= 8, "the interactive job waited behind the backlog: {p}");
+    // The backlog finishes, every job succeeded; each started after the interactive job but the few claimed while
+    // the upload was being stored and the interactive job submitted.
+    let p = batch_done(&s, progress, Duration::from_secs(120));
+    let counts = ["total", "succeeded", "failed", "canceled", "enqueued", "processing"].map(|c| p[c].as_u64().unwrap());
+    assert_eq!((counts, &p["failed_jobs"]), ([20, 20, 0, 0, 0, 0], &json!([])), "{p}");
+    let started = |id: &str| reply(agent().get(&s.url(&format!("/v1/jobs/{id}"))).call()).body["started_at"].clone();
+    let mine = done["started_at"].as_str().unwrap().to_string();
+    let before = jobs.iter().filter(|id| started(id).as_str().unwrap() < mine.as_str()).count();
+    assert!(before <= 6, "{before} backlog jobs started before the interactive one");
+    // Unknown batches: 404, an id that is not one included.
+    assert_problem(
+        &reply(agent().get(&s.url(&format!("/v1/shapes/bulk/{}", "0".repeat(32)))).call()),
+        404,
+        "not-found",
+    );
+    assert_problem(&reply(agent().get(&s.url("/v1/shapes/bulk/nothex")).call()), 404, "not-found");
+    let metrics = String::from_utf8(reply(agent().get(&s.url("/metrics")).call()).raw).unwrap();
+    assert!(metrics.lines().any(|l| l == "kac_queue_backlog 0"), "{metrics}");
+}
+
+/// Issue 50, item 3: back-pressure before anything is stored: an upload that would take the backlog beyond
+/// --max-backlog is refused 503 with Retry-After, and none of its shapes is stored.
+#[test]
+fn a_bulk_upload_beyond_the_backlog_limit_is_refused_before_anything_is_stored() {
+    let s = Server::start(&["--workers", "1", "--max-backlog", "5", "--test-job-delay-ms", "5000"]);
+    let files = distinct_spheres(10);
+    let shapes = || reply(agent().get(&s.url("/v1/shapes")).call()).body["total"].as_u64().unwrap();
+    let r = bulk_upload(&s, &files[..6]);
+    assert_problem(&r, 503, "queue-full");
+    assert!(r.retry_after.is_some() && r.body["detail"].as_str().unwrap().contains("--max-backlog"), "{}", r.body);
+    assert_eq!((r.body["max_backlog"].as_u64(), shapes()), (Some(5), 0));
+    // Three fit; four more do not (two or three of the first wait: the one worker holds one for 5 s).
+    let r = bulk_upload(&s, &files[..3]);
+    assert_eq!((r.status, r.body["unstarted"].as_u64()), (200, Some(0)), "{}", r.body);
+    let r = bulk_upload(&s, &files[3..7]);
+    assert_problem(&r, 503, "queue-full");
+    assert_eq!(r.body["backlog"].as_u64().map(|b| (2..=3).contains(&b)), Some(true), "{}", r.body);
+    assert_eq!(shapes(), 3, "the refused upload stored nothing");
+}
+
+/// Issue 50, item 3: backlog jobs are in the store: a server killed with an upload's jobs waiting finishes them when
+/// it starts again on the same data directory.
+#[test]
+fn a_killed_server_finishes_a_bulk_upload_s_backlog_after_a_restart() {
+    let s = Server::start(&["--workers", "1", "--test-job-delay-ms", "1000"]);
+    let r = bulk_upload(&s, &distinct_spheres(6));
+    assert_eq!((r.status, r.body["unstarted"].as_u64()), (200, Some(0)), "{}", r.body);
+    let progress = r.body["progress"].as_str().unwrap().to_string();
+    let p = reply(agent().get(&s.url(&progress)).call()).body;
+    assert!(p["enqueued"].as_u64().unwrap() >= 4 && p["done"] == json!(false), "{p}");
+    let (dir, _) = s.stop(false);
+    let (s, _) = Server::start_in(dir, &["--workers", "1"]);
+    let p = batch_done(&s, &progress, Duration::from_secs(120));
+    assert_eq!((p["total"].as_u64(), p["succeeded"].as_u64()), (Some(6), Some(6)), "{p}");
 }
 
 /// A job cut into spectrum slices borrows the server's idle workers, one slice at a time: on two workers with one

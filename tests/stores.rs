@@ -12,9 +12,9 @@ mod stored;
 
 use clap::Parser;
 use kac::analysis::VertexArray;
-use kac::service::ids::{JobId, ShapeId};
+use kac::service::ids::{BatchId, JobId, ShapeId};
 use kac::service::jobs::{JobProgress, JobView, Status};
-use kac::service::store::{self, Backend, Enqueued, Lease, StoredResult, StoredShape};
+use kac::service::store::{self, Backend, Enqueued, Lane, Lease, StoredResult, StoredShape};
 use kac_engine::{Code, EngineConfig, Failure};
 use serde_json::json;
 use std::sync::Arc;
@@ -203,10 +203,12 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     // The queue: one job per id, within capacity.
     let q = &b.queue;
     let mut changes = q.changes();
-    assert!(matches!(q.enqueue(job(&h("j1")), 2).unwrap(), Enqueued::New(_)));
-    assert!(matches!(q.enqueue(job(&h("j1")), 2).unwrap(), Enqueued::Existing(v) if v.status == Status::Enqueued));
-    assert!(matches!(q.enqueue(job(&h("j2")), 2).unwrap(), Enqueued::New(_)));
-    assert!(matches!(q.enqueue(job(&h("j3")), 2).unwrap(), Enqueued::Full));
+    assert!(matches!(q.enqueue(job(&h("j1")), Lane::Run, 2).unwrap(), Enqueued::New(_)));
+    assert!(
+        matches!(q.enqueue(job(&h("j1")), Lane::Run, 2).unwrap(), Enqueued::Existing(v) if v.status == Status::Enqueued)
+    );
+    assert!(matches!(q.enqueue(job(&h("j2")), Lane::Run, 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job(&h("j3")), Lane::Run, 2).unwrap(), Enqueued::Full));
     assert_eq!(q.depth().unwrap(), (2, 0));
     // Claims in submission order, each job to one claim.
     let lease = Duration::from_secs(30);
@@ -231,13 +233,17 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert!(q.finish(&h("j1"), "r1:1", &done).unwrap());
     assert!(!q.finish(&h("j1"), "r1:1", &done).unwrap(), "finished once");
     assert_eq!(reopen().queue.get(&jid("j1")).unwrap().unwrap().status, Status::Succeeded);
-    assert!(matches!(q.enqueue(job(&h("j1")), 9).unwrap(), Enqueued::Existing(v) if v.status == Status::Succeeded));
+    assert!(
+        matches!(q.enqueue(job(&h("j1")), Lane::Run, 9).unwrap(), Enqueued::Existing(v) if v.status == Status::Succeeded)
+    );
     // An enqueued job is canceled at once, and may be enqueued again.
-    assert!(matches!(q.enqueue(job(&h("j4")), 9).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job(&h("j4")), Lane::Run, 9).unwrap(), Enqueued::New(_)));
     let v = q.cancel(&jid("j4"), &problem()).unwrap().unwrap();
     assert_eq!((v.status, v.error.as_ref().map(|p| p.code.as_str())), (Status::Canceled, Some("canceled")));
     assert!(q.cancel(&jid("nope"), &problem()).unwrap().is_none());
-    assert!(matches!(q.enqueue(job(&h("j4")), 9).unwrap(), Enqueued::New(v) if v.status == Status::Enqueued));
+    assert!(
+        matches!(q.enqueue(job(&h("j4")), Lane::Run, 9).unwrap(), Enqueued::New(v) if v.status == Status::Enqueued)
+    );
     // An expired claim goes back in the queue; its holder has lost it.
     let c4 = q.claim("r1:3", Duration::from_millis(200)).unwrap().unwrap();
     assert_eq!(c4.id, h("j4"));
@@ -249,7 +255,7 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert!(!q.finish(&h("j4"), "r1:3", &done).unwrap());
     assert_eq!(q.claim("r2:2", lease).unwrap().unwrap().id, h("j4"), "claimed again");
     // A cancel asked for while a job runs is kept if its claim ends without a finish: released, it ends canceled.
-    assert!(matches!(q.enqueue(job(&h("j5")), 9).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job(&h("j5")), Lane::Run, 9).unwrap(), Enqueued::New(_)));
     let c5 = q.claim("r1:4", Duration::from_millis(200)).unwrap().unwrap();
     assert_eq!(c5.id, h("j5"));
     assert_eq!(reopen().queue.cancel(&jid("j5"), &problem()).unwrap().unwrap().status, Status::Processing);
@@ -259,10 +265,10 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
     assert_eq!((v.status, v.error.map(|p| p.code)), (Status::Canceled, Some(Code::Canceled)));
     assert!(q.claim("r1:5", lease).unwrap().is_none(), "a canceled job is not claimed again");
     // A job claimed by its id (a job taking back its own slice job), by one claim only, and only while enqueued.
-    assert!(matches!(q.enqueue(job(&h("j6")), 9).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(job(&h("j6")), Lane::Run, 9).unwrap(), Enqueued::New(_)));
     let mut slice = job(&h("j7"));
     slice.analysis = "spectrum-slice".into();
-    assert!(matches!(q.enqueue(slice, 9).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(slice, Lane::Run, 9).unwrap(), Enqueued::New(_)));
     // Waiting jobs, slice jobs aside or not.
     assert_eq!((q.waiting("spectrum-slice").unwrap(), q.waiting("spectrum").unwrap()), (1, 1));
     assert!(q.claim_id(&h("j5"), "r1:6", lease).unwrap().is_none(), "canceled");
@@ -288,6 +294,43 @@ fn conformance(b: &Backend, reopen: &dyn Fn() -> Backend) {
         }
     }
     assert!(["j1", "j2", "j4"].iter().all(|id| seen.contains(&h(id))), "announced: {seen:?}");
+
+    // Lanes: backlog jobs are never refused and do not count against the capacity (four run jobs are processing
+    // here: a capacity of 6 leaves room for two); a backlog job a run request asks for moves to the run lane while
+    // it has room; the run lane is claimed first; a recovered claim keeps its lane. Batches: read by any replica.
+    for n in ["b1", "b2", "b3"] {
+        assert!(matches!(q.enqueue(job(&h(n)), Lane::Backlog, 6).unwrap(), Enqueued::New(_)));
+    }
+    assert!(matches!(q.enqueue(job(&h("r1")), Lane::Run, 6).unwrap(), Enqueued::New(_)));
+    assert_eq!(reopen().queue.backlog().unwrap(), 3);
+    assert!(
+        matches!(q.enqueue(job(&h("b3")), Lane::Run, 6).unwrap(), Enqueued::Existing(v) if v.status == Status::Enqueued)
+    );
+    assert!(matches!(q.enqueue(job(&h("r2")), Lane::Run, 6).unwrap(), Enqueued::Full), "b3 counts in the run lane");
+    assert!(matches!(q.enqueue(job(&h("b4")), Lane::Backlog, 6).unwrap(), Enqueued::New(_)), "never full");
+    assert_eq!(reopen().queue.backlog().unwrap(), 3);
+    let batch = BatchId::draw(b"stores");
+    q.put_batch(&batch, &[jid("b1"), jid("b2"), jid("r1"), jid("b1")]).unwrap();
+    let p = reopen().queue.batch(&batch).unwrap().expect("another replica reads the batch");
+    assert_eq!((p.total, p.enqueued, p.done), (3, 3, false));
+    assert!(reopen().queue.batch(&BatchId::draw(b"none")).unwrap().is_none());
+    // The run lane in submission order (b3 was submitted before r1), then the backlog's oldest.
+    assert_eq!(q.claim("r1:7", lease).unwrap().unwrap().id, h("b3"));
+    assert_eq!(reopen().queue.claim("r2:4", lease).unwrap().unwrap().id, h("r1"));
+    assert_eq!(q.claim("r1:8", Duration::from_millis(200)).unwrap().unwrap().id, h("b1"));
+    assert_eq!(reopen().queue.backlog().unwrap(), 2);
+    let p = reopen().queue.batch(&batch).unwrap().unwrap();
+    assert_eq!((p.enqueued, p.processing), (1, 2));
+    // A restart: b1's claim (expired) is taken back into the backlog, ahead of b2 and b4.
+    std::thread::sleep(Duration::from_millis(1200));
+    let restarted = reopen();
+    restarted.queue.recover().unwrap();
+    assert_eq!(restarted.queue.backlog().unwrap(), 3, "b1 is back in the backlog lane");
+    let mut order = vec![];
+    while let Some(v) = restarted.queue.claim(&format!("r3:{}", order.len()), lease).unwrap() {
+        order.push(v.id);
+    }
+    assert_eq!(order[order.len() - 3..], [h("b1"), h("b2"), h("b4")], "the backlog last, oldest first: {order:?}");
 }
 
 #[test]
@@ -321,6 +364,6 @@ fn replicas_starting_together_migrate_once() {
     assert_eq!(opened.len(), 3);
     assert_eq!(
         cluster.query("migrate", "SELECT string_agg(version::text, ',' ORDER BY version) FROM schema_migrations"),
-        "1,2,3,4"
+        "1,2,3,4,5"
     );
 }

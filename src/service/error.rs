@@ -54,6 +54,14 @@ pub enum ApiError {
         capacity: usize,
         retry_after_s: u64,
     },
+    /// A bulk upload whose jobs would take the backlog lane beyond --max-backlog (503 `queue-full`, Retry-After):
+    /// refused before anything is stored.
+    BacklogFull {
+        backlog: usize,
+        files: usize,
+        limit: usize,
+        retry_after_s: u64,
+    },
     /// k above --max-k (413 `k-too-large`).
     KTooLarge {
         detail: String,
@@ -179,6 +187,18 @@ impl ApiError {
                     Code::QueueFull,
                     "The job queue is full",
                     format!("{capacity} jobs are queued or running; retry later"),
+                )
+            }
+            ApiError::BacklogFull { backlog, files, limit, retry_after_s } => {
+                extra.insert("backlog".into(), (*backlog).into());
+                extra.insert("max_backlog".into(), (*limit).into());
+                extra.insert("retry_after_s".into(), (*retry_after_s).into());
+                (
+                    Code::QueueFull,
+                    "The job queue is full",
+                    format!(
+                        "the backlog holds {backlog} jobs of bulk uploads and this upload's {files} files would take                          it beyond {limit} (--max-backlog): nothing was stored; retry after Retry-After seconds, or                          send fewer files"
+                    ),
                 )
             }
             ApiError::BodyTooSlow { detail } => (Code::BodyTimeout, "The request body came too slowly", detail.clone()),
@@ -334,6 +354,7 @@ impl IntoResponse for ApiError {
         let (status, p) = self.problem();
         let mut r = problem_response(status, &p);
         if let ApiError::QueueFull { retry_after_s, .. }
+        | ApiError::BacklogFull { retry_after_s, .. }
         | ApiError::MemoryBusy { retry_after_s, .. }
         | ApiError::RateLimited { retry_after_s, .. }
         | ApiError::AuthThrottled { retry_after_s, .. } = self
@@ -435,6 +456,7 @@ mod tests {
             },
             ApiError::UnsupportedMediaType { detail: "m".into() },
             ApiError::QueueFull { capacity: 1, retry_after_s: 1 },
+            ApiError::BacklogFull { backlog: 1, files: 1, limit: 1, retry_after_s: 1 },
             ApiError::MemoryBusy { budget: 1, retry_after_s: 1 },
             ApiError::BodyTooSlow { detail: "m".into() },
             ApiError::KTooLarge { detail: "m".into() },
@@ -466,6 +488,7 @@ mod tests {
                 | ApiError::DuplicateKey { .. }
                 | ApiError::UnsupportedMediaType { .. }
                 | ApiError::QueueFull { .. }
+                | ApiError::BacklogFull { .. }
                 | ApiError::KTooLarge { .. }
                 | ApiError::TooManySamples { .. }
                 | ApiError::OutputTooLarge { .. }

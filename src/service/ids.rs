@@ -29,10 +29,20 @@ pub fn result_id(s: &str) -> Result<ResultId, ApiError> {
     })
 }
 
+/// A batch id a client sent, or 404 naming the rule it breaks.
+pub fn batch_id(s: &str) -> Result<BatchId, ApiError> {
+    BatchId::parse(s).ok_or_else(|| ApiError::NotFound {
+        what: "batch",
+        id: format!("{} (a batch id is 32 lowercase hexadecimal digits)", shown(s)),
+    })
+}
+
 /// The `{id}` of a route under `/v1/shapes/`, parsed.
 pub struct ShapePath(pub ShapeId);
 /// The `{id}` of a route under `/v1/jobs/`, parsed.
 pub struct JobPath(pub JobId);
+/// The `{batch}` of `/v1/shapes/bulk/{batch}`, parsed.
+pub struct BatchPath(pub BatchId);
 /// The `{id}` of a route under `/v1/results/`, parsed (with the rest of the path's parameters as text).
 pub struct ResultPath(pub ResultId, pub Option<String>);
 
@@ -62,6 +72,13 @@ impl<S: Send + Sync> FromRequestParts<S> for JobPath {
     }
 }
 
+impl<S: Send + Sync> FromRequestParts<S> for BatchPath {
+    type Rejection = ApiError;
+    async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, ApiError> {
+        Ok(BatchPath(batch_id(param(&params(parts).await?, "batch"))?))
+    }
+}
+
 impl<S: Send + Sync> FromRequestParts<S> for ResultPath {
     type Rejection = ApiError;
     async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, ApiError> {
@@ -80,5 +97,6 @@ mod tests {
         let shape = "0123456789abcdef".repeat(4);
         assert!(shape_id(&shape).is_ok() && job_id(&shape[..32]).is_ok() && result_id(&shape[..32]).is_ok());
         assert!(shape_id("..%2Fx").is_err() && job_id(&shape).is_err() && result_id(&shape).is_err());
+        assert!(batch_id(&shape[..32]).is_ok() && batch_id(&shape).is_err() && batch_id("..").is_err());
     }
 }

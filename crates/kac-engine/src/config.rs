@@ -24,9 +24,14 @@ pub struct EngineConfig {
     /// Worker threads running jobs (0: one per core).
     #[arg(long, env = "KAC_WORKERS", default_value_t = 0)]
     pub workers: usize,
-    /// Jobs queued or running at most; beyond it submissions get 503 with Retry-After.
+    /// Interactive jobs (the run lane) queued or running at most; beyond it submissions get 503 with Retry-After.
+    /// A bulk upload's jobs wait in the backlog lane instead, which this does not bound.
     #[arg(long, env = "KAC_QUEUE_CAPACITY", default_value_t = 64, value_parser = at_least_one)]
     pub queue_capacity: usize,
+    /// Bulk uploads' jobs waiting in the backlog lane at most (on all replicas together): an upload whose files
+    /// would take the backlog beyond it gets 503 with Retry-After before anything is stored.
+    #[arg(long, env = "KAC_MAX_BACKLOG", default_value_t = 1_000_000, value_parser = at_least_one)]
+    pub max_backlog: usize,
     /// Largest shape, in vertices.
     #[arg(long, env = "KAC_MAX_VERTICES", default_value_t = 2_000_000, value_parser = at_least_one)]
     pub max_vertices: usize,

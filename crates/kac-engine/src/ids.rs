@@ -5,7 +5,8 @@
 //!
 //! - a shape id ([`ShapeId`]): the SHA-256 of the canonical shape, 64 lowercase hex digits;
 //! - a job id ([`JobId`]), which is also its result's id: the first 16 bytes of SHA-256 over the request, 32
-//!   lowercase hex digits.
+//!   lowercase hex digits;
+//! - a batch id ([`BatchId`]), a bulk upload's: 16 bytes drawn when the upload is recorded, 32 lowercase hex digits.
 
 pub use kac_core::geometry::hash::ShapeId;
 use std::fmt;
@@ -56,6 +57,50 @@ impl fmt::Display for JobId {
 impl fmt::Debug for JobId {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "JobId({})", self.hex())
+    }
+}
+
+/// A bulk upload's batch: 16 bytes, written as 32 lowercase hex digits. Drawn, not a content hash: two uploads of
+/// the same files are two batches, each with its own progress.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct BatchId(pub [u8; 16]);
+
+impl BatchId {
+    /// The id its 32 lowercase hex digits name; nothing else parses.
+    pub fn parse(s: &str) -> Option<BatchId> {
+        let mut b = [0u8; 16];
+        lower_hex(s, &mut b).then_some(BatchId(b))
+    }
+    /// A new id: SHA-256 over the time, the process, a counter of this process and `seed` (the batch's jobs), so
+    /// that no two batches of any replica share one without a random source.
+    pub fn draw(seed: &[u8]) -> BatchId {
+        use sha2::{Digest, Sha256};
+        use std::sync::atomic::{AtomicU64, Ordering};
+        static DRAWN: AtomicU64 = AtomicU64::new(0);
+        let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        let mut h = Sha256::new();
+        h.update(t.as_nanos().to_le_bytes());
+        h.update(std::process::id().to_le_bytes());
+        h.update(DRAWN.fetch_add(1, Ordering::Relaxed).to_le_bytes());
+        h.update(seed);
+        let mut b = [0u8; 16];
+        b.copy_from_slice(&h.finalize()[..16]);
+        BatchId(b)
+    }
+    pub fn hex(&self) -> String {
+        self.0.iter().map(|b| format!("{b:02x}")).collect()
+    }
+}
+
+impl fmt::Display for BatchId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.hex())
+    }
+}
+
+impl fmt::Debug for BatchId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "BatchId({})", self.hex())
     }
 }
 
@@ -113,6 +158,10 @@ mod tests {
             assert!(ShapeId::parse(&format!("{bad}{bad}")).is_none(), "{bad:?}");
         }
         assert!(ShapeId::parse("..%2Fx").is_none() && JobId::parse(&shape).is_none());
+        assert_eq!(BatchId::parse(job).map(|b| b.hex()), Some(job.to_string()));
+        assert!(BatchId::parse(&shape).is_none() && BatchId::parse("0123456789ABCDEF0123456789ABCDEF").is_none());
+        let (a, b) = (BatchId::draw(b"x"), BatchId::draw(b"x"));
+        assert!(a != b && BatchId::parse(&a.hex()) == Some(a), "drawn twice, two ids");
     }
 
     #[test]

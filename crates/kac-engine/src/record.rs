@@ -27,6 +27,12 @@ impl Status {
             Status::Canceled => "canceled",
         }
     }
+    /// The status a [`Status::name`] names.
+    pub fn from_name(name: &str) -> Option<Status> {
+        [Status::Enqueued, Status::Processing, Status::Succeeded, Status::Failed, Status::Canceled]
+            .into_iter()
+            .find(|s| s.name() == name)
+    }
 }
 
 #[derive(Debug, Clone, Serialize, serde::Deserialize, utoipa::ToSchema)]
@@ -80,6 +86,67 @@ pub struct JobView {
     pub result: Option<String>,
     /// The request, canonical (defaults filled in).
     pub request: serde_json::Value,
+}
+
+/// How far a bulk upload's jobs have got: its jobs by status, read from the queue (on every replica the same).
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
+pub struct BatchProgress {
+    /// The batch's id (32 hex digits).
+    pub batch: String,
+    /// When the batch was recorded (RFC 3339).
+    pub created_at: String,
+    /// The batch's jobs, each once (a file sent twice in one upload names one job).
+    pub total: usize,
+    pub enqueued: usize,
+    pub processing: usize,
+    pub succeeded: usize,
+    pub failed: usize,
+    pub canceled: usize,
+    /// Every job has ended (succeeded, failed or canceled); true for a batch without jobs.
+    pub done: bool,
+    /// The first failed jobs' ids, in the batch's order (at most 10).
+    pub failed_jobs: Vec<String>,
+}
+
+impl BatchProgress {
+    /// Failed jobs named in a progress report: enough to look at, few enough for a 10,000-job batch.
+    pub const FAILED_SHOWN: usize = 10;
+
+    /// The report of a batch whose jobs have these statuses (in the batch's order; one per job); the first failed
+    /// ones named.
+    pub fn tally<'a>(
+        batch: &crate::ids::BatchId,
+        created_at: String,
+        jobs: impl IntoIterator<Item = (&'a str, Status)>,
+    ) -> BatchProgress {
+        let mut p = BatchProgress {
+            batch: batch.hex(),
+            created_at,
+            total: 0,
+            enqueued: 0,
+            processing: 0,
+            succeeded: 0,
+            failed: 0,
+            canceled: 0,
+            done: false,
+            failed_jobs: vec![],
+        };
+        for (id, status) in jobs {
+            p.total += 1;
+            *match status {
+                Status::Enqueued => &mut p.enqueued,
+                Status::Processing => &mut p.processing,
+                Status::Succeeded => &mut p.succeeded,
+                Status::Failed => &mut p.failed,
+                Status::Canceled => &mut p.canceled,
+            } += 1;
+            if status == Status::Failed && p.failed_jobs.len() < Self::FAILED_SHOWN {
+                p.failed_jobs.push(id.to_string());
+            }
+        }
+        p.done = p.succeeded + p.failed + p.canceled == p.total;
+        p
+    }
 }
 
 pub fn now() -> String {

@@ -132,6 +132,9 @@ pub fn render(state: &AppState) -> String {
     let _ = writeln!(out, "# HELP kac_queue_capacity Configured queue capacity.");
     let _ = writeln!(out, "# TYPE kac_queue_capacity gauge");
     let _ = writeln!(out, "kac_queue_capacity {}", state.jobs.capacity);
+    let _ = writeln!(out, "# HELP kac_queue_backlog Bulk uploads' jobs waiting in the backlog lane.");
+    let _ = writeln!(out, "# TYPE kac_queue_backlog gauge");
+    let _ = writeln!(out, "kac_queue_backlog {}", state.jobs.backlog().unwrap_or(0));
     let mut by_status: BTreeMap<&str, u64> = BTreeMap::new();
     for s in [Status::Enqueued, Status::Processing, Status::Succeeded, Status::Failed, Status::Canceled] {
         by_status.insert(s.name(), 0);

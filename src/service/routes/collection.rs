@@ -1,9 +1,12 @@
 //! Collections: a shape's tags (`/v1/shapes/{id}/tags`), which a search may be limited to, and bulk ingest
-//! (`/v1/shapes/bulk`): many shapes in one request, each answered on its own, with their fingerprint jobs started.
+//! (`/v1/shapes/bulk`): many shapes in one request, each answered on its own, with their fingerprint jobs started
+//! in the queue's backlog lane (never refused for capacity: bounded by `--max-backlog` before anything is stored)
+//! and recorded as a batch whose progress `/v1/shapes/bulk/{batch}` tells.
 
 use super::archive::{unzip, Expansion};
 use super::shapes::{ingest, shape_resource, ShapeResource, Upload};
 use super::*;
+use crate::service::ids::{BatchPath, JobId};
 use crate::service::search::MAX_TAGS;
 use crate::service::store::{TagEdit, TagsOutcome};
 
@@ -107,6 +110,15 @@ fn default_fingerprint() -> Option<BulkFingerprint> {
     Some(BulkFingerprint::default())
 }
 
+/// The job a bulk upload starts for each stored shape: the one place that says which analysis fingerprints it.
+fn fingerprint_job(fp: &BulkFingerprint) -> Analysis {
+    Analysis::Fingerprint {
+        options: fp.options.clone(),
+        operator: fp.operator.clone(),
+        solver: analysis::SolverSpec::default(),
+    }
+}
+
 /// One file of a bulk upload.
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct BulkFile {
@@ -116,7 +128,8 @@ pub struct BulkFile {
     pub status: u16,
     /// The shape stored (also for a file failed for its tags: stored, but without them).
     pub shape: Option<ShapeResource>,
-    /// The fingerprint job started (or found: the same job again) for it.
+    /// The fingerprint job started (or found: the same job again) for it, in the backlog lane: it may wait there
+    /// behind interactive jobs and earlier uploads, and starts as workers free up.
     pub job: Option<JobResource>,
     /// Why the file was not stored, or why its job could not start (the shape is stored then).
     pub problem: Option<crate::service::error::Problem>,
@@ -129,10 +142,27 @@ pub struct BulkResult {
     pub existing: usize,
     /// Files not stored, or stored without the tags asked for (each with its `problem`).
     pub failed: usize,
-    /// Files stored whose fingerprint job could not start (the queue full, say; each with its `problem`): send them
-    /// again (a stored shape answers 200 and gets its job then).
+    /// Files stored whose fingerprint job could not be recorded: the store failed as it was written, or the
+    /// fingerprint is refused for that shape (a limit, or a kind it does not apply to); each with its `problem`.
+    /// Never for the queue's capacity (the jobs wait in the backlog lane). Send them again (a stored shape answers
+    /// 200 and gets its job then).
     pub unstarted: usize,
+    /// The batch of this upload's jobs (32 hex digits): every job started or found for its files.
+    pub batch: String,
+    /// Where the batch's progress is read: `/v1/shapes/bulk/{batch}`.
+    pub progress: String,
     pub files: Vec<BulkFile>,
+}
+
+/// The progress of a bulk upload's fingerprint jobs.
+#[utoipa::path(get, path = "/v1/shapes/bulk/{batch}", tag = "shapes", params(("batch" = String, Path)),
+    responses((status = 200, body = jobs::BatchProgress),
+              (status = 404, body = crate::service::error::Problem, content_type = "application/problem+json")))]
+pub(crate) async fn bulk_progress(
+    State(st): State<AppState>,
+    BatchPath(batch): BatchPath,
+) -> Result<Json<jobs::BatchProgress>, ApiError> {
+    st.jobs.batch(&batch)?.map(Json).ok_or(ApiError::NotFound { what: "batch", id: batch.hex() })
 }
 
 /// Most files one bulk request may hold (archives' entries included).
@@ -144,6 +174,12 @@ pub const MAX_BULK_FILES: usize = 10_000;
 /// lists every file with its shape, job, or problem. A bad file does not stop the others (a file stored whose
 /// tags are refused is counted `failed`, with its problem); the request's limits (body size, read time) apply to
 /// the whole body.
+///
+/// The fingerprint jobs wait in the queue's backlog lane, which `--queue-capacity` does not bound: they start in
+/// order as workers free up, after interactive jobs, and survive a restart. The answer names the upload's batch and
+/// where its progress is read. Back-pressure comes before anything is stored: when the backlog's waiting jobs plus
+/// the request's files exceed `--max-backlog`, the answer is 503 `queue-full` with Retry-After and nothing is
+/// stored.
 ///
 /// Archives: the files of a request's archives expand to at most `--max-body-bytes` together (what they could
 /// take sent unpacked), and the memory holding them is reserved against `--max-body-memory-bytes` as it is
@@ -157,7 +193,7 @@ pub const MAX_BULK_FILES: usize = 10_000;
         (status = 400, description = "not multipart, no file part, a part with an empty file name, two options parts, bad options (a key twice included), too many files, or an archive that cannot be read, names an entry twice, holds an archive or expands beyond --max-body-bytes", body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "too large", body = crate::service::error::Problem, content_type = "application/problem+json"),
         (status = 422, description = "an unknown field in the options", body = crate::service::error::Problem, content_type = "application/problem+json"),
-        (status = 503, description = "too many connections (too-many-connections), or request bodies in flight and the files of archives being expanded hold --max-body-memory-bytes (memory-busy), with Retry-After", body = crate::service::error::Problem, content_type = "application/problem+json", headers(("Retry-After" = u64)))))]
+        (status = 503, description = "the backlog's waiting jobs plus this request's files exceed --max-backlog (queue-full; nothing stored), too many connections (too-many-connections), request bodies in flight and the files of archives being expanded hold --max-body-memory-bytes (memory-busy), with Retry-After; or the store failed (not-ready)", body = crate::service::error::Problem, content_type = "application/problem+json", headers(("Retry-After" = u64)))))]
 pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Result<Json<BulkResult>, ApiError> {
     let ct = req.headers().get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
     if !ct.to_ascii_lowercase().starts_with("multipart/form-data") {
@@ -241,7 +277,24 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
             )));
         }
     }
-    let mut out = BulkResult { created: 0, existing: 0, failed: 0, unstarted: 0, files: vec![] };
+    // Back-pressure before anything is stored: every file counts (some may fail or find their job done).
+    if options.fingerprint.is_some() {
+        let backlog = st.jobs.backlog()?;
+        let limit = st.engine.config.max_backlog;
+        if backlog.saturating_add(files.len()) > limit {
+            return Err(ApiError::BacklogFull { backlog, files: files.len(), limit, retry_after_s: 5 });
+        }
+    }
+    let mut out = BulkResult {
+        created: 0,
+        existing: 0,
+        failed: 0,
+        unstarted: 0,
+        batch: String::new(),
+        progress: String::new(),
+        files: vec![],
+    };
+    let mut batch: Vec<JobId> = vec![];
     for (name, bytes) in files {
         let up = Upload::file(bytes, Some(name.clone()));
         let (created, shape) = match ingest(&st, up).await {
@@ -269,18 +322,17 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         } else {
             out.existing += 1;
         }
-        let started = (|| -> Result<Option<JobResource>, ApiError> {
-            let Some(fp) = &options.fingerprint else { return Ok(None) };
-            let analysis = Analysis::Fingerprint {
-                options: fp.options.clone(),
-                operator: fp.operator.clone(),
-                solver: analysis::SolverSpec::default(),
-            };
-            let (job, _) = jobs::submit(&st.jobs, &st.engine.config, shape.clone(), analysis)?;
-            Ok(Some(job_resource(&job)))
-        })();
+        let started = match &options.fingerprint {
+            None => Ok(None),
+            Some(fp) => jobs::submit_backlog(&st.jobs, &st.engine.config, shape.clone(), fingerprint_job(fp))
+                .map(|(job, _)| Some(job))
+                .map_err(ApiError::from),
+        };
         let (job, problem) = match started {
-            Ok(job) => (job, None),
+            Ok(job) => {
+                batch.extend(job.as_ref().and_then(|j| JobId::parse(&j.id)));
+                (job.as_ref().map(job_resource), None)
+            }
             Err(e) => {
                 out.unstarted += 1;
                 (None, Some(e.problem().1))
@@ -295,6 +347,11 @@ pub(crate) async fn bulk_upload(State(st): State<AppState>, req: Request) -> Res
         };
         out.files.push(file);
     }
+    // Recorded once the jobs are: a store that fails here answers 503, and the upload sent again finds its shapes
+    // and jobs stored (200, the same jobs) under a new batch.
+    let batch = st.jobs.put_batch(&batch)?;
+    out.progress = format!("/v1/shapes/bulk/{batch}");
+    out.batch = batch.hex();
     drop(expansion);
     Ok(Json(out))
 }

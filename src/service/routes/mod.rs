@@ -59,6 +59,7 @@ pub fn router(state: AppState) -> Router {
         .route("/readyz", get(readyz))
         .route("/v1/shapes", post(upload_shape).get(list_shapes))
         .route("/v1/shapes/bulk", post(bulk_upload))
+        .route("/v1/shapes/bulk/{batch}", get(bulk_progress))
         .route("/v1/shapes/{id}", get(get_shape).delete(delete_shape))
         .route("/v1/shapes/{id}/tags", get(get_tags).put(put_tags))
         .route("/v1/shapes/{id}/geometry", get(get_geometry))

@@ -3,8 +3,8 @@
 //! cancellation goes through its stop flag, a timer stops jobs that run too long, and a panic inside a job fails
 //! that job only.
 
-use super::ids::{JobId, ShapeId};
-use super::store::{Enqueued, JobQueue, Lease, StoredResult, StoredShape};
+use super::ids::{BatchId, JobId, ShapeId};
+use super::store::{Enqueued, JobQueue, Lane, Lease, StoredResult, StoredShape};
 use crate::analysis::{self, Analysis, Hooks};
 use crate::config::EngineConfig;
 use crate::failure::Failure;
@@ -22,7 +22,7 @@ mod runner;
 mod slices;
 pub use crate::clock::{Clock, ManualClock, SystemClock};
 pub use crate::error::{JobError, Limit};
-pub use crate::record::{now, ArrayLinks, JobProgress, JobView, Status};
+pub use crate::record::{now, ArrayLinks, BatchProgress, JobProgress, JobView, Status};
 use runner::canceled;
 pub use runner::{result_of, supervise, Beats};
 pub use slices::{SliceRequest, SLICE_JOB};
@@ -84,7 +84,8 @@ pub struct Jobs {
     pub queue: Arc<dyn JobQueue>,
     /// Jobs running here, by id.
     pub running: Mutex<HashMap<String, Arc<Job>>>,
-    /// Enqueued plus processing jobs the queue takes (on all replicas together).
+    /// Enqueued plus processing jobs the run lane takes (on all replicas together); the backlog lane is not bounded
+    /// here (see [`submit_backlog`]).
     pub capacity: usize,
     /// How long a claim lasts without a heartbeat.
     pub lease: Duration,
@@ -294,13 +295,35 @@ pub fn submit(
     shape: Arc<StoredShape>,
     analysis: Analysis,
 ) -> Result<(JobView, bool), JobError> {
+    submit_in(jobs, config, shape, analysis, Lane::Run)
+}
+
+/// Submits a job of a bulk upload as [`submit`] does, in the backlog lane: never refused for the queue's capacity,
+/// it waits in the store behind the run lane and starts as workers free up. The caller bounds the backlog
+/// (`--max-backlog`, with [`Jobs::backlog`]) before it stores anything.
+pub fn submit_backlog(
+    jobs: &Jobs,
+    config: &EngineConfig,
+    shape: Arc<StoredShape>,
+    analysis: Analysis,
+) -> Result<(JobView, bool), JobError> {
+    submit_in(jobs, config, shape, analysis, Lane::Backlog)
+}
+
+fn submit_in(
+    jobs: &Jobs,
+    config: &EngineConfig,
+    shape: Arc<StoredShape>,
+    analysis: Analysis,
+    lane: Lane,
+) -> Result<(JobView, bool), JobError> {
     analysis.supported(&shape.validated.shape).map_err(JobError::Analysis)?;
     super::limits::check_limits(config, &analysis)?;
     super::limits::check_work(config, &analysis, &shape.validated)?;
     let canonical = serde_json::to_value(&analysis).map_err(|e| JobError::Internal(e.to_string()))?;
     let id = job_id(&shape.id, &canonical);
     let shape_id = shape.id.clone();
-    jobs.enqueue(id, shape_id, analysis.name(), canonical)
+    jobs.enqueue_in(id, shape_id, analysis.name(), canonical, lane)
 }
 
 /// Submits a comparison of stored shapes (the request's `shape_ids` resolved, in that order), or returns the
@@ -384,14 +407,26 @@ pub fn submit_correspondence(
 }
 
 impl Jobs {
-    /// Enqueues a request under its id unless a job with that id is queued, running or done (true: newly
-    /// enqueued).
+    /// Enqueues a request under its id in the run lane unless a job with that id is queued, running or done (true:
+    /// newly enqueued).
     fn enqueue(
         &self,
         id: String,
         shape_id: String,
         analysis: &str,
         canonical: serde_json::Value,
+    ) -> Result<(JobView, bool), JobError> {
+        self.enqueue_in(id, shape_id, analysis, canonical, Lane::Run)
+    }
+
+    /// [`Jobs::enqueue`] in a given lane.
+    fn enqueue_in(
+        &self,
+        id: String,
+        shape_id: String,
+        analysis: &str,
+        canonical: serde_json::Value,
+        lane: Lane,
     ) -> Result<(JobView, bool), JobError> {
         let view = JobView {
             id,
@@ -406,7 +441,7 @@ impl Jobs {
             result: None,
             request: canonical,
         };
-        match self.queue.enqueue(view, self.capacity)? {
+        match self.queue.enqueue(view, lane, self.capacity)? {
             Enqueued::Existing(v) => Ok((v, false)),
             Enqueued::Full => Err(JobError::QueueFull { capacity: self.capacity }),
             Enqueued::New(v) => {
@@ -415,6 +450,24 @@ impl Jobs {
                 Ok((v, true))
             }
         }
+    }
+
+    /// Jobs waiting in the backlog lane (on all replicas together).
+    pub fn backlog(&self) -> Result<usize, JobError> {
+        Ok(self.queue.backlog()?)
+    }
+
+    /// Records a bulk upload's jobs as a new batch; its id.
+    pub fn put_batch(&self, jobs: &[JobId]) -> Result<BatchId, JobError> {
+        let seed: Vec<u8> = jobs.iter().flat_map(|j| j.0).collect();
+        let batch = BatchId::draw(&seed);
+        self.queue.put_batch(&batch, jobs)?;
+        Ok(batch)
+    }
+
+    /// A batch's progress (None: no such batch).
+    pub fn batch(&self, batch: &BatchId) -> Result<Option<BatchProgress>, JobError> {
+        Ok(self.queue.batch(batch)?)
     }
 
     /// Cancels a job: an enqueued one at once, a running one at its next stop-flag check (here at once; on another

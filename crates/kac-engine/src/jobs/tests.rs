@@ -38,10 +38,10 @@ fn progress(phase: &str) -> JobProgress {
 fn conformance(q: &dyn JobQueue, clock: &ManualClock) {
     let (a, b, c) = (view(1), view(2), view(3));
     // Enqueue: new, then the same id again is that job; a full queue refuses.
-    assert!(matches!(q.enqueue(a.clone(), 2).unwrap(), Enqueued::New(_)));
-    assert!(matches!(q.enqueue(a.clone(), 2).unwrap(), Enqueued::Existing(v) if v.id == a.id));
-    assert!(matches!(q.enqueue(b.clone(), 2).unwrap(), Enqueued::New(_)));
-    assert!(matches!(q.enqueue(c.clone(), 2).unwrap(), Enqueued::Full));
+    assert!(matches!(q.enqueue(a.clone(), Lane::Run, 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(a.clone(), Lane::Run, 2).unwrap(), Enqueued::Existing(v) if v.id == a.id));
+    assert!(matches!(q.enqueue(b.clone(), Lane::Run, 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(c.clone(), Lane::Run, 2).unwrap(), Enqueued::Full));
     assert_eq!(q.depth().unwrap(), (2, 0));
     // Claims take the oldest first, for one owner each.
     let got = q.claim("w:1", LEASE).unwrap().unwrap();
@@ -72,14 +72,16 @@ fn conformance(q: &dyn JobQueue, clock: &ManualClock) {
     assert_eq!(again.id, a.id);
     assert!(q.finish(&a.id, "w:2", &done).unwrap());
     assert_eq!(q.get(&jid(&a)).unwrap().unwrap().status, Status::Succeeded);
-    assert!(matches!(q.enqueue(a.clone(), 2).unwrap(), Enqueued::Existing(v) if v.status == Status::Succeeded));
+    assert!(
+        matches!(q.enqueue(a.clone(), Lane::Run, 2).unwrap(), Enqueued::Existing(v) if v.status == Status::Succeeded)
+    );
     // Cancel: an enqueued job at once, with the problem given.
     let problem = canceled();
     let v = q.cancel(&jid(&b), &problem).unwrap().unwrap();
     assert_eq!((v.status, v.error.map(|p| p.code)), (Status::Canceled, Some(problem.code)));
     // A canceled job enqueued again goes to the back of the queue.
-    assert!(matches!(q.enqueue(c.clone(), 2).unwrap(), Enqueued::New(_)));
-    assert!(matches!(q.enqueue(b.clone(), 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(c.clone(), Lane::Run, 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(b.clone(), Lane::Run, 2).unwrap(), Enqueued::New(_)));
     assert_eq!(q.claim("w:3", LEASE).unwrap().unwrap().id, c.id);
     // A processing job: the cancel is a request its holder sees at its next beat.
     let v = q.cancel(&jid(&c), &problem).unwrap().unwrap();
@@ -98,7 +100,7 @@ fn conformance(q: &dyn JobQueue, clock: &ManualClock) {
     assert_eq!(q.get(&jid(&b)).unwrap().unwrap().status, Status::Enqueued);
     // A job claimed by its id: taken though an older one waits, once; one not enqueued is not claimed.
     let d = view(4);
-    assert!(matches!(q.enqueue(d.clone(), 2).unwrap(), Enqueued::New(_)));
+    assert!(matches!(q.enqueue(d.clone(), Lane::Run, 2).unwrap(), Enqueued::New(_)));
     assert!(q.claim_id(&a.id, "w:5", LEASE).unwrap().is_none(), "succeeded");
     assert!(q.claim_id(&c.id, "w:5", LEASE).unwrap().is_none(), "canceled");
     let mine = q.claim_id(&d.id, "w:5", LEASE).unwrap().unwrap();
@@ -123,6 +125,138 @@ fn the_sqlite_queue_keeps_the_queues_contract() {
     let clock = Arc::new(ManualClock::default());
     let db = Database::open_with_clock(dir.path(), 1000, 1 << 20, clock.clone()).unwrap();
     conformance(&db, &clock);
+}
+
+/// The lanes, on every queue: backlog jobs are never refused and do not count against the capacity; claims take
+/// the run lane first, each lane oldest first; a backlog job a run request asks for again moves to the run lane when
+/// it has room; requeued and recovered jobs keep their lane; a batch's progress follows its jobs and survives a
+/// restart. `reopen`: the same store opened again (a restart).
+fn lanes(q: Arc<dyn JobQueue>, clock: &ManualClock, reopen: &dyn Fn() -> Arc<dyn JobQueue>) {
+    let id = |n: u8| view(n).id;
+    let new = |n: u8, lane: Lane| matches!(q.enqueue(view(n), lane, 2).unwrap(), Enqueued::New(_));
+    let claim = |q: &dyn JobQueue, owner: &str| q.claim(owner, LEASE).unwrap().map(|v| v.id);
+    let end = |n: u8, owner: &str, status: Status| {
+        let mut v = q.get(&jid(&view(n))).unwrap().unwrap();
+        v.status = status;
+        assert!(q.finish(&v.id.clone(), owner, &v).unwrap(), "{n} finished by {owner}");
+    };
+    // Five backlog jobs, then the run lane filled to its capacity of 2: the backlog counted in neither.
+    for n in 10..15 {
+        assert!(new(n, Lane::Backlog));
+    }
+    assert!(new(1, Lane::Run) && new(2, Lane::Run));
+    assert!(matches!(q.enqueue(view(3), Lane::Run, 2).unwrap(), Enqueued::Full));
+    assert!(new(15, Lane::Backlog), "the backlog takes jobs while the run lane is full");
+    assert_eq!((q.backlog().unwrap(), q.depth().unwrap()), (6, (8, 0)));
+    // A batch of three of them (one named twice).
+    let batch = BatchId::draw(b"lanes");
+    q.put_batch(&batch, &[jid(&view(10)), jid(&view(11)), jid(&view(10)), jid(&view(12))]).unwrap();
+    let p = q.batch(&batch).unwrap().unwrap();
+    assert_eq!((p.total, p.enqueued, p.done, p.batch.clone()), (3, 3, false, batch.hex()));
+    // A run request for a backlog job while the run lane is full: the same job, left in the backlog.
+    assert!(matches!(q.enqueue(view(13), Lane::Run, 2).unwrap(), Enqueued::Existing(v) if v.id == id(13)));
+    assert_eq!(q.backlog().unwrap(), 6);
+    // The run lane first, though the backlog is older; then the backlog's oldest. A processing backlog job does not
+    // count against the capacity; processing run jobs do.
+    assert_eq!(claim(&*q, "w:1"), Some(id(1)));
+    assert_eq!(claim(&*q, "w:2"), Some(id(2)));
+    assert_eq!(claim(&*q, "w:10"), Some(id(10)));
+    assert!(matches!(q.enqueue(view(3), Lane::Run, 2).unwrap(), Enqueued::Full));
+    assert_eq!(q.backlog().unwrap(), 5);
+    let p = q.batch(&batch).unwrap().unwrap();
+    assert_eq!((p.enqueued, p.processing), (2, 1));
+    // Room in the run lane: the backlog job asked for moves there and is claimed before older backlog jobs.
+    end(1, "w:1", Status::Succeeded);
+    assert!(
+        matches!(q.enqueue(view(13), Lane::Run, 2).unwrap(), Enqueued::Existing(v) if v.status == Status::Enqueued)
+    );
+    assert_eq!(q.backlog().unwrap(), 4);
+    assert!(matches!(q.enqueue(view(3), Lane::Run, 2).unwrap(), Enqueued::Full), "the moved job counts");
+    assert_eq!(claim(&*q, "w:13"), Some(id(13)));
+    end(2, "w:2", Status::Succeeded);
+    assert!(new(4, Lane::Run));
+    // Expired claims go back to their own lane: 13 before 4 (older, both run), 10 after them (backlog).
+    clock.advance(LEASE * 2);
+    let mut requeued = q.requeue_expired(&[]).unwrap();
+    requeued.sort();
+    let mut want = vec![id(10), id(13)];
+    want.sort();
+    assert_eq!(requeued, want);
+    assert_eq!(q.backlog().unwrap(), 5);
+    // A restart with a run job processing: recovered to the run lane, the backlog still behind it, the batch kept.
+    assert_eq!(claim(&*q, "w:13b"), Some(id(13)));
+    let q2 = reopen();
+    assert_eq!(q2.recover().unwrap(), 7);
+    assert_eq!(q2.backlog().unwrap(), 5);
+    assert_eq!(q2.batch(&batch).unwrap().unwrap().enqueued, 3);
+    let order: Vec<Option<String>> = (0..7).map(|i| claim(&*q2, &format!("r:{i}"))).collect();
+    let want: Vec<Option<String>> = [13, 4, 10, 11, 12, 14, 15].iter().map(|&n| Some(id(n))).collect();
+    assert_eq!(order, want);
+    assert_eq!((q2.backlog().unwrap(), claim(&*q2, "r:8")), (0, None));
+    // The batch's jobs end: its progress says so, the failed one named. A batch is recorded once.
+    for (n, owner, status) in
+        [(10, "r:2", Status::Failed), (11, "r:3", Status::Succeeded), (12, "r:4", Status::Canceled)]
+    {
+        let mut v = q2.get(&jid(&view(n))).unwrap().unwrap();
+        v.status = status;
+        assert!(q2.finish(&v.id.clone(), owner, &v).unwrap());
+    }
+    q2.put_batch(&batch, &[jid(&view(1))]).unwrap();
+    let p = reopen().batch(&batch).unwrap().unwrap();
+    let counts = (p.total, p.enqueued, p.processing, p.succeeded, p.failed, p.canceled, p.done);
+    assert_eq!((counts, p.failed_jobs), ((3, 0, 0, 1, 1, 1, true), vec![id(10)]));
+    assert!(q2.batch(&BatchId::draw(b"other")).unwrap().is_none());
+    let empty = BatchId::draw(b"empty");
+    q2.put_batch(&empty, &[]).unwrap();
+    assert!(q2.batch(&empty).unwrap().is_some_and(|p| p.total == 0 && p.done));
+}
+
+#[test]
+fn the_memory_queue_keeps_the_lanes() {
+    let clock = Arc::new(ManualClock::default());
+    let q: Arc<dyn JobQueue> = Arc::new(MemoryQueue::new(clock.clone()));
+    let same = q.clone();
+    lanes(q, &clock, &move || same.clone());
+}
+
+#[test]
+fn the_sqlite_queue_keeps_the_lanes() {
+    let dir = tempfile::tempdir().unwrap();
+    let clock = Arc::new(ManualClock::default());
+    let open = {
+        let (path, clock) = (dir.path().to_path_buf(), clock.clone());
+        move || -> Arc<dyn JobQueue> {
+            Arc::new(Database::open_with_clock(&path, 1000, 1 << 20, clock.clone()).unwrap())
+        }
+    };
+    lanes(open(), &clock, &open);
+}
+
+/// A data directory of a version without lanes: its jobs ran in the run lane, and go on in it after the migration.
+#[test]
+fn a_jobs_table_without_lanes_is_migrated_to_the_run_lane() {
+    let dir = tempfile::tempdir().unwrap();
+    {
+        let c = rusqlite::Connection::open(dir.path().join("kac.sqlite3")).unwrap();
+        c.execute_batch(
+            "CREATE TABLE jobs (seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, view TEXT NOT NULL,
+                 status TEXT NOT NULL DEFAULT 'enqueued', owner TEXT, lease_until INTEGER NOT NULL DEFAULT 0,
+                 cancel INTEGER NOT NULL DEFAULT 0);",
+        )
+        .unwrap();
+        let v = view(1);
+        c.execute("INSERT INTO jobs (id, view) VALUES (?1, ?2)", [&v.id, &serde_json::to_string(&v).unwrap()]).unwrap();
+    }
+    let clock = Arc::new(ManualClock::default());
+    let db = Database::open_with_clock(dir.path(), 1000, 1 << 20, clock.clone()).unwrap();
+    assert_eq!(db.backlog().unwrap(), 0);
+    assert!(matches!(db.enqueue(view(2), Lane::Backlog, 1).unwrap(), Enqueued::New(_)));
+    assert!(matches!(db.enqueue(view(3), Lane::Run, 1).unwrap(), Enqueued::Full), "the old job is a run job");
+    assert_eq!(db.claim("w", LEASE).unwrap().map(|v| v.id), Some(view(1).id));
+    drop(db);
+    // Opened again: the migration is not run twice.
+    let db = Database::open_with_clock(dir.path(), 1000, 1 << 20, clock).unwrap();
+    assert_eq!(db.backlog().unwrap(), 1);
 }
 
 /// An engine on an in-memory queue and a manual clock, with no workers: the tests run its jobs by hand.

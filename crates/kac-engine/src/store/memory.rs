@@ -2,11 +2,11 @@
 //! with leases read from the engine's [`Clock`]. The job engine's in-process tests run on it (and the queue's
 //! conformance tests hold it and the SQLite queue to the same behaviour).
 
-use super::queue::{release, Enqueued, JobQueue, Lease};
+use super::queue::{distinct, release, Enqueued, JobQueue, Lane, Lease};
 use crate::clock::Clock;
 use crate::failure::Failure;
-use crate::ids::JobId;
-use crate::record::{now, JobProgress, JobView, Status};
+use crate::ids::{BatchId, JobId};
+use crate::record::{now, BatchProgress, JobProgress, JobView, Status};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -14,6 +14,7 @@ use tokio::sync::broadcast;
 
 struct Row {
     seq: u64,
+    lane: Lane,
     view: JobView,
     owner: Option<String>,
     lease_until: i64,
@@ -24,6 +25,18 @@ struct Row {
 struct Rows {
     next_seq: u64,
     jobs: HashMap<String, Row>,
+    /// Batches: when recorded, and their jobs in order.
+    batches: HashMap<BatchId, (String, Vec<String>)>,
+}
+
+impl Rows {
+    /// The run lane's enqueued and processing jobs (what the capacity bounds).
+    fn running_lane(&self) -> usize {
+        self.jobs
+            .values()
+            .filter(|r| r.lane == Lane::Run && matches!(r.view.status, Status::Enqueued | Status::Processing))
+            .count()
+    }
 }
 
 pub struct MemoryQueue {
@@ -42,7 +55,7 @@ impl MemoryQueue {
     fn announce(&self, id: &str) {
         let _ = self.changes.send(id.to_string());
     }
-    /// Claims the oldest enqueued job, or `only` if it is enqueued.
+    /// Claims the oldest enqueued job of the run lane, else of the backlog, or `only` if it is enqueued.
     fn claim_where(&self, only: Option<&str>, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
         let mut rows = self.rows();
         let until = self.clock.wall_ms() + lease.as_millis() as i64;
@@ -50,7 +63,7 @@ impl MemoryQueue {
             .jobs
             .values_mut()
             .filter(|r| r.view.status == Status::Enqueued && only.is_none_or(|id| r.view.id == id))
-            .min_by_key(|r| r.seq)
+            .min_by_key(|r| (r.lane.rank(), r.seq))
         else {
             return Ok(None);
         };
@@ -85,22 +98,24 @@ impl MemoryQueue {
 }
 
 impl JobQueue for MemoryQueue {
-    fn enqueue(&self, view: JobView, capacity: usize) -> std::io::Result<Enqueued> {
+    fn enqueue(&self, view: JobView, lane: Lane, capacity: usize) -> std::io::Result<Enqueued> {
         let mut rows = self.rows();
-        if let Some(old) = rows.jobs.get(&view.id) {
+        let room = rows.running_lane() < capacity;
+        if let Some(old) = rows.jobs.get_mut(&view.id) {
             if !matches!(old.view.status, Status::Failed | Status::Canceled) {
+                if lane == Lane::Run && old.lane == Lane::Backlog && old.view.status == Status::Enqueued && room {
+                    old.lane = Lane::Run;
+                }
                 return Ok(Enqueued::Existing(old.view.clone()));
             }
         }
-        let active =
-            rows.jobs.values().filter(|r| matches!(r.view.status, Status::Enqueued | Status::Processing)).count();
-        if active >= capacity {
+        if lane == Lane::Run && !room {
             return Ok(Enqueued::Full);
         }
         // A failed or canceled job enqueued again goes to the back of the queue.
         rows.next_seq += 1;
         let seq = rows.next_seq;
-        let row = Row { seq, view: view.clone(), owner: None, lease_until: 0, cancel: false };
+        let row = Row { seq, lane, view: view.clone(), owner: None, lease_until: 0, cancel: false };
         rows.jobs.insert(view.id.clone(), row);
         drop(rows);
         self.announce(&view.id);
@@ -182,6 +197,19 @@ impl JobQueue for MemoryQueue {
     }
     fn waiting(&self, except: &str) -> std::io::Result<usize> {
         Ok(self.rows().jobs.values().filter(|r| r.view.status == Status::Enqueued && r.view.analysis != except).count())
+    }
+    fn backlog(&self) -> std::io::Result<usize> {
+        Ok(self.rows().jobs.values().filter(|r| r.lane == Lane::Backlog && r.view.status == Status::Enqueued).count())
+    }
+    fn put_batch(&self, batch: &BatchId, jobs: &[JobId]) -> std::io::Result<()> {
+        self.rows().batches.entry(*batch).or_insert_with(|| (now(), distinct(jobs)));
+        Ok(())
+    }
+    fn batch(&self, batch: &BatchId) -> std::io::Result<Option<BatchProgress>> {
+        let rows = self.rows();
+        let Some((created_at, ids)) = rows.batches.get(batch) else { return Ok(None) };
+        let statuses = ids.iter().filter_map(|id| rows.jobs.get(id).map(|r| (id.as_str(), r.view.status)));
+        Ok(Some(BatchProgress::tally(batch, created_at.clone(), statuses)))
     }
     fn changes(&self) -> broadcast::Receiver<String> {
         self.changes.subscribe()

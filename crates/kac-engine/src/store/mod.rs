@@ -58,7 +58,7 @@ pub fn open(config: &crate::config::EngineConfig) -> std::io::Result<Backend> {
         format!("--store {store}: give sqlite:DIR or postgres://…"),
     ))
 }
-pub use queue::{Enqueued, JobQueue, Lease};
+pub use queue::{Enqueued, JobQueue, Lane, Lease};
 pub use sqlite::{write_atomic, Database, FileResults};
 
 /// A map bounded by bytes: the least recently used entries go first. Values are shared (`Arc`).

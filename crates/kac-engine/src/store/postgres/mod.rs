@@ -11,8 +11,8 @@
 
 use super::*;
 use crate::failure::Failure;
-use crate::ids::JobId;
-use crate::record::{now, JobProgress, Status};
+use crate::ids::{BatchId, JobId};
+use crate::record::{now, BatchProgress, JobProgress, Status};
 use deadpool_postgres::{Manager, ManagerConfig, Pool, RecyclingMethod};
 use std::future::Future;
 use std::time::Duration;
@@ -70,6 +70,17 @@ const MIGRATIONS: &[(i32, &str)] = &[
         "CREATE TABLE meta (key text PRIMARY KEY, value text NOT NULL);
          INSERT INTO meta (key, value) VALUES ('store_id', md5(random()::text || clock_timestamp()::text));",
     ),
+    (
+        5,
+        // Lanes (0 run, 1 backlog: `Lane::rank`; the jobs before them ran in the run lane), the claim's order on one
+        // index, and bulk uploads' batches.
+        "ALTER TABLE jobs ADD COLUMN lane smallint NOT NULL DEFAULT 0;
+         DROP INDEX jobs_enqueued;
+         CREATE INDEX jobs_claim ON jobs (lane, seq) WHERE status = 'enqueued';
+         CREATE TABLE batches (id text PRIMARY KEY, created_at text NOT NULL);
+         CREATE TABLE batch_jobs (
+             batch text NOT NULL, position integer NOT NULL, job text NOT NULL, PRIMARY KEY (batch, position));",
+    ),
 ];
 
 /// The advisory lock that serializes migrations (and queue admissions, as a transaction lock of its own key).
@@ -102,7 +113,7 @@ impl Drop for Postgres {
 }
 
 impl Postgres {
-    /// Claims the oldest enqueued job, or `only` if it is enqueued.
+    /// Claims the oldest enqueued job of the run lane, else of the backlog, or `only` if it is enqueued.
     fn claim_where(&self, only: Option<&str>, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
         let (only, owner) = (only.map(str::to_string), owner.to_string());
         self.run(move |pool| async move {
@@ -111,7 +122,7 @@ impl Postgres {
             let Some(row) = tx
                 .query_opt(
                     "SELECT id, view FROM jobs WHERE status = 'enqueued' AND ($1::text IS NULL OR id = $1)
-                     ORDER BY seq LIMIT 1 FOR UPDATE SKIP LOCKED",
+                     ORDER BY lane, seq LIMIT 1 FOR UPDATE SKIP LOCKED",
                     &[&only],
                 )
                 .await

@@ -8,33 +8,41 @@ pub(super) fn secs(d: Duration) -> f64 {
 }
 
 impl JobQueue for Postgres {
-    fn enqueue(&self, view: JobView, capacity: usize) -> std::io::Result<Enqueued> {
+    fn enqueue(&self, view: JobView, lane: Lane, capacity: usize) -> std::io::Result<Enqueued> {
         self.run(move |pool| async move {
             let mut c = pool.get().await.map_err(pg)?;
             let tx = c.transaction().await.map_err(pg)?;
             // Admissions one at a time, so that the capacity holds across replicas.
             tx.execute("SELECT pg_advisory_xact_lock($1)", &[&ENQUEUE_LOCK]).await.map_err(pg)?;
-            if let Some(row) =
-                tx.query_opt("SELECT view FROM jobs WHERE id = $1 FOR UPDATE", &[&view.id]).await.map_err(pg)?
-            {
-                let old = view_of(row.get(0))?;
-                if !matches!(old.status, Status::Failed | Status::Canceled) {
-                    return Ok(Enqueued::Existing(old));
-                }
-            }
-            let active: i64 = tx
-                .query_one("SELECT COUNT(*) FROM jobs WHERE status IN ('enqueued', 'processing')", &[])
+            let running: i64 = tx
+                .query_one("SELECT COUNT(*) FROM jobs WHERE status IN ('enqueued', 'processing') AND lane = 0", &[])
                 .await
                 .map_err(pg)?
                 .get(0);
-            if active as usize >= capacity {
+            let room = (running as usize) < capacity;
+            if let Some(row) =
+                tx.query_opt("SELECT view, lane FROM jobs WHERE id = $1 FOR UPDATE", &[&view.id]).await.map_err(pg)?
+            {
+                let old = view_of(row.get(0))?;
+                let old_lane = Lane::of_rank(row.get::<_, i16>(1).into());
+                if !matches!(old.status, Status::Failed | Status::Canceled) {
+                    if lane == Lane::Run && old_lane == Lane::Backlog && old.status == Status::Enqueued && room {
+                        tx.execute("UPDATE jobs SET lane = 0 WHERE id = $1 AND status = 'enqueued'", &[&view.id])
+                            .await
+                            .map_err(pg)?;
+                        tx.commit().await.map_err(pg)?;
+                    }
+                    return Ok(Enqueued::Existing(old));
+                }
+            }
+            if lane == Lane::Run && !room {
                 return Ok(Enqueued::Full);
             }
             tx.execute(
-                "INSERT INTO jobs (id, status, view) VALUES ($1, 'enqueued', $2)
+                "INSERT INTO jobs (id, status, view, lane) VALUES ($1, 'enqueued', $2, $3)
                  ON CONFLICT (id) DO UPDATE SET status = 'enqueued', view = excluded.view, owner = NULL,
-                 lease_until = NULL, cancel = false, seq = nextval('jobs_order')",
-                &[&view.id, &text_of(&view)?],
+                 lease_until = NULL, cancel = false, lane = excluded.lane, seq = nextval('jobs_order')",
+                &[&view.id, &text_of(&view)?, &lane.rank()],
             )
             .await
             .map_err(pg)?;
@@ -205,6 +213,65 @@ impl JobQueue for Postgres {
                 .await
                 .map_err(pg)?;
             Ok(row.get::<_, i64>(0) as usize)
+        })
+    }
+    fn backlog(&self) -> std::io::Result<usize> {
+        self.run(|pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let row = c
+                .query_one("SELECT count(*) FROM jobs WHERE status = 'enqueued' AND lane = 1", &[])
+                .await
+                .map_err(pg)?;
+            Ok(row.get::<_, i64>(0) as usize)
+        })
+    }
+    fn put_batch(&self, batch: &BatchId, jobs: &[JobId]) -> std::io::Result<()> {
+        let (id, jobs) = (batch.hex(), crate::store::queue::distinct(jobs));
+        self.run(move |pool| async move {
+            let mut c = pool.get().await.map_err(pg)?;
+            let tx = c.transaction().await.map_err(pg)?;
+            let new = tx
+                .execute(
+                    "INSERT INTO batches (id, created_at) VALUES ($1, $2) ON CONFLICT (id) DO NOTHING",
+                    &[&id, &now()],
+                )
+                .await
+                .map_err(pg)?;
+            if new > 0 {
+                // One statement for the whole batch (10,000 files at most): positions from the array's order.
+                let positions: Vec<i32> = (0..jobs.len() as i32).collect();
+                tx.execute(
+                    "INSERT INTO batch_jobs (batch, position, job) SELECT $1, p, j FROM unnest($2::int[], $3::text[]) AS t(p, j)",
+                    &[&id, &positions, &jobs],
+                )
+                .await
+                .map_err(pg)?;
+            }
+            tx.commit().await.map_err(pg)?;
+            Ok(())
+        })
+    }
+    fn batch(&self, batch: &BatchId) -> std::io::Result<Option<BatchProgress>> {
+        let (b, id) = (*batch, batch.hex());
+        self.run(move |pool| async move {
+            let c = pool.get().await.map_err(pg)?;
+            let Some(row) = c.query_opt("SELECT created_at FROM batches WHERE id = $1", &[&id]).await.map_err(pg)?
+            else {
+                return Ok(None);
+            };
+            let rows = c
+                .query(
+                    "SELECT b.job, j.status FROM batch_jobs b JOIN jobs j ON j.id = b.job
+                     WHERE b.batch = $1 ORDER BY b.position",
+                    &[&id],
+                )
+                .await
+                .map_err(pg)?;
+            let statuses: Vec<(String, Status)> = rows
+                .iter()
+                .filter_map(|r| Some((r.get::<_, String>(0), Status::from_name(r.get::<_, &str>(1))?)))
+                .collect();
+            Ok(Some(BatchProgress::tally(&b, row.get(0), statuses.iter().map(|(j, s)| (j.as_str(), *s)))))
         })
     }
     fn changes(&self) -> broadcast::Receiver<String> {

@@ -4,8 +4,8 @@
 use super::*;
 use crate::clock::{Clock, SystemClock};
 use crate::failure::Failure;
-use crate::ids::{file_in, JobId};
-use crate::record::{now, JobProgress, Status};
+use crate::ids::{file_in, BatchId, JobId};
+use crate::record::{now, BatchProgress, JobProgress, Status};
 use rusqlite::OptionalExtension;
 use std::io::Write;
 use std::time::Duration;
@@ -133,7 +133,8 @@ fn sweep_leftovers(data_dir: &Path, shape_dir: &Path, conn: &rusqlite::Connectio
     Ok(removed)
 }
 
-/// The queue's columns on a jobs table of an older version (id and view only): added, and filled from the views.
+/// The queue's columns on a jobs table of an older version (id and view only, or no lane): added, and filled from
+/// the views.
 fn migrate_jobs(conn: &rusqlite::Connection) -> std::io::Result<()> {
     let has_status: bool = conn
         .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'status'")
@@ -151,7 +152,21 @@ fn migrate_jobs(conn: &rusqlite::Connection) -> std::io::Result<()> {
         )
         .map_err(db_err)?;
     }
-    conn.execute_batch("CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, seq);").map_err(db_err)?;
+    // The lane (0 run, 1 backlog: [`Lane::rank`]); the jobs of a data directory from before lanes ran in the run
+    // lane.
+    let has_lane: bool = conn
+        .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'lane'")
+        .and_then(|mut st| st.exists([]))
+        .map_err(db_err)?;
+    if !has_lane {
+        conn.execute_batch("ALTER TABLE jobs ADD COLUMN lane INTEGER NOT NULL DEFAULT 0;").map_err(db_err)?;
+    }
+    // The claim's order (run lane first, then submission) and the lanes' counts read from one index.
+    conn.execute_batch(
+        "CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, seq);
+         CREATE INDEX IF NOT EXISTS jobs_claim ON jobs (status, lane, seq);",
+    )
+    .map_err(db_err)?;
     Ok(())
 }
 
@@ -194,6 +209,9 @@ impl Database {
              CREATE TABLE IF NOT EXISTS shape_tags (
                  shape_id TEXT NOT NULL, tag TEXT NOT NULL, PRIMARY KEY (shape_id, tag));
              CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+             CREATE TABLE IF NOT EXISTS batches (id TEXT PRIMARY KEY, created_at TEXT NOT NULL);
+             CREATE TABLE IF NOT EXISTS batch_jobs (
+                 batch TEXT NOT NULL, position INTEGER NOT NULL, job TEXT NOT NULL, PRIMARY KEY (batch, position));
              INSERT OR IGNORE INTO meta (key, value) VALUES ('store_id', lower(hex(randomblob(16))));",
         )
         .map_err(db_err)?;

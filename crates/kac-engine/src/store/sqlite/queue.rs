@@ -13,29 +13,44 @@ pub(super) fn status_name(v: &JobView) -> &'static str {
 /// The job queue on SQLite: one row per job (its view as JSON beside the columns the queue works on), every
 /// transition one statement or transaction under the connection's lock.
 impl JobQueue for Database {
-    fn enqueue(&self, view: JobView, capacity: usize) -> std::io::Result<Enqueued> {
+    fn enqueue(&self, view: JobView, lane: Lane, capacity: usize) -> std::io::Result<Enqueued> {
         let mut c = self.conn();
         let tx = c.transaction().map_err(db_err)?;
-        let existing: Option<String> =
-            tx.query_row("SELECT view FROM jobs WHERE id = ?1", [&view.id], |r| r.get(0)).optional().map_err(db_err)?;
-        if let Some(text) = &existing {
+        let running: i64 = tx
+            .query_row("SELECT COUNT(*) FROM jobs WHERE status IN ('enqueued', 'processing') AND lane = 0", [], |r| {
+                r.get(0)
+            })
+            .map_err(db_err)?;
+        let room = (running as usize) < capacity;
+        let existing: Option<(String, i64)> = tx
+            .query_row("SELECT view, lane FROM jobs WHERE id = ?1", [&view.id], |r| Ok((r.get(0)?, r.get(1)?)))
+            .optional()
+            .map_err(db_err)?;
+        if let Some((text, old_lane)) = &existing {
             let old = view_of(text)?;
             if !matches!(old.status, Status::Failed | Status::Canceled) {
+                if lane == Lane::Run
+                    && Lane::of_rank(*old_lane) == Lane::Backlog
+                    && old.status == Status::Enqueued
+                    && room
+                {
+                    tx.execute("UPDATE jobs SET lane = 0 WHERE id = ?1 AND status = 'enqueued'", [&view.id])
+                        .map_err(db_err)?;
+                    tx.commit().map_err(db_err)?;
+                }
                 return Ok(Enqueued::Existing(old));
             }
         }
-        let active: i64 = tx
-            .query_row("SELECT COUNT(*) FROM jobs WHERE status IN ('enqueued', 'processing')", [], |r| r.get(0))
-            .map_err(db_err)?;
-        if active as usize >= capacity {
+        if lane == Lane::Run && !room {
             return Ok(Enqueued::Full);
         }
         let text = serde_json::to_string(&view).map_err(std::io::Error::other)?;
         // A failed or canceled job enqueued again goes to the back of the queue (a new row, a new seq).
         tx.execute("DELETE FROM jobs WHERE id = ?1", [&view.id]).map_err(db_err)?;
         tx.execute(
-            "INSERT INTO jobs (id, view, status, owner, lease_until, cancel) VALUES (?1, ?2, 'enqueued', NULL, 0, 0)",
-            rusqlite::params![view.id, text],
+            "INSERT INTO jobs (id, view, status, owner, lease_until, cancel, lane)
+             VALUES (?1, ?2, 'enqueued', NULL, 0, 0, ?3)",
+            rusqlite::params![view.id, text, lane.rank()],
         )
         .map_err(db_err)?;
         tx.commit().map_err(db_err)?;
@@ -151,19 +166,65 @@ impl JobQueue for Database {
             .map_err(db_err)?;
         Ok(n as usize)
     }
+    fn backlog(&self) -> std::io::Result<usize> {
+        let n: i64 = self
+            .conn()
+            .query_row("SELECT COUNT(*) FROM jobs WHERE status = 'enqueued' AND lane = 1", [], |r| r.get(0))
+            .map_err(db_err)?;
+        Ok(n as usize)
+    }
+    fn put_batch(&self, batch: &BatchId, jobs: &[JobId]) -> std::io::Result<()> {
+        let mut c = self.conn();
+        let tx = c.transaction().map_err(db_err)?;
+        let id = batch.hex();
+        let new = tx
+            .execute("INSERT OR IGNORE INTO batches (id, created_at) VALUES (?1, ?2)", [&id, &now()])
+            .map_err(db_err)?;
+        if new > 0 {
+            let mut st =
+                tx.prepare("INSERT INTO batch_jobs (batch, position, job) VALUES (?1, ?2, ?3)").map_err(db_err)?;
+            for (position, job) in crate::store::queue::distinct(jobs).iter().enumerate() {
+                st.execute(rusqlite::params![id, position as i64, job]).map_err(db_err)?;
+            }
+        }
+        tx.commit().map_err(db_err)
+    }
+    fn batch(&self, batch: &BatchId) -> std::io::Result<Option<BatchProgress>> {
+        let c = self.conn();
+        let id = batch.hex();
+        let created: Option<String> = c
+            .query_row("SELECT created_at FROM batches WHERE id = ?1", [&id], |r| r.get(0))
+            .optional()
+            .map_err(db_err)?;
+        let Some(created) = created else { return Ok(None) };
+        let mut st = c
+            .prepare(
+                "SELECT b.job, j.status FROM batch_jobs b JOIN jobs j ON j.id = b.job
+                 WHERE b.batch = ?1 ORDER BY b.position",
+            )
+            .map_err(db_err)?;
+        let rows = st
+            .query_map([&id], |r| Ok((r.get::<_, String>(0)?, r.get::<_, String>(1)?)))
+            .map_err(db_err)?
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(db_err)?;
+        let statuses = rows.iter().filter_map(|(job, s)| Some((job.as_str(), Status::from_name(s)?)));
+        Ok(Some(BatchProgress::tally(batch, created, statuses)))
+    }
     fn changes(&self) -> tokio::sync::broadcast::Receiver<String> {
         self.changes.subscribe()
     }
 }
 
 impl Database {
-    /// Claims the oldest enqueued job, or `only` if it is enqueued.
+    /// Claims the oldest enqueued job of the run lane, else of the backlog, or `only` if it is enqueued.
     fn claim_where(&self, only: Option<&str>, owner: &str, lease: Duration) -> std::io::Result<Option<JobView>> {
         let mut c = self.conn();
         let tx = c.transaction().map_err(db_err)?;
         let next: Option<(String, String)> = tx
             .query_row(
-                "SELECT id, view FROM jobs WHERE status = 'enqueued' AND (?1 IS NULL OR id = ?1) ORDER BY seq LIMIT 1",
+                "SELECT id, view FROM jobs WHERE status = 'enqueued' AND (?1 IS NULL OR id = ?1)
+                 ORDER BY lane, seq LIMIT 1",
                 [only],
                 |r| Ok((r.get(0)?, r.get(1)?)),
             )
