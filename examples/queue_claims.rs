@@ -46,7 +46,7 @@ fn main() {
     let q = backend.queue;
     let t = Instant::now();
     for i in 0..a.jobs + a.claims {
-        q.enqueue(view(i), usize::MAX).expect("enqueue");
+        q.enqueue(view(i), kac_engine::store::Lane::Run, usize::MAX).expect("enqueue");
     }
     let enqueue_s = t.elapsed().as_secs_f64();
     let mut ms = vec![];
