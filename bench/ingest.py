@@ -26,12 +26,12 @@ Eigensolver-bound rate, two ways:
 
 Ingest. A fresh `kac serve` (throwaway data directory, default settings unless --workers / --queue-capacity);
 --uploaders threads send POST /v1/shapes/bulk with --batch files each plus the `options` part
-{"tags": ["ingest-bench"], "fingerprint": {"k": 50, "normalization": "area"}}. The bulk route starts one job per
-file and a full queue (--queue-capacity, 64 by default) makes a file's job fail to start (its problem
-`queue-full`, the shape stored), so the uploaders keep within the queue: a batch is sent only when the jobs
-submitted and not yet finished plus the batch fit the capacity (a batch larger than the capacity is sent when
-none are outstanding); a file whose job still did not start is submitted again with POST /v1/jobs
-(`queue_full_retries`). Progress is read from GET /metrics (kac_jobs{status}) every 0.2 s.
+{"tags": ["ingest-bench"], "fingerprint": {"k": 50, "normalization": "area"}}. The bulk route starts one
+fingerprint job per file in the queue's backlog lane, which --queue-capacity does not bound (since issue 50 no job
+is left unstarted for capacity); the uploaders still pace themselves as they did when a full queue refused jobs
+(a batch is sent only when the jobs submitted and not yet finished plus the batch fit --queue-capacity, or none
+are outstanding), so that the figures stay comparable with the earlier runs; a file whose job did not start would
+be submitted again with POST /v1/jobs (`queue_full_retries`, now always 0). Progress is read from GET /metrics (kac_jobs{status}) every 0.2 s.
   * upload_s: the bulk requests' own seconds, summed; upload_wall_s: the first request's start to the last
     answer (includes waiting for room in the queue);
   * ingest_s: the first request's start to the latest `finished_at` of the jobs (GET /v1/jobs/{id} of each,

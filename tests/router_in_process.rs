@@ -73,11 +73,11 @@ async fn search_wants_one_query_and_unknown_shapes_are_not_found() {
     // A fingerprint of another length than k is refused even where its family holds no rows yet.
     let (status, p) = call(&app, post_json("/v1/search", json!({ "fingerprint": [1.0, 2.0, 3.0], "k": 2 }))).await;
     assert_eq!((status, p["code"].as_str()), (StatusCode::BAD_REQUEST, Some("invalid-request")), "{p}");
-    assert!(p["detail"].as_str().unwrap().starts_with("fingerprint: 3 values, but k = 2"), "{p}");
+    assert!(p["detail"].as_str().unwrap().starts_with("fingerprint: 3 values, but a shape-dna fingerprint"), "{p}");
 }
 
 /// `GET /v1/search/audit` compares the index with the store: consistent after fingerprints are kept, each row
-/// counted.
+/// counted (a search from a shape keeps its fingerprint in each of the three families).
 #[tokio::test]
 async fn the_search_audit_compares_the_index_with_the_store() {
     let dir = tempfile::tempdir().unwrap();
@@ -91,12 +91,14 @@ async fn the_search_audit_compares_the_index_with_the_store() {
     let (status, r) = call(&app, post_json("/v1/search?wait=30", json!({ "shape_id": id, "k": 5 }))).await;
     assert_eq!(status, StatusCode::OK, "{r}");
     let (status, a) = call(&app, Request::get("/v1/search/audit").body(Body::empty()).unwrap()).await;
-    assert_eq!((status, a["consistent"].as_bool(), a["rows"].as_u64()), (StatusCode::OK, Some(true), Some(1)), "{a}");
-    let fam = &a["families"][0];
-    assert_eq!(
-        (fam["store_rows"].as_u64(), fam["index_rows"].as_u64(), fam["missing"].as_u64()),
-        (Some(1), Some(1), Some(0))
-    );
+    assert_eq!((status, a["consistent"].as_bool(), a["rows"].as_u64()), (StatusCode::OK, Some(true), Some(3)), "{a}");
+    assert_eq!(a["families"].as_array().unwrap().len(), 3, "{a}");
+    for fam in a["families"].as_array().unwrap() {
+        assert_eq!(
+            (fam["store_rows"].as_u64(), fam["index_rows"].as_u64(), fam["missing"].as_u64()),
+            (Some(1), Some(1), Some(0))
+        );
+    }
 }
 
 /// The same JSON, key for key, with numbers equal to `tol` relative (the CLI and the service may use different
@@ -1070,6 +1072,7 @@ async fn every_analysis_result_matches_its_schema() {
         (upload(&sphere), json!({ "analysis": "spectrum", "k": 10, "eigenvectors": true, "counting": true })),
         (upload(&square), json!({ "analysis": "spectrum", "k": 4, "extrapolate": true, "refinements": 1 })),
         (upload(&sphere), json!({ "analysis": "operator", "report": true })),
+        (upload(&sphere), json!({ "analysis": "fingerprint", "options": { "k": 10 } })),
         (upload(&square), json!({ "analysis": "operator", "operator": { "order": 2 } })),
         (upload(&sphere), json!({ "analysis": "hks", "k": 20 })),
         (upload(&sphere), json!({ "analysis": "si-hks", "k": 20 })),
@@ -1123,9 +1126,9 @@ async fn every_analysis_result_matches_its_schema() {
             }
         }
     }
-    // A comparison: between the two shapes, through its own route.
+    // A comparison: between three shapes (the fused distance's spreads need three), through its own route.
     let mut ids = vec![];
-    for off in [upload(&sphere), upload(&square)] {
+    for off in [upload(&sphere), upload(&square), upload(&kac_core::geometry::generate::icosphere(1))] {
         let (_, shape) = call(&app, Request::post("/v1/shapes?format=off").body(Body::from(off)).unwrap()).await;
         ids.push(shape["id"].as_str().unwrap().to_string());
     }

@@ -165,7 +165,8 @@ fn by_families(
         let spread = match collection.and_then(|c| c.spread_of(&family)) {
             Some((s, rows)) if rows >= MIN_SPREAD_ROWS => s,
             _ if n >= MIN_SPREAD_ROWS => compare::spread(&rows),
-            _ if req.descriptor == Descriptor::Fused => {
+            // One shape (or none) has no distance to scale.
+            _ if req.descriptor == Descriptor::Fused && n >= 2 => {
                 return Err(AnalysisError::invalid_parameter(format!(
                     "descriptor fused: each family's distance is divided by its spread over at least \
                      {MIN_SPREAD_ROWS} fingerprints, and the collection holds fewer of family {family} than that \
