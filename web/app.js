@@ -440,10 +440,12 @@ function follow(job) {
 }
 
 $('run').addEventListener('click', () => submit(request()));
-// Shape-DNA of every stored shape and the distances between them, as a job.
+// Shape-DNA of every stored shape (scale-invariant: retrieval's default options) and the distances between them, as a
+// job. By shape-DNA rather than fused: a fused distance needs spreads over three shapes or more, and a viewer often
+// holds two.
 $('compare').addEventListener('click', () =>
   guarded(async () => {
-    const r = await api('POST', '/v1/compare?wait=0', { normalization: 'area' });
+    const r = await api('POST', '/v1/compare?wait=0', { descriptor: 'shape-dna' });
     await follow(r.status && r.links ? r : { id: r.result_id, status: 'succeeded' });
   }),
 );
