@@ -323,7 +323,8 @@ fn a_search_on_one_replica_sees_fingerprints_and_removals_made_on_another() {
     for l in [1, 2, 3] {
         let (_, s, _) = call(agent().post(&a.url("/v1/shapes?format=off")).send_bytes(&off(l))).unwrap();
         let id = s["id"].as_str().unwrap().to_string();
-        let req = json!({ "analysis": "shape-dna", "options": { "k": 5 } });
+        // Every family (the fused search B answers by default reads all three).
+        let req = json!({ "analysis": "fingerprint", "options": { "k": 5 } });
         let uri = format!(
             "/v1/analyze?wait=60&format=off&analysis={}",
             form_urlencoded::byte_serialize(req.to_string().as_bytes()).collect::<String>()
