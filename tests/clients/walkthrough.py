@@ -19,9 +19,9 @@ from kac_client.models import (
     JobResource,
     SearchRequest,
     SearchResult,
-    ShapeDnaAnalysisAnalysis,
-    ShapeDnaJobRequest,
-    ShapeDnaOptions,
+    FingerprintAnalysisAnalysis,
+    FingerprintJobRequest,
+    FingerprintOptions,
     ShapeResource,
     SpectrumAnalysisAnalysis,
     SpectrumJobRequest,
@@ -88,13 +88,13 @@ def main(base, sphere, torus):
     phi = np.load(io.BytesIO(raw.content))
     check(phi.shape == (642, 10) and np.isfinite(phi).all(), f".npy shape {phi.shape}")
     check(abs(np.std(phi[:, 0]) * math.sqrt(642)) < 1e-6, "the first eigenvector is constant")
-    # 5. Shape-DNA of two shapes, then search by the sphere.
+    # 5. The retrieval fingerprints of two shapes, then search by the sphere (fused over every family).
     other = upload(client, torus)
     for s in (shape, other):
-        dna = ShapeDnaJobRequest(
-            analysis=ShapeDnaAnalysisAnalysis.SHAPE_DNA, shape_id=s.id, options=ShapeDnaOptions(k=20)
+        fp = FingerprintJobRequest(
+            analysis=FingerprintAnalysisAnalysis.FINGERPRINT, shape_id=s.id, options=FingerprintOptions(k=20)
         )
-        finished(client, create_job.sync(client=client, body=dna))
+        finished(client, create_job.sync(client=client, body=fp))
     found = search.sync(client=client, body=SearchRequest(shape_id=shape.id, k=20, neighbours=5))
     check(isinstance(found, SearchResult), f"search: {found!r}")
     check(found.searched == 2 and [n.shape_id for n in found.neighbours] == [other.id], f"search: {found}")

@@ -75,8 +75,8 @@ async function main(base: string, sphere: string, torus: string): Promise<void> 
   check(bytes[0] === 0x93 && String.fromCharCode(...bytes.slice(1, 6)) === "NUMPY", "an .npy file");
   const other = await call<Upload>(base, "POST", "/v1/shapes?format=off", undefined, readFileSync(torus));
   for (const id of [shape.id, other.id]) {
-    const dna: Schemas["ShapeDnaJobRequest"] = { analysis: "shape-dna", shape_id: id, options: { k: 20 } };
-    await finished(base, await call<Job>(base, "POST", "/v1/jobs", dna));
+    const fp: Schemas["FingerprintJobRequest"] = { analysis: "fingerprint", shape_id: id, options: { k: 20 } };
+    await finished(base, await call<Job>(base, "POST", "/v1/jobs", fp));
   }
   const query: Schemas["SearchRequest"] = { shape_id: shape.id, k: 20, neighbours: 5 };
   const found = await call<Found>(base, "POST", "/v1/search", query);
