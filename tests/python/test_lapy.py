@@ -31,7 +31,9 @@ def tria(path):
 def test_eigenvalues_match_lapy_on_generated_meshes(meshes, name, k, lump):
     v, t = tria(meshes[name])
     ours = klapy.Solver(klapy.TriaMesh(v, t), lump=lump).eigs(k=k)
-    theirs = lapy.Solver(lapy.TriaMesh(v, t), lump=lump).eigs(k=k)
+    # A fixed start vector: ARPACK from a random one sometimes returns a repeated eigenvalue once too few (lapy 1.7
+    # on the sphere at k = 10 gave the 5-fold λ = 6.07 four times and λ = 12.2 twice); kac's are complete.
+    theirs = lapy.Solver(lapy.TriaMesh(v, t), lump=lump).eigs(k=k, rng=0)
     assert rel(ours[0], theirs[0]) < 1e-8
     assert abs(ours[0][0]) < 1e-9 and abs(theirs[0][0]) < 1e-9
     # The matrices are the same.
