@@ -1027,7 +1027,7 @@ fn off_of(m: &kac_core::geometry::TriangleMesh) -> Vec<u8> {
 }
 
 /// Issue 15, item 5: search over every stored fingerprint of a family: from a stored shape (excluded from its own
-/// answer) or from a fingerprint, nearest first; a shape without a fingerprint gets one as a shape-dna job;
+/// answer) or from a fingerprint, nearest first; a shape without a shape-DNA fingerprint gets one as a shape-dna job;
 /// deleted shapes drop out; the index survives a restart (it is reloaded from the store).
 #[test]
 fn search_finds_the_nearest_stored_shapes_by_shape_dna() {
@@ -1071,10 +1071,10 @@ fn search_finds_the_nearest_stored_shapes_by_shape_dna() {
         (Some(a.as_str()), Some(0.0))
     );
     assert_eq!(f.body["neighbours"].as_array().unwrap().len(), 2);
-    // Another family (k = 6): the query shape's fingerprints are computed first, as a fingerprint job.
+    // Another family (k = 6): the query shape's fingerprint is computed first, as a shape-dna job.
     let n = search(&s, json!({ "descriptor": "shape-dna", "shape_id": b, "k": 6, "normalization": "area" }));
     assert_eq!((n.status, n.body["searched"].as_u64()), (200, Some(1)), "{}", n.body);
-    let jobs = reply(agent().get(&s.url(&format!("/v1/jobs?shape_id={b}&analysis=fingerprint"))).call());
+    let jobs = reply(agent().get(&s.url(&format!("/v1/jobs?shape_id={b}&analysis=shape-dna"))).call());
     assert_eq!(jobs.body["total"], 1, "{}", jobs.body);
     // Bad queries.
     assert_problem(

@@ -370,10 +370,12 @@ async fn fingerprint_shape(
     wait: Option<f64>,
 ) -> Result<Result<Vec<Vec<f64>>, Response>, ApiError> {
     let shape = stored_shape(st, id)?;
-    let job = Analysis::Fingerprint {
-        options: req.options.clone(),
-        operator: req.operator.clone(),
-        solver: analysis::SolverSpec::default(),
+    // Shape-DNA alone as the shape-dna job it always was (it needs no eigenvectors, and a graph has it while it has
+    // no fingerprint families); every other descriptor through the fingerprint job.
+    let (options, operator, solver) = (req.options.clone(), req.operator.clone(), analysis::SolverSpec::default());
+    let job = match req.descriptor() {
+        Descriptor::ShapeDna => Analysis::ShapeDna { options: options.dna(), operator, solver },
+        _ => Analysis::Fingerprint { options, operator, solver },
     };
     let (job, _) = jobs::submit(&st.jobs, &st.engine.config, shape, job)?;
     let view = wait_for(st, &job, wait).await?;
@@ -391,10 +393,13 @@ async fn fingerprint_shape(
                 .ok_or(ApiError::Internal { detail: "the result went missing".into() })?;
             let mut out = vec![];
             for (d, family) in families {
+                // A fingerprint result lists its families; a shape-dna result is the shape-DNA family's.
                 let values: Vec<f64> = r.summary["families"]
                     .as_array()
                     .and_then(|fs| fs.iter().find(|f| f["descriptor"] == d.name()))
-                    .and_then(|f| serde_json::from_value(f["values"].clone()).ok())
+                    .map(|f| f["values"].clone())
+                    .or_else(|| (*d == Descriptor::ShapeDna).then(|| r.summary["shape_dna"]["values"].clone()))
+                    .and_then(|v| serde_json::from_value(v).ok())
                     .ok_or_else(|| ApiError::Internal {
                         detail: format!("the fingerprint result has no {} values", d.name()),
                     })?;
