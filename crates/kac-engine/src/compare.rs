@@ -183,9 +183,6 @@ fn by_families(
         if req.descriptor == d {
             summary.distances = distances.clone();
         }
-        let family = values
-            .first()
-            .map_or_else(|| analysis::descriptor_family(d, &req.options, &req.operator), |f| f[i].family.clone());
         summary.families.push(analysis::CompareFamily {
             descriptor: d.name(),
             family,

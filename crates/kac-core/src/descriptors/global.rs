@@ -25,8 +25,8 @@ pub const HEAT_QUANTILES: usize = 16;
 /// Times at which the heat distribution is taken, in units of the shape scaled to unit measure: log-spaced from
 /// [`HEAT_TIMES`]`.0` to `.1`. On a surface of unit area the 50th non-zero eigenvalue is about 4π·50 ≈ 630 (Weyl's
 /// law), so at the smallest time e^{-λ t} has fallen to about 0.05 where the computed spectrum ends; at the largest
-/// only the first modes of elongated shapes remain. Six times and 16 levels (96 values) measured as well as 10 × 24
-/// on the retrieval benchmark's class-level collection (mAP 0.678 against 0.679; docs/retrieval.md).
+/// only the first modes of elongated shapes remain. Six times and 16 levels (96 values) ranked the retrieval
+/// benchmark's class-level collection as well as more of either (docs/retrieval.md).
 pub const HEAT_TIMES: (f64, f64, usize) = (0.005, 2.0, 6);
 /// Quantile levels of the GPS distance distribution.
 pub const GPS_QUANTILES: usize = 32;

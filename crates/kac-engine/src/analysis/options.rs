@@ -345,9 +345,8 @@ impl Descriptor {
 /// The weights of shape-DNA, the heat distribution and GPS D2 in the fused distance (each family's distance first
 /// divided by its spread over the collection), chosen on the retrieval benchmark (`bench/retrieval.py`, figures and
 /// caveats in docs/retrieval.md): on a grid of steps of 0.05, the best class-level mAP among the weights whose
-/// non-rigid mAP reaches 0.99. Shape-DNA ranks poses best, the heat distribution classes; heavier heat weights
-/// rank the class-level collection better (0.3/0.6/0.1: mAP 0.672 against 0.629) and poses worse (0.980 against
-/// 0.990).
+/// non-rigid mAP reaches 0.99. Shape-DNA ranks poses best, the heat distribution classes: heavier heat weights
+/// rank the class-level collection better and poses worse.
 pub const FUSION_WEIGHTS: [f64; 3] = [0.7, 0.1, 0.2];
 
 /// The fingerprint a retrieval request computes or looks up, with retrieval's defaults: 50 non-zero eigenpairs,

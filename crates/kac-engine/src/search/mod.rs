@@ -494,7 +494,7 @@ mod tests {
     use super::*;
 
     /// A shape id made from a number.
-    fn sid(i: usize) -> ShapeId {
+    pub(super) fn sid(i: usize) -> ShapeId {
         let mut b = [0u8; 32];
         b[..8].copy_from_slice(&(i as u64).to_be_bytes());
         ShapeId(b)
